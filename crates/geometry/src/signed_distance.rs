@@ -1,0 +1,338 @@
+//! Signed distance between two posed ellipses, witness points, normal, and their exact derivatives.
+//!
+//! Conventions are SCENE.md's (Constraints): `d` is the Euclidean gap when apart and minus the penetration
+//! depth when overlapping, `normal` points from A to B, `point_a` and `point_b` are the support points of
+//! A along `normal` and of B along `-normal`, and `point_b = point_a + d * normal`.
+//!
+//! Derivatives are taken with respect to the pose coordinates `p = (x_A, y_A, theta_A, x_B, y_B, theta_B)`.
+//! The distance is `d(p) = -F(phi*(p), p)` where `phi*` minimises the support gap (see `gap.rs`), so by the
+//! envelope theorem `grad d = -F_p`, and by the implicit function theorem on `F_phi = 0`,
+//! `phi*_p = -F_phi_p / F_phi_phi` and `hess d = -(F_pp - F_phi_p F_phi_p^T / F_phi_phi)`.
+
+use crate::gap::{Gap, GapBody, GapJet, GapMinimum};
+use crate::{Ellipse, GeometryError};
+use num_dual::DualNum;
+use parry2d_f64::math::{Pose, Vector};
+use parry2d_f64::query::details::contact_support_map_support_map;
+
+/// Pose coordinates `[x, y, theta]` of a planar body.
+pub type PoseCoords = [f64; 3];
+
+/// The six pose coordinates `(x_A, y_A, theta_A, x_B, y_B, theta_B)` that derivatives are taken against.
+pub const POSE_COORDINATES: usize = 6;
+
+/// Reads `[x, y, theta]` off a parry pose (theta in `(-pi, pi]`).
+pub fn pose_coords(pose: &Pose) -> PoseCoords {
+    [
+        pose.translation.x,
+        pose.translation.y,
+        pose.rotation.angle(),
+    ]
+}
+
+/// A parry pose from `[x, y, theta]`.
+pub fn pose_from_coords(p: PoseCoords) -> Pose {
+    Pose::new(Vector::new(p[0], p[1]), p[2])
+}
+
+/// Closest (or deepest) points of two ellipses: the answer to [`signed_distance`].
+#[derive(Debug, Clone, Copy)]
+pub struct Contact {
+    /// Signed distance: positive apart, minus the penetration depth when overlapping.
+    pub distance: f64,
+    /// Witness point on the boundary of A (the support point of A along `normal`).
+    pub point_a: Vector,
+    /// Witness point on the boundary of B (the support point of B along `-normal`).
+    pub point_b: Vector,
+    /// Unit normal from A to B.
+    pub normal: Vector,
+    /// False where the witnesses are not unique (concentric shapes, or two equally deep escape
+    /// directions); the distance is still exact, the witnesses and normal are one valid choice, and the
+    /// distance is not differentiable there.
+    pub witness_unique: bool,
+    /// False only if the global search ran out of its evaluation budget (never seen in testing); the answer
+    /// is then the best local minimum found.
+    pub certified: bool,
+    /// Evaluations of the support gap that the search took (a cost measure).
+    pub evaluations: usize,
+    jet: GapJet,
+    centers: [[f64; 2]; 2],
+}
+
+/// First and second derivatives of a [`Contact`] with respect to both poses
+/// `p = (x_A, y_A, theta_A, x_B, y_B, theta_B)`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ContactDerivatives {
+    /// `d d / d p`.
+    pub gradient: [f64; 6],
+    /// `d^2 d / d p^2` (symmetric).
+    pub hessian: [[f64; 6]; 6],
+    /// `d normal / d p`, rows x and y.
+    pub normal: [[f64; 6]; 2],
+    /// `d point_a / d p`, rows x and y.
+    pub point_a: [[f64; 6]; 2],
+    /// `d point_b / d p`, rows x and y.
+    pub point_b: [[f64; 6]; 2],
+}
+
+pub(crate) fn check_pose(shape: &'static str, p: PoseCoords) -> Result<(), GeometryError> {
+    for (coordinate, value) in ["x", "y", "theta"].into_iter().zip(p) {
+        if !value.is_finite() {
+            return Err(GeometryError::Pose {
+                shape,
+                coordinate,
+                value,
+            });
+        }
+    }
+    Ok(())
+}
+
+/// Signed distance between ellipse `a` at `pose_a` and ellipse `b` at `pose_b`, exact to rounding.
+///
+/// The search starts from the line of centres; if that direction does not separate the shapes it asks
+/// parry's GJK/EPA for a normal, then certifies the global minimum of the support gap by branch and bound.
+pub fn signed_distance(
+    a: &Ellipse,
+    pose_a: &Pose,
+    b: &Ellipse,
+    pose_b: &Pose,
+) -> Result<Contact, GeometryError> {
+    signed_distance_coords(a, pose_coords(pose_a), b, pose_coords(pose_b))
+}
+
+/// [`signed_distance`] with poses given as `[x, y, theta]`.
+pub fn signed_distance_coords(
+    a: &Ellipse,
+    pose_a: PoseCoords,
+    b: &Ellipse,
+    pose_b: PoseCoords,
+) -> Result<Contact, GeometryError> {
+    check_pose("A", pose_a)?;
+    check_pose("B", pose_b)?;
+    let center_a = [pose_a[0], pose_a[1]];
+    let center_b = [pose_b[0], pose_b[1]];
+    let gap = Gap::new(
+        center_a,
+        GapBody::ellipse(a, pose_a[2]),
+        center_b,
+        GapBody::ellipse(b, pose_b[2]),
+    );
+    let line = (center_b[1] - center_a[1]).atan2(center_b[0] - center_a[0]);
+    let mut starts = [line, line];
+    let mut n_starts = 1;
+    if gap.eval(line).f >= 0.0 {
+        if let Some(phi) = parry_normal_angle(a, pose_a, b, pose_b) {
+            starts[1] = phi;
+            n_starts = 2;
+        }
+    }
+    let min = gap.minimise(&starts[..n_starts]);
+    Ok(Contact::from_minimum(&gap, [center_a, center_b], &min))
+}
+
+/// parry's GJK/EPA normal from A to B, as a world angle (`None` if parry finds nothing).
+fn parry_normal_angle(
+    a: &Ellipse,
+    pose_a: PoseCoords,
+    b: &Ellipse,
+    pose_b: PoseCoords,
+) -> Option<f64> {
+    let pa = pose_from_coords(pose_a);
+    let pb = pose_from_coords(pose_b);
+    let pos12 = pa.inv_mul(&pb);
+    let reach =
+        4.0 * (a.max_axis() + b.max_axis()) + (pose_a[0] - pose_b[0]).hypot(pose_a[1] - pose_b[1]);
+    let contact = contact_support_map_support_map(&pos12, a, b, reach)?;
+    let n = pa.rotation * contact.normal1;
+    (n.x.is_finite() && n.y.is_finite() && n.length_squared() > 0.0).then(|| n.y.atan2(n.x))
+}
+
+impl Contact {
+    pub(crate) fn from_minimum(gap: &Gap, centers: [[f64; 2]; 2], min: &GapMinimum) -> Self {
+        let jet = min.jet;
+        let (c, s) = (jet.cos, jet.sin);
+        let oa = gap.a.support_offset(c, s);
+        let ob = gap.b.support_offset(-c, -s);
+        Contact {
+            distance: -jet.f,
+            point_a: Vector::new(centers[0][0] + oa[0], centers[0][1] + oa[1]),
+            point_b: Vector::new(centers[1][0] + ob[0], centers[1][1] + ob[1]),
+            normal: Vector::new(c, s),
+            witness_unique: !min.tie,
+            certified: min.certified,
+            evaluations: min.evaluations,
+            jet,
+            centers,
+        }
+    }
+
+    /// Angle of the normal, `normal = (cos, sin)` of it.
+    pub fn normal_angle(&self) -> f64 {
+        self.jet.phi
+    }
+
+    /// `d F' / d phi` at the solution: `rho_A + rho_B + d`, the curvature of the support gap. Small values
+    /// mean ill-conditioned witnesses (nearly parallel flat sides, near-concentric shapes).
+    pub fn gap_curvature(&self) -> f64 {
+        self.jet.ddf
+    }
+
+    /// Gradient of the distance with respect to `(x_A, y_A, theta_A, x_B, y_B, theta_B)`:
+    /// `-F_p = (-n, h_A'(psi_A), n, h_B'(psi_B))`, which equals `n^T (J_B(p_B) - J_A(p_A))` of SCENE.md.
+    pub fn gradient(&self) -> [f64; 6] {
+        let (c, s) = (self.jet.cos, self.jet.sin);
+        [-c, -s, self.jet.a.dh, c, s, self.jet.b.dh]
+    }
+
+    /// Gradient, Hessian, and the first derivatives of the normal and both witness points.
+    ///
+    /// Where the gap curvature vanishes (concentric circles) the witnesses do not move with the poses to first
+    /// order in any well-defined way; the angle's derivative is then taken as zero rather than infinite.
+    pub fn derivatives(&self) -> ContactDerivatives {
+        let j = &self.jet;
+        let (c, s) = (j.cos, j.sin);
+        let t = [-s, c];
+        // F_phi_p and F_pp.
+        let f_phi_p = [-s, c, -j.a.ddh(), s, -c, -j.b.ddh()];
+        let ddf = j.ddf;
+        let phi_p: [f64; 6] = if ddf > f64::EPSILON * (j.a.rho + j.b.rho + j.f.abs()) {
+            f_phi_p.map(|v| -v / ddf)
+        } else {
+            [0.0; 6]
+        };
+        let mut hessian = [[0.0; 6]; 6];
+        for (r, row) in hessian.iter_mut().enumerate() {
+            for (k, h) in row.iter_mut().enumerate() {
+                *h = -f_phi_p[r] * phi_p[k];
+            }
+        }
+        // F_pp is non-zero only in the two rotation diagonals; d = -F.
+        hessian[2][2] -= j.a.ddh();
+        hessian[5][5] -= j.b.ddh();
+        for r in 0..6 {
+            for k in 0..r {
+                let avg = 0.5 * (hessian[r][k] + hessian[k][r]);
+                hessian[r][k] = avg;
+                hessian[k][r] = avg;
+            }
+        }
+        let mut normal = [[0.0; 6]; 2];
+        for k in 0..6 {
+            normal[0][k] = t[0] * phi_p[k];
+            normal[1][k] = t[1] * phi_p[k];
+        }
+        // p_A moves with c_A, rotates with theta_A at fixed phi (J (p_A - c_A) - rho_A t), slides with phi (rho_A t).
+        let ra = [
+            self.point_a.x - self.centers[0][0],
+            self.point_a.y - self.centers[0][1],
+        ];
+        let rb = [
+            self.point_b.x - self.centers[1][0],
+            self.point_b.y - self.centers[1][1],
+        ];
+        let mut point_a = [[0.0; 6]; 2];
+        let mut point_b = [[0.0; 6]; 2];
+        for i in 0..2 {
+            let jr_a = if i == 0 { -ra[1] } else { ra[0] };
+            let jr_b = if i == 0 { -rb[1] } else { rb[0] };
+            for k in 0..6 {
+                point_a[i][k] = j.a.rho * t[i] * phi_p[k];
+                point_b[i][k] = -j.b.rho * t[i] * phi_p[k];
+            }
+            point_a[i][i] += 1.0;
+            point_a[i][2] += jr_a - j.a.rho * t[i];
+            point_b[i][3 + i] += 1.0;
+            point_b[i][5] += jr_b + j.b.rho * t[i];
+        }
+        ContactDerivatives {
+            gradient: self.gradient(),
+            hessian,
+            normal,
+            point_a,
+            point_b,
+        }
+    }
+}
+
+/// The contact of [`signed_distance_dual`]: every field carries the derivatives of its scalar type.
+#[derive(Debug, Clone, Copy)]
+pub struct DualContact<T> {
+    /// Signed distance.
+    pub distance: T,
+    /// Witness point on A.
+    pub point_a: [T; 2],
+    /// Witness point on B.
+    pub point_b: [T; 2],
+    /// Unit normal from A to B.
+    pub normal: [T; 2],
+    /// As [`Contact::witness_unique`]; where false, the derivative parts are those of one witness choice.
+    pub witness_unique: bool,
+}
+
+/// Signed distance with poses in any forward-mode dual number type of `num-dual` (first, second or third
+/// order, scalar or vector directions): the result carries exact derivatives of the distance, the normal
+/// and both witness points to that order.
+///
+/// The minimising angle is found in `f64`, then refined by Newton steps on `F'(phi, p) = 0` in the dual type:
+/// each step doubles the number of exact derivative orders (one step is exact to first order, two to third),
+/// because the real part is already converged.
+pub fn signed_distance_dual<T: DualNum<Primitive = f64> + Copy>(
+    a: &Ellipse,
+    pose_a: [T; 3],
+    b: &Ellipse,
+    pose_b: [T; 3],
+) -> Result<DualContact<T>, GeometryError> {
+    let re = |p: [T; 3]| [p[0].re(), p[1].re(), p[2].re()];
+    let base = signed_distance_coords(a, re(pose_a), b, re(pose_b))?;
+    let steps = match T::NDERIV {
+        0 => 0,
+        1 => 1,
+        2 | 3 => 2,
+        _ => 3,
+    };
+    let delta = [pose_a[0] - pose_b[0], pose_a[1] - pose_b[1]];
+    let mut phi = T::from(base.jet.phi);
+    if base.jet.ddf > f64::EPSILON * (base.jet.a.rho + base.jet.b.rho + base.jet.f.abs()) {
+        for _ in 0..steps {
+            let (s, c) = phi.sin_cos();
+            let (_, ha, dha, ddha) = dual_support(a, pose_a[2], c, s);
+            let (_, hb, dhb, ddhb) = dual_support(b, pose_b[2], c, s);
+            let f = c * delta[0] + s * delta[1] + ha + hb;
+            let df = -s * delta[0] + c * delta[1] + dha + dhb;
+            // F'' = rho_A + rho_B - F, with rho = h'' + h.
+            let ddf = (ddha + ha) + (ddhb + hb) - f;
+            phi -= df / ddf;
+        }
+    }
+    let (s, c) = phi.sin_cos();
+    let (la, ha, _, _) = dual_support(a, pose_a[2], c, s);
+    let (lb, hb, _, _) = dual_support(b, pose_b[2], -c, -s);
+    let f = c * delta[0] + s * delta[1] + ha + hb;
+    Ok(DualContact {
+        distance: -f,
+        point_a: [pose_a[0] + la[0], pose_a[1] + la[1]],
+        point_b: [pose_b[0] + lb[0], pose_b[1] + lb[1]],
+        normal: [c, s],
+        witness_unique: base.witness_unique,
+    })
+}
+
+/// World-frame support offset, value, and first two angle derivatives of an ellipse at orientation
+/// `theta` along the world direction `(c, s)`.
+fn dual_support<T: DualNum<Primitive = f64> + Copy>(
+    e: &Ellipse,
+    theta: T,
+    c: T,
+    s: T,
+) -> ([T; 2], T, T, T) {
+    let (st, ct) = theta.sin_cos();
+    let bc = c * ct + s * st;
+    let bs = s * ct - c * st;
+    let (a2, b2) = (e.a() * e.a(), e.b() * e.b());
+    let h = (bc * bc * a2 + bs * bs * b2).sqrt();
+    let dh = bc * bs * (b2 - a2) / h;
+    let rho = h.powi(3).recip() * (a2 * b2);
+    let (lx, ly) = (bc * a2 / h, bs * b2 / h);
+    ([ct * lx - st * ly, st * lx + ct * ly], h, dh, rho - h)
+}

@@ -1,0 +1,4 @@
+//! Integration scenarios, one module each, through public APIs only.
+
+mod geometry_reference;
+mod support;

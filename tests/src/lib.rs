@@ -1,0 +1,1 @@
+//! Test-only package: the integration scenarios live under `it/`.
