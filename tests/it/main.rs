@@ -1,4 +1,5 @@
 //! Integration scenarios, one module each, through public APIs only.
 
+mod geometry_laws;
 mod geometry_reference;
 mod support;

@@ -1,1 +1,35 @@
-fn main() {}
+//! `cargo xtask <experiment>`: the experiment driver, the only binary of the workspace.
+
+mod benchmarks;
+mod distance;
+
+use clap::{Parser, Subcommand};
+
+#[derive(Debug, Parser)]
+#[command(
+    name = "xtask",
+    about = "Experiments of the stochastic-complementarity contact project"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Signed distance of posed ellipse pairs: JSON lines in on stdin, JSON lines out on stdout.
+    ///
+    /// Each input line is {"a":[a1,b1],"pose_a":[x,y,theta],"b":[a2,b2],"pose_b":[x,y,theta]};
+    /// each output line is {"distance":d,"point_a":[x,y],"point_b":[x,y],"normal":[nx,ny],
+    /// "witness_unique":bool} or {"error":"..."}; a bad line never stops the stream.
+    Distance(distance::Args),
+    /// Measure speed against error and rewrite the generated tables of docs/benchmarks.md.
+    Benchmarks(benchmarks::Args),
+}
+
+fn main() -> anyhow::Result<()> {
+    match Cli::parse().command {
+        Command::Distance(args) => distance::run(&args),
+        Command::Benchmarks(args) => benchmarks::run(&args),
+    }
+}

@@ -15,16 +15,16 @@
 //! - where `F < 0` (a separating direction) `F'' > 0`, and each sublevel set `{F <= -c}` is an arc
 //!   (it is the cone where the convex function `h_{A-B}(n) + c |n|` is non-positive); so one separating
 //!   direction and a damped Newton descent give the global minimum when the ellipses are apart;
-//! - everywhere `rho_min_A + rho_min_B - F <= F'' <= rho_max_A + rho_max_B + |Delta|`; these curvature bounds
-//!   give rigorous lower bounds of `F` on an interval from its end values and slopes, so a branch and bound
-//!   certifies the global minimum in penetration, where `F` may have several local minima.
+//! - everywhere `F'' + F >= rho_min_A + rho_min_B`; this gives rigorous lower bounds of `F` on an interval
+//!   from its end values and slopes (`lower_bound`), so a branch and bound certifies the global minimum in
+//!   penetration, where `F` may have several local minima.
 
 use crate::ellipse::{Ellipse, SupportJet};
 
 /// Relative rounding allowance of the certification, in units of `f64::EPSILON` times the problem's scale.
 const CERTIFY_ULPS: f64 = 64.0;
 /// Intervals of the initial branch-and-bound grid over the full circle.
-const INITIAL_CELLS: usize = 16;
+const INITIAL_CELLS: usize = 4;
 /// Budget of gap evaluations for one certification (a safety net; hard cases use a few hundred).
 const MAX_EVALUATIONS: usize = 20_000;
 /// Narrowest interval the branch and bound splits, in radians.
@@ -38,7 +38,10 @@ pub(crate) struct GapBody {
     cos: f64,
     sin: f64,
     rho_min: f64,
+    /// Largest radius of curvature, `max^2 / min`.
     rho_max: f64,
+    /// Lipschitz constant of the support value in the angle: `|a^2 - b^2| / (2 min(a, b))`.
+    slope_max: f64,
     ellipse: Option<Ellipse>,
 }
 
@@ -53,6 +56,7 @@ impl GapBody {
             sin,
             rho_min: lo * lo / hi,
             rho_max: hi * hi / lo,
+            slope_max: (hi * hi - lo * lo) / (2.0 * lo),
             ellipse: Some(*e),
         }
     }
@@ -65,6 +69,7 @@ impl GapBody {
             sin: 0.0,
             rho_min: 0.0,
             rho_max: 0.0,
+            slope_max: 0.0,
             ellipse: None,
         }
     }
@@ -248,7 +253,6 @@ impl Gap {
     /// Certifies (or improves) a local minimum as the global one over the whole circle.
     fn branch_and_bound(&self, mut best: GapJet, mut evaluations: usize) -> GapMinimum {
         let tol = self.rounding();
-        let curvature_max = self.a.rho_max + self.b.rho_max + self.delta[0].hypot(self.delta[1]);
         let curvature_min = self.a.rho_min + self.b.rho_min;
         let mut runner_up: Option<GapJet> = None;
         let mut stack: Vec<(GapJet, GapJet)> = Vec::with_capacity(64);
@@ -267,7 +271,9 @@ impl Gap {
         }
         let mut certified = true;
         while let Some((l, r)) = stack.pop() {
-            if lower_bound(&l, &r, curvature_min, curvature_max) >= best.f - tol {
+            if lower_bound(&l, &r, curvature_min) >= best.f - tol
+                || self.convex_lower_bound(&l, &r) >= best.f - tol
+            {
                 continue;
             }
             let width = r.phi - l.phi;
@@ -305,39 +311,91 @@ impl Gap {
     }
 }
 
+impl Gap {
+    /// A lower bound of `F` on `[l.phi, r.phi]` that holds where `F` is convex there (else `-inf`).
+    ///
+    /// On the interval `F <= U := max(F_l, F_r) + F''_max w^2 / 8` with `F''_max = rho_max_A + rho_max_B + |Delta|`,
+    /// and each radius of curvature `rho = a^2 b^2 / h^3` is at least its value at the largest support value
+    /// `h` can reach (`h` is Lipschitz with `slope_max`). If `rho_A + rho_B - U > 0` the gap is convex on the
+    /// interval and lies above both end tangents. This settles the intervals next to a minimum deeper than
+    /// `rho_min_A + rho_min_B`, where the sinusoid bound of `lower_bound` would need many bisections.
+    fn convex_lower_bound(&self, l: &GapJet, r: &GapJet) -> f64 {
+        let w = r.phi - l.phi;
+        let curvature_max = self.a.rho_max
+            + self.b.rho_max
+            + (self.delta[0] * self.delta[0] + self.delta[1] * self.delta[1]).sqrt();
+        let upper = l.f.max(r.f) + curvature_max * w * w / 8.0;
+        let rho_low = |body: &GapBody, hl: f64, hr: f64| {
+            if body.ellipse.is_none() {
+                return 0.0;
+            }
+            let h = 0.5 * (hl + hr) + 0.5 * body.slope_max * w;
+            body.a2 * body.b2 / (h * h * h)
+        };
+        let m = rho_low(&self.a, l.a.h, r.a.h) + rho_low(&self.b, l.b.h, r.b.h) - upper;
+        if m.is_nan() || m <= 0.0 {
+            return f64::NEG_INFINITY;
+        }
+        let ends = l.f.min(r.f);
+        let denom = l.df - r.df;
+        if denom >= 0.0 {
+            return ends;
+        }
+        // Tangents F_l + F'_l x and F_r + F'_r (x - w) cross at x.
+        let x = (r.f - r.df * w - l.f) / denom;
+        if x > 0.0 && x < w {
+            ends.min(l.f + l.df * x)
+        } else {
+            ends
+        }
+    }
+}
+
 /// Smallest angle between two angles on the circle.
 fn angular_gap(a: f64, b: f64) -> f64 {
     let d = (a - b).rem_euclid(std::f64::consts::TAU);
     d.min(std::f64::consts::TAU - d)
 }
 
-/// A rigorous lower bound of `F` on `[l.phi, r.phi]`.
+/// A rigorous lower bound of `F` on `[l.phi, r.phi]` (an interval no wider than pi).
 ///
-/// An upper bound `U` of `F` on the interval follows from `F'' <= curvature_max`; then
-/// `F'' >= curvature_min - U =: -kappa`, so `g(x) = F(l.phi + x) + kappa x^2 / 2` is convex and lies above its
-/// tangents at both ends; the minimum of `max(tangents) - kappa x^2 / 2` is at an end or where the tangents cross.
-fn lower_bound(l: &GapJet, r: &GapJet, curvature_min: f64, curvature_max: f64) -> f64 {
+/// `G = F - P` with `P = rho_min_A + rho_min_B` obeys `G'' + G = rho_A + rho_B - P >= 0`, so by Sturm
+/// comparison `G` lies above the sinusoid that matches its value and slope at either end of the interval
+/// (the property of support functions behind Blaschke's rolling theorem). The bound is the minimum over the
+/// interval of the larger of the two sinusoids: at an end, where they cross, or at a trough of either.
+fn lower_bound(l: &GapJet, r: &GapJet, curvature_min: f64) -> f64 {
     let w = r.phi - l.phi;
-    let upper = l.f.max(r.f) + curvature_max * w * w / 8.0;
-    let kappa = (upper - curvature_min).max(0.0);
-    let ends = l.f.min(r.f);
-    let g_w = r.f + 0.5 * kappa * w * w;
-    let dg_w = r.df + kappa * w;
-    let denom = l.df - dg_w;
-    if denom >= 0.0 {
-        // Convexity says dg_w >= l.df; equality (or rounding against it) leaves only the ends.
-        return if denom == 0.0 {
-            ends
-        } else {
-            f64::NEG_INFINITY
-        };
+    let (sw, cw) = w.sin_cos();
+    // Both sinusoids as P + u cos x + v sin x, with x measured from the left end.
+    let (ul, vl) = (l.f - curvature_min, l.df);
+    let (ur, vr) = (
+        (r.f - curvature_min) * cw - r.df * sw,
+        (r.f - curvature_min) * sw + r.df * cw,
+    );
+    // Candidate points are handled by their (cos, sin): a point with sin > 0 lies inside (0, w) iff its
+    // cosine exceeds cos w (w <= pi), so no angle is ever formed.
+    let upper = |c: f64, s: f64| (ul * c + vl * s).max(ur * c + vr * s);
+    let mut lowest = ul.max(ur).min(upper(cw, sw));
+    let mut consider = |c: f64, s: f64| {
+        if s > 0.0 && c > cw {
+            lowest = lowest.min(upper(c, s));
+        }
+    };
+    // Crossing: (ul - ur) cos x + (vl - vr) sin x = 0, i.e. (cos x, sin x) parallel to (vl - vr, ur - ul).
+    let (cx, sx) = (vl - vr, ur - ul);
+    let norm = (cx * cx + sx * sx).sqrt();
+    if norm > 0.0 {
+        let sign = if sx < 0.0 { -1.0 } else { 1.0 };
+        consider(sign * cx / norm, sign * sx / norm);
     }
-    let x = (g_w - dg_w * w - l.f) / denom;
-    if x > 0.0 && x < w {
-        ends.min(l.f + l.df * x - 0.5 * kappa * x * x)
-    } else {
-        ends
+    // Troughs of u cos x + v sin x lie at (cos, sin) = -(u, v) / |(u, v)|.
+    for (u, v) in [(ul, vl), (ur, vr)] {
+        let norm = (u * u + v * v).sqrt();
+        if norm > 0.0 {
+            consider(-u / norm, -v / norm);
+        }
     }
+    curvature_min + lowest
 }
 
 #[cfg(test)]
@@ -374,12 +432,11 @@ mod tests {
             body(0.7, 0.5, 1.0),
         );
         let kmin = gap.a.rho_min + gap.b.rho_min;
-        let kmax = gap.a.rho_max + gap.b.rho_max + gap.delta[0].hypot(gap.delta[1]);
         for i in 0..200 {
             let lo = i as f64 * 0.03;
-            for w in [1e-3, 0.05, 0.4] {
+            for w in [1e-3, 0.05, 0.4, 1.5, 3.0] {
                 let (l, r) = (gap.eval(lo), gap.eval(lo + w));
-                let lb = lower_bound(&l, &r, kmin, kmax);
+                let lb = lower_bound(&l, &r, kmin).max(gap.convex_lower_bound(&l, &r));
                 let sampled = (0..=50)
                     .map(|k| gap.eval(lo + w * k as f64 / 50.0).f)
                     .fold(f64::INFINITY, f64::min);

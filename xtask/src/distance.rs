@@ -1,0 +1,96 @@
+//! `cargo xtask distance`: the geometry as a JSON-lines filter, so any tool can check it.
+
+use geometry::{Ellipse, signed_distance_coords};
+use serde::{Deserialize, Serialize};
+use std::io::{BufRead, Write};
+
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Also write the gradient (6) and Hessian (6x6) of the distance with respect to
+    /// (x_A, y_A, theta_A, x_B, y_B, theta_B).
+    #[arg(long)]
+    derivatives: bool,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Query {
+    a: [f64; 2],
+    pose_a: [f64; 3],
+    b: [f64; 2],
+    pose_b: [f64; 3],
+}
+
+#[derive(Debug, Serialize)]
+struct Answer {
+    distance: f64,
+    point_a: [f64; 2],
+    point_b: [f64; 2],
+    normal: [f64; 2],
+    witness_unique: bool,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    gradient: Option<[f64; 6]>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    hessian: Option<[[f64; 6]; 6]>,
+}
+
+/// Answers one input line: the JSON answer or the error message.
+pub fn answer_line(line: &str, derivatives: bool) -> Result<String, String> {
+    let q: Query = serde_json::from_str(line).map_err(|e| format!("bad input line: {e}"))?;
+    let a = Ellipse::new(q.a[0], q.a[1]).map_err(|e| format!("shape a: {e}"))?;
+    let b = Ellipse::new(q.b[0], q.b[1]).map_err(|e| format!("shape b: {e}"))?;
+    let c = signed_distance_coords(&a, q.pose_a, &b, q.pose_b).map_err(|e| e.to_string())?;
+    let d = derivatives.then(|| c.derivatives());
+    let answer = Answer {
+        distance: c.distance,
+        point_a: [c.point_a.x, c.point_a.y],
+        point_b: [c.point_b.x, c.point_b.y],
+        normal: [c.normal.x, c.normal.y],
+        witness_unique: c.witness_unique,
+        gradient: d.map(|d| d.gradient),
+        hessian: d.map(|d| d.hessian),
+    };
+    serde_json::to_string(&answer).map_err(|e| e.to_string())
+}
+
+pub fn run(args: &Args) -> anyhow::Result<()> {
+    let stdin = std::io::stdin();
+    let mut out = std::io::BufWriter::new(std::io::stdout().lock());
+    for line in stdin.lock().lines() {
+        let line = line?;
+        if line.trim().is_empty() {
+            continue;
+        }
+        match answer_line(&line, args.derivatives) {
+            Ok(json) => writeln!(out, "{json}")?,
+            Err(message) => writeln!(out, "{}", serde_json::json!({ "error": message }))?,
+        }
+    }
+    out.flush()?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn answers_a_good_line_and_reports_bad_ones() {
+        let ok = answer_line(
+            r#"{"a":[1,0.5],"pose_a":[0,0,0],"b":[0.7,0.5],"pose_b":[3,0,0]}"#,
+            true,
+        )
+        .unwrap();
+        let v: serde_json::Value = serde_json::from_str(&ok).unwrap();
+        assert!((v["distance"].as_f64().unwrap() - 1.3).abs() < 1e-14);
+        assert_eq!(v["gradient"].as_array().unwrap().len(), 6);
+        for bad in [
+            "not json",
+            r#"{"a":[1,-0.5],"pose_a":[0,0,0],"b":[0.7,0.5],"pose_b":[3,0,0]}"#,
+            r#"{"a":[1,0.5],"pose_a":[0,0],"b":[0.7,0.5],"pose_b":[3,0,0]}"#,
+            r#"{"a":[1,0.5],"pose_a":[0,0,1e999],"b":[0.7,0.5],"pose_b":[3,0,0]}"#,
+        ] {
+            assert!(answer_line(bad, false).is_err(), "accepted {bad}");
+        }
+    }
+}
