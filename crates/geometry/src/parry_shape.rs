@@ -78,7 +78,7 @@ impl PointQuery for Ellipse {
             [pt.x, pt.y],
             GapBody::point(),
         );
-        let min = gap.minimise(&[pt.y.atan2(pt.x)]);
+        let min = gap.minimise(pt.y.atan2(pt.x));
         let [x, y] = gap.a.support_offset(min.jet.cos, min.jet.sin);
         PointProjection::new(inside, Vector::new(x, y))
     }

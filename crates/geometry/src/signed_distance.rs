@@ -120,7 +120,7 @@ pub fn signed_distance_coords(
     );
     // The line of centres separates most apart pairs at once; otherwise the search is global anyway.
     let line = (center_b[1] - center_a[1]).atan2(center_b[0] - center_a[0]);
-    let min = gap.minimise(&[line]);
+    let min = gap.minimise(line);
     Ok(Contact::from_minimum(&gap, [center_a, center_b], &min))
 }
 
