@@ -1,0 +1,259 @@
+//! Small dense LU factorisation with partial pivoting, in two interchangeable back ends: faer's in-place
+//! factorisation (with a workspace allocated once) and a hand-written loop over a row-major slice.
+//!
+//! At the scene's sizes (6 to 12 unknowns) a whole Newton solve takes a couple of microseconds, so the
+//! per-call cost of the factorisation matters; `cargo xtask benchmarks` and `cargo bench -p ncp` measure
+//! both back ends and docs/benchmarks.md shows the result that picked the default.
+
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::lu::partial_pivoting::{factor, solve};
+use faer::{Mat, Par};
+use serde::{Deserialize, Serialize};
+
+/// Which dense LU implementation a solver uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LinearSolver {
+    /// Hand-written partial-pivoting LU on a row-major buffer (the default: cheaper below ~20 unknowns).
+    #[default]
+    Hand,
+    /// faer's `lu_in_place` and `solve_in_place`, sequential, with a preallocated workspace.
+    Faer,
+}
+
+/// A reusable LU factorisation of an `n x n` matrix.
+pub struct DenseLu {
+    n: usize,
+    backend: Backend,
+}
+
+impl std::fmt::Debug for DenseLu {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let kind = match self.backend {
+            Backend::Hand { .. } => LinearSolver::Hand,
+            Backend::Faer { .. } => LinearSolver::Faer,
+        };
+        f.debug_struct("DenseLu")
+            .field("n", &self.n)
+            .field("backend", &kind)
+            .finish()
+    }
+}
+
+enum Backend {
+    Hand {
+        lu: Vec<f64>,
+        perm: Vec<usize>,
+    },
+    Faer {
+        lu: Mat<f64>,
+        perm: Vec<usize>,
+        perm_inv: Vec<usize>,
+        rhs: Mat<f64>,
+        buffer: MemBuffer,
+    },
+}
+
+impl DenseLu {
+    /// Workspace for `n x n` matrices with the chosen back end.
+    pub fn new(n: usize, solver: LinearSolver) -> Self {
+        let backend = match solver {
+            LinearSolver::Hand => Backend::Hand {
+                lu: vec![0.0; n * n],
+                perm: (0..n).collect(),
+            },
+            LinearSolver::Faer => {
+                let req =
+                    factor::lu_in_place_scratch::<usize, f64>(n, n, Par::Seq, Default::default())
+                        .or(solve::solve_in_place_scratch::<usize, f64>(n, 1, Par::Seq));
+                Backend::Faer {
+                    lu: Mat::zeros(n, n),
+                    perm: vec![0; n],
+                    perm_inv: vec![0; n],
+                    rhs: Mat::zeros(n, 1),
+                    buffer: MemBuffer::new(req),
+                }
+            }
+        };
+        DenseLu { n, backend }
+    }
+
+    /// The size this workspace factors.
+    pub fn dim(&self) -> usize {
+        self.n
+    }
+
+    /// Factor the row-major `n x n` matrix `a`. Returns false when it is singular to working precision
+    /// (a pivot below `n eps max|a|`, or a non-finite entry); the factorisation is then unusable.
+    pub fn factor(&mut self, a: &[f64]) -> bool {
+        let n = self.n;
+        debug_assert_eq!(a.len(), n * n);
+        let scale = a.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        if !scale.is_finite() {
+            return false;
+        }
+        let tiny = (n as f64) * f64::EPSILON * scale;
+        match &mut self.backend {
+            Backend::Hand { lu, perm } => {
+                lu.copy_from_slice(a);
+                for (i, p) in perm.iter_mut().enumerate() {
+                    *p = i;
+                }
+                for k in 0..n {
+                    let mut p = k;
+                    let mut best = lu[k * n + k].abs();
+                    for i in k + 1..n {
+                        let v = lu[i * n + k].abs();
+                        if v > best {
+                            best = v;
+                            p = i;
+                        }
+                    }
+                    if !(best > tiny) {
+                        return false;
+                    }
+                    if p != k {
+                        for j in 0..n {
+                            lu.swap(k * n + j, p * n + j);
+                        }
+                        perm.swap(k, p);
+                    }
+                    let pivot = lu[k * n + k];
+                    for i in k + 1..n {
+                        let l = lu[i * n + k] / pivot;
+                        lu[i * n + k] = l;
+                        if l != 0.0 {
+                            for j in k + 1..n {
+                                lu[i * n + j] -= l * lu[k * n + j];
+                            }
+                        }
+                    }
+                }
+                true
+            }
+            Backend::Faer {
+                lu,
+                perm,
+                perm_inv,
+                buffer,
+                ..
+            } => {
+                for i in 0..n {
+                    for j in 0..n {
+                        lu[(i, j)] = a[i * n + j];
+                    }
+                }
+                let stack = MemStack::new(buffer);
+                factor::lu_in_place(
+                    lu.as_mut(),
+                    perm,
+                    perm_inv,
+                    Par::Seq,
+                    stack,
+                    Default::default(),
+                );
+                (0..n).all(|k| {
+                    let u = lu[(k, k)];
+                    u.is_finite() && u.abs() > tiny
+                })
+            }
+        }
+    }
+
+    /// Overwrite `rhs` with the solution of `a x = rhs` for the last matrix factored successfully.
+    pub fn solve(&mut self, rhs: &mut [f64]) {
+        let n = self.n;
+        debug_assert_eq!(rhs.len(), n);
+        match &mut self.backend {
+            Backend::Hand { lu, perm } => {
+                // Forward substitution on P b (unit lower), then back substitution.
+                let mut x = [0.0f64; 32];
+                if n <= 32 {
+                    let x = &mut x[..n];
+                    substitute(lu, perm, rhs, x);
+                    rhs.copy_from_slice(x);
+                } else {
+                    let mut x = vec![0.0; n];
+                    substitute(lu, perm, rhs, &mut x);
+                    rhs.copy_from_slice(&x);
+                }
+            }
+            Backend::Faer {
+                lu,
+                perm,
+                perm_inv,
+                rhs: b,
+                buffer,
+            } => {
+                for i in 0..n {
+                    b[(i, 0)] = rhs[i];
+                }
+                let stack = MemStack::new(buffer);
+                let p = faer::perm::PermRef::new_checked(perm, perm_inv, n);
+                solve::solve_in_place(lu.as_ref(), lu.as_ref(), p, b.as_mut(), Par::Seq, stack);
+                for i in 0..n {
+                    rhs[i] = b[(i, 0)];
+                }
+            }
+        }
+    }
+}
+
+fn substitute(lu: &[f64], perm: &[usize], b: &[f64], x: &mut [f64]) {
+    let n = perm.len();
+    for i in 0..n {
+        let mut s = b[perm[i]];
+        for j in 0..i {
+            s -= lu[i * n + j] * x[j];
+        }
+        x[i] = s;
+    }
+    for i in (0..n).rev() {
+        let mut s = x[i];
+        for j in i + 1..n {
+            s -= lu[i * n + j] * x[j];
+        }
+        x[i] = s / lu[i * n + i];
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+
+    #[test]
+    fn hand_and_faer_back_ends_solve_the_same_systems() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        for n in [1usize, 2, 3, 6, 9, 12, 40] {
+            let a: Vec<f64> = (0..n * n).map(|_| rng.random_range(-1.0..1.0)).collect();
+            let x: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
+            let b: Vec<f64> = (0..n)
+                .map(|i| (0..n).map(|j| a[i * n + j] * x[j]).sum())
+                .collect();
+            for solver in [LinearSolver::Hand, LinearSolver::Faer] {
+                let mut lu = DenseLu::new(n, solver);
+                assert!(lu.factor(&a));
+                let mut y = b.clone();
+                lu.solve(&mut y);
+                let err = x
+                    .iter()
+                    .zip(&y)
+                    .fold(0.0f64, |m, (p, q)| m.max((p - q).abs()));
+                assert!(err < 1e-10, "{solver:?} n = {n}: error {err}");
+            }
+        }
+    }
+
+    #[test]
+    fn singular_and_non_finite_matrices_are_reported() {
+        for solver in [LinearSolver::Hand, LinearSolver::Faer] {
+            let mut lu = DenseLu::new(3, solver);
+            assert!(!lu.factor(&[1.0, 2.0, 3.0, 2.0, 4.0, 6.0, 0.0, 1.0, 1.0]));
+            assert!(!lu.factor(&[1.0, 0.0, 0.0, 0.0, f64::NAN, 0.0, 0.0, 0.0, 1.0]));
+            // A pivot far below the matrix's scale is singular; the same matrix scaled uniformly is not.
+            assert!(!lu.factor(&[0.0, 1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1e-300]));
+            assert!(lu.factor(&[0.0, 1e-200, 0.0, 1e-200, 0.0, 0.0, 0.0, 0.0, 1e-200]));
+        }
+    }
+}

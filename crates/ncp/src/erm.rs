@@ -1,0 +1,302 @@
+//! Expected residual minimisation (paper eq. 14 with 15, after Chen and Fukushima): for a linear mixed
+//! problem, minimise `f(lambda) = sum_i E[min(lambda_i, w_i + sigma_i xi_i)^2]` over `lambda >= 0`, with
+//! `xi_i` standard normal and the equality rows held exactly.
+//!
+//! The equality rows are eliminated once ([`LinearMcp::reduce`]): `x = X lambda + x0` satisfies them to
+//! rounding at every iterate, and `w = A lambda + b` with the Schur complement `A`. What remains is a smooth,
+//! generally non-convex, bound-constrained minimisation in `c` variables, solved by a projected Newton method
+//! (Bertsekas, "Projected Newton methods for optimization problems with simple constraints", 1982) on the
+//! exact Hessian of eq. (15), with a Levenberg–Marquardt shift that makes the reduced Hessian positive
+//! definite and adapts to the step's success, and an Armijo search along the projection arc.
+
+use crate::dense::{DenseLu, LinearSolver};
+use crate::error::{NcpError, check_finite, check_len};
+use crate::function::normal_expected_squared;
+use crate::newton::inf_norm;
+use crate::problem::{LinearMcp, Mcp, Reduced};
+use crate::solution::{Info, Solution, Status};
+use serde::{Deserialize, Serialize};
+
+/// Settings of [`ErmSolver`].
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ErmSettings {
+    /// Stop when the projected gradient's infinity norm is below `tol * (1 + max(|lambda|, |w|))^2`
+    /// (the objective is quadratic in the data's scale).
+    pub tol: f64,
+    /// Iterations at most.
+    pub max_iter: usize,
+    /// Armijo constant of the search along the projection arc.
+    pub armijo: f64,
+}
+
+impl Default for ErmSettings {
+    fn default() -> Self {
+        ErmSettings {
+            tol: 1e-13,
+            max_iter: 200,
+            armijo: 1e-4,
+        }
+    }
+}
+
+impl ErmSettings {
+    /// `Err` naming the first setting out of range.
+    pub fn validate(&self) -> Result<(), NcpError> {
+        if !(self.tol.is_finite() && self.tol > 0.0) {
+            return Err(NcpError::Setting {
+                name: "tol",
+                value: self.tol,
+                expected: "finite and positive",
+            });
+        }
+        if self.max_iter == 0 {
+            return Err(NcpError::Setting {
+                name: "max_iter",
+                value: 0.0,
+                expected: "at least 1",
+            });
+        }
+        if !(self.armijo > 0.0 && self.armijo < 0.5) {
+            return Err(NcpError::Setting {
+                name: "armijo",
+                value: self.armijo,
+                expected: "in (0, 0.5)",
+            });
+        }
+        Ok(())
+    }
+}
+
+/// The ERM solver for linear mixed problems.
+#[derive(Debug)]
+pub struct ErmSolver {
+    settings: ErmSettings,
+}
+
+struct Eval {
+    f: f64,
+    g: Vec<f64>,
+    h: Vec<f64>,
+    w: Vec<f64>,
+}
+
+impl ErmSolver {
+    /// A solver with checked settings.
+    pub fn new(settings: ErmSettings) -> Result<Self, NcpError> {
+        settings.validate()?;
+        Ok(ErmSolver { settings })
+    }
+
+    /// Minimise the expected squared residual with noise `sigma[i]` on row `i`'s `w`, starting from the
+    /// complementarity part of `z0` (projected onto `lambda >= 0`; the free part is recomputed).
+    #[tracing::instrument(name = "ncp.erm", level = "debug", skip_all)]
+    pub fn solve(
+        &self,
+        problem: &LinearMcp,
+        sigma: &[f64],
+        z0: &[f64],
+    ) -> Result<Solution, NcpError> {
+        let n = problem.dim();
+        let nf = problem.n_free();
+        let c = n - nf;
+        check_len("z0", z0.len(), n)?;
+        check_len("sigma", sigma.len(), c)?;
+        check_finite("z0", z0)?;
+        if let Some(&s) = sigma.iter().find(|s| !(s.is_finite() && **s > 0.0)) {
+            return Err(NcpError::Sigma(s));
+        }
+        let reduced = problem.reduce()?;
+        let s = self.settings;
+        let mut lambda: Vec<f64> = z0[nf..].iter().map(|v| v.max(0.0)).collect();
+        let mut cur = evaluate(&reduced, sigma, &lambda, true);
+        let mut mu = 0.0f64;
+        let mut lu = DenseLu::new(c, LinearSolver::Hand);
+        let mut evaluations = 1;
+        let mut iterations = 0;
+        let mut trial = vec![0.0; c];
+        let status = loop {
+            let pg: Vec<f64> = (0..c)
+                .map(|i| {
+                    if lambda[i] > 0.0 {
+                        cur.g[i]
+                    } else {
+                        cur.g[i].min(0.0)
+                    }
+                })
+                .collect();
+            let residual = inf_norm(&pg);
+            let scale = 1.0 + inf_norm(&lambda).max(inf_norm(&cur.w));
+            tracing::trace!(iter = iterations, residual, mu, "ncp.erm");
+            if residual <= s.tol * scale * scale {
+                break Status::Converged;
+            }
+            if iterations == s.max_iter {
+                break Status::MaxIterations;
+            }
+            iterations += 1;
+            // Bertsekas' active set: variables at (or within eps of) the bound that the gradient pushes out.
+            let eps = residual.min(1e-3 * scale);
+            let free: Vec<bool> = (0..c)
+                .map(|i| !(lambda[i] <= eps && cur.g[i] > 0.0))
+                .collect();
+            let diag_max = (0..c)
+                .fold(0.0f64, |m, i| m.max(cur.h[i * c + i].abs()))
+                .max(f64::MIN_POSITIVE);
+            // Newton direction on the free set with a Levenberg–Marquardt shift until it is a descent
+            // direction of a positive definite model.
+            let mut d = vec![0.0; c];
+            let mut solved = false;
+            for _ in 0..60 {
+                let mut m = vec![0.0; c * c];
+                for i in 0..c {
+                    for j in 0..c {
+                        m[i * c + j] = if free[i] && free[j] {
+                            cur.h[i * c + j]
+                        } else if i == j {
+                            1.0
+                        } else {
+                            0.0
+                        };
+                    }
+                    if free[i] {
+                        m[i * c + i] += mu;
+                    }
+                }
+                if is_positive_definite(&m, c) && lu.factor(&m) {
+                    for i in 0..c {
+                        d[i] = if free[i] { -cur.g[i] } else { 0.0 };
+                    }
+                    lu.solve(&mut d);
+                    solved = d.iter().all(|v| v.is_finite());
+                    if solved {
+                        break;
+                    }
+                }
+                mu = (mu * 10.0).max(1e-10 * diag_max);
+            }
+            if !solved {
+                break Status::SingularJacobian;
+            }
+            // Search along the projection arc lambda(t) = max(lambda + t d, 0), active variables moved by
+            // their (projected) gradient step.
+            let mut t = 1.0;
+            let accepted = loop {
+                for i in 0..c {
+                    let step = if free[i] {
+                        d[i]
+                    } else {
+                        -cur.g[i] / cur.h[i * c + i].abs().max(mu).max(1e-300)
+                    };
+                    trial[i] = (lambda[i] + t * step).max(0.0);
+                }
+                let e = evaluate(&reduced, sigma, &trial, false);
+                evaluations += 1;
+                let decrease: f64 = (0..c).map(|i| cur.g[i] * (trial[i] - lambda[i])).sum();
+                if e.f.is_finite() && e.f <= cur.f + s.armijo * decrease {
+                    break Some(t);
+                }
+                t *= 0.5;
+                if t < 1e-12 {
+                    break None;
+                }
+            };
+            let Some(t) = accepted else {
+                // The step was too long for the model: trust it less, or stop at the rounding floor.
+                if mu > 1e12 * diag_max {
+                    break Status::LineSearchFailed;
+                }
+                mu = (mu * 10.0).max(1e-6 * diag_max);
+                continue;
+            };
+            let moved = (0..c).fold(0.0f64, |m, i| m.max((trial[i] - lambda[i]).abs()));
+            lambda.copy_from_slice(&trial);
+            cur = evaluate(&reduced, sigma, &lambda, true);
+            evaluations += 1;
+            mu = if t == 1.0 { mu / 10.0 } else { mu * 4.0 };
+            if moved <= 4.0 * f64::EPSILON * (1.0 + inf_norm(&lambda)) {
+                break Status::Converged;
+            }
+        };
+        let pg_norm = (0..c).fold(0.0f64, |m, i| {
+            m.max(
+                if lambda[i] > 0.0 {
+                    cur.g[i]
+                } else {
+                    cur.g[i].min(0.0)
+                }
+                .abs(),
+            )
+        });
+        let z = reduced.expand(&lambda);
+        let mut w = vec![0.0; n];
+        problem.evaluate(&z, &mut w, None);
+        Ok(Solution {
+            z,
+            w,
+            info: Info {
+                status,
+                iterations,
+                residual: pg_norm,
+                evaluations,
+            },
+        })
+    }
+}
+
+/// Objective, gradient and (when asked) Hessian of the reduced ERM objective at `lambda`.
+fn evaluate(r: &Reduced, sigma: &[f64], lambda: &[f64], hessian: bool) -> Eval {
+    let c = lambda.len();
+    let w: Vec<f64> = (0..c)
+        .map(|i| r.b[i] + (0..c).map(|j| r.a[i * c + j] * lambda[j]).sum::<f64>())
+        .collect();
+    let jets: Vec<_> = (0..c)
+        .map(|i| normal_expected_squared(lambda[i], w[i], sigma[i]))
+        .collect();
+    let f = jets.iter().map(|j| j.value).sum();
+    // g = e_a + A^T e_b
+    let g: Vec<f64> = (0..c)
+        .map(|j| jets[j].da + (0..c).map(|i| r.a[i * c + j] * jets[i].db).sum::<f64>())
+        .collect();
+    let mut h = Vec::new();
+    if hessian {
+        h = vec![0.0; c * c];
+        for j in 0..c {
+            for k in 0..c {
+                let mut s = 0.0;
+                for i in 0..c {
+                    s += r.a[i * c + j] * jets[i].dbb * r.a[i * c + k];
+                }
+                s += jets[j].dab * r.a[j * c + k] + r.a[k * c + j] * jets[k].dab;
+                if j == k {
+                    s += jets[j].daa;
+                }
+                h[j * c + k] = s;
+            }
+        }
+    }
+    Eval { f, g, h, w }
+}
+
+/// Cholesky test of a symmetric row-major matrix.
+fn is_positive_definite(m: &[f64], n: usize) -> bool {
+    let mut l = vec![0.0; n * n];
+    for j in 0..n {
+        let mut d = m[j * n + j];
+        for k in 0..j {
+            d -= l[j * n + k] * l[j * n + k];
+        }
+        if !(d > 0.0) {
+            return false;
+        }
+        let d = d.sqrt();
+        l[j * n + j] = d;
+        for i in j + 1..n {
+            let mut s = 0.5 * (m[i * n + j] + m[j * n + i]);
+            for k in 0..j {
+                s -= l[i * n + k] * l[j * n + k];
+            }
+            l[i * n + j] = s / d;
+        }
+    }
+    true
+}

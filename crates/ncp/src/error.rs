@@ -1,0 +1,96 @@
+//! The one error type of the crate: an ill-posed question, never a solver that ran and fell short (that is a
+//! [`Status`](crate::Status)).
+
+/// Why a complementarity problem could not be posed or solved at all.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum NcpError {
+    /// A vector or matrix had the wrong size.
+    #[error("{what} has {got} entries, expected {expected}")]
+    Dimension {
+        /// What was mis-sized (`"q"`, `"z0"`, `"functions"`, ...).
+        what: &'static str,
+        /// Its size.
+        got: usize,
+        /// The size the problem needs.
+        expected: usize,
+    },
+    /// An input held NaN or an infinity.
+    #[error("{what}[{index}] is {value}; inputs must be finite")]
+    NonFinite {
+        /// Which input (`"M"`, `"q"`, `"z0"`, `"F(z0)"`).
+        what: &'static str,
+        /// Flat index of the first offending entry (row-major for matrices).
+        index: usize,
+        /// The offending value.
+        value: f64,
+    },
+    /// A smoothing scale was not finite and positive.
+    #[error(
+        "smoothing sigma = {0}; it must be finite and positive (use a hard function for sigma = 0)"
+    )]
+    Sigma(f64),
+    /// A setting was out of its range.
+    #[error("setting `{name}` = {value} is out of range: {expected}")]
+    Setting {
+        /// The field name.
+        name: &'static str,
+        /// Its value.
+        value: f64,
+        /// The admissible range, in words.
+        expected: &'static str,
+    },
+    /// The block of equality rows cannot be eliminated (it is singular), so the free variables are not
+    /// determined by the complementarity variables.
+    #[error("the {n_free}x{n_free} block of equality rows is singular")]
+    SingularFreeBlock {
+        /// Number of equality rows.
+        n_free: usize,
+    },
+    /// Lemke's method ended on a secondary ray: the LCP has no solution (certain for copositive-plus M,
+    /// which includes every positive semi-definite M).
+    #[error("Lemke's method ended on a ray after {pivots} pivots: the LCP has no solution")]
+    Infeasible {
+        /// Pivots performed.
+        pivots: usize,
+    },
+    /// A method that only handles one kind of problem was given another.
+    #[error("{0}")]
+    Unsupported(&'static str),
+    /// A solve did not converge and the caller asked for an error in that case.
+    #[error(
+        "the solver stopped without converging: {status:?} after {iterations} iterations, residual {residual:e}"
+    )]
+    NotConverged {
+        /// Why it stopped.
+        status: crate::Status,
+        /// Iterations run.
+        iterations: usize,
+        /// Final residual.
+        residual: f64,
+    },
+}
+
+/// `Err(NonFinite)` naming the first non-finite entry of `values`.
+pub(crate) fn check_finite(what: &'static str, values: &[f64]) -> Result<(), NcpError> {
+    match values.iter().position(|v| !v.is_finite()) {
+        None => Ok(()),
+        Some(index) => Err(NcpError::NonFinite {
+            what,
+            index,
+            value: values[index],
+        }),
+    }
+}
+
+/// `Err(Dimension)` unless `got == expected`.
+pub(crate) fn check_len(what: &'static str, got: usize, expected: usize) -> Result<(), NcpError> {
+    if got == expected {
+        Ok(())
+    } else {
+        Err(NcpError::Dimension {
+            what,
+            got,
+            expected,
+        })
+    }
+}

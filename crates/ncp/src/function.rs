@@ -1,0 +1,295 @@
+//! NCP functions: `phi(a, b) = 0` exactly when `a >= 0`, `b >= 0`, `a b = 0` (paper section III-B), their
+//! smoothed stochastic versions (section IV-A), and the expected squared residual of eq. (15).
+//!
+//! Every function is written as `min(a, b)` minus a non-negative correction, so that the value keeps full
+//! relative accuracy where it is small (the root, which is where a solver looks) and never overflows:
+//!
+//! - logistic (eq. 17): `a - s ln(1 + exp((a - b)/s)) = min(a, b) - s softplus(-|a - b| / s)`,
+//! - normal mean (footnote 3): `a - s^2 p(a) - (a - b) P(a) = min(a, b) - s I1(|a - b| / s)`,
+//!
+//! with `I1(x) = E[(Z - x)^+]` (see `special.rs`). The two smoothed functions are the expectation of
+//! `min(a, b + noise)` for logistic and normal noise of scale `s` on `b`.
+
+use crate::error::NcpError;
+use crate::special::{sigmoid, sigmoid_slope, softplus, upper_tails};
+use serde::{Deserialize, Serialize};
+
+/// Which NCP function a complementarity row uses.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum NcpFunction {
+    /// `min(a, b)`, paper eq. (4): the hard complementarity, semismooth.
+    Min,
+    /// Fischer–Burmeister `a + b - sqrt(a^2 + b^2)`: hard, semismooth, and its square is smooth.
+    FischerBurmeister,
+    /// Logistic smoothing, paper eq. (17): `E[min(a, b_L)]` for `b_L` logistic with mean `b` and scale `sigma`.
+    Logistic {
+        /// Noise scale `sigma > 0` (the paper's default is 0.1).
+        sigma: f64,
+    },
+    /// Normal smoothing, paper footnote 3: `E[min(a, b_N)]` for `b_N ~ N(b, sigma^2)`.
+    Normal {
+        /// Noise standard deviation `sigma > 0`.
+        sigma: f64,
+    },
+}
+
+/// Value and first and second partial derivatives of a function of `(a, b)`.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct NcpJet {
+    /// `phi(a, b)`.
+    pub value: f64,
+    /// `d phi / d a`.
+    pub da: f64,
+    /// `d phi / d b`.
+    pub db: f64,
+    /// `d^2 phi / d a^2`.
+    pub daa: f64,
+    /// `d^2 phi / d a d b`.
+    pub dab: f64,
+    /// `d^2 phi / d b^2`.
+    pub dbb: f64,
+}
+
+impl NcpFunction {
+    /// Logistic smoothing with noise scale `sigma`, checked.
+    pub fn logistic(sigma: f64) -> Result<Self, NcpError> {
+        let f = NcpFunction::Logistic { sigma };
+        f.validate()?;
+        Ok(f)
+    }
+
+    /// Normal smoothing with standard deviation `sigma`, checked.
+    pub fn normal(sigma: f64) -> Result<Self, NcpError> {
+        let f = NcpFunction::Normal { sigma };
+        f.validate()?;
+        Ok(f)
+    }
+
+    /// `Err` unless a smoothing `sigma` is finite and positive.
+    pub fn validate(&self) -> Result<(), NcpError> {
+        match *self {
+            NcpFunction::Logistic { sigma } | NcpFunction::Normal { sigma } => {
+                if sigma.is_finite() && sigma > 0.0 {
+                    Ok(())
+                } else {
+                    Err(NcpError::Sigma(sigma))
+                }
+            }
+            _ => Ok(()),
+        }
+    }
+
+    /// True for the functions whose roots are exactly the complementarity conditions.
+    pub fn is_hard(&self) -> bool {
+        matches!(self, NcpFunction::Min | NcpFunction::FischerBurmeister)
+    }
+
+    /// The value `phi(a, b)` alone.
+    pub fn value(&self, a: f64, b: f64) -> f64 {
+        match *self {
+            NcpFunction::Min => a.min(b),
+            NcpFunction::FischerBurmeister => fischer_burmeister(a, b),
+            NcpFunction::Logistic { sigma } => a.min(b) - sigma * softplus(-(a - b).abs() / sigma),
+            NcpFunction::Normal { sigma } => {
+                a.min(b) - sigma * upper_tails((a - b).abs() / sigma).i1
+            }
+        }
+    }
+
+    /// Value and first and second derivatives. At the kinks of the hard functions the first derivative is
+    /// one element of the generalised (Clarke) Jacobian: `min` takes `(1, 0)` when `a <= b`, and
+    /// Fischer–Burmeister takes `(1 - 1/sqrt 2, 1 - 1/sqrt 2)` at the origin; their second derivatives are
+    /// zero at the kinks.
+    pub fn jet(&self, a: f64, b: f64) -> NcpJet {
+        match *self {
+            NcpFunction::Min => {
+                if a <= b {
+                    NcpJet {
+                        value: a,
+                        da: 1.0,
+                        ..NcpJet::default()
+                    }
+                } else {
+                    NcpJet {
+                        value: b,
+                        db: 1.0,
+                        ..NcpJet::default()
+                    }
+                }
+            }
+            NcpFunction::FischerBurmeister => fischer_burmeister_jet(a, b),
+            NcpFunction::Logistic { sigma } => {
+                let c = (a - b) / sigma;
+                let value = a.min(b) - sigma * softplus(-c.abs());
+                let curvature = sigmoid_slope(c) / sigma;
+                NcpJet {
+                    value,
+                    da: sigmoid(-c),
+                    db: sigmoid(c),
+                    daa: -curvature,
+                    dab: curvature,
+                    dbb: -curvature,
+                }
+            }
+            NcpFunction::Normal { sigma } => {
+                let alpha = (a - b) / sigma;
+                let t = upper_tails(alpha.abs());
+                // P(b_N < a) = Phi(alpha): the weight of the branch where the noisy b is the minimum.
+                let (phi_lo, phi_hi) = (t.i0, 1.0 - t.i0);
+                let db = if alpha > 0.0 { phi_hi } else { phi_lo };
+                let da = if alpha > 0.0 { phi_lo } else { phi_hi };
+                let curvature = t.pdf / sigma;
+                NcpJet {
+                    value: a.min(b) - sigma * t.i1,
+                    da,
+                    db,
+                    daa: -curvature,
+                    dab: curvature,
+                    dbb: -curvature,
+                }
+            }
+        }
+    }
+}
+
+fn fischer_burmeister(a: f64, b: f64) -> f64 {
+    let r = a.hypot(b);
+    let s = a + b;
+    if s > 0.0 {
+        2.0 * a * b / (s + r)
+    } else {
+        s - r
+    }
+}
+
+fn fischer_burmeister_jet(a: f64, b: f64) -> NcpJet {
+    let r = a.hypot(b);
+    if r == 0.0 {
+        let g = 1.0 - std::f64::consts::FRAC_1_SQRT_2;
+        return NcpJet {
+            value: 0.0,
+            da: g,
+            db: g,
+            ..NcpJet::default()
+        };
+    }
+    // 1 - a/r = (r - a)/r, with r - a = b^2 / (r + a) when a > 0 (no cancellation).
+    let r_minus = |x: f64, y: f64| if x > 0.0 { y * y / (r + x) } else { r - x };
+    NcpJet {
+        value: fischer_burmeister(a, b),
+        da: r_minus(a, b) / r,
+        db: r_minus(b, a) / r,
+        daa: -(b / r) * (b / r) / r,
+        dab: (a / r) * (b / r) / r,
+        dbb: -(a / r) * (a / r) / r,
+    }
+}
+
+/// The expected squared residual of the normal model, paper eq. (15): `E[min(a, b_N)^2]` for
+/// `b_N ~ N(b, sigma^2)`, with its first and second derivatives. `sigma` must be positive and finite.
+///
+/// The paper's form `a^2 - sigma^2 (a + b) p(a) + (sigma^2 + b^2 - a^2) P(a)` is correct (checked against
+/// quadrature in the tests) but cancels badly on both sides; with `alpha = (a - b) / sigma` this uses
+///
+/// - `alpha <= 0`: `a^2 - 2 a sigma I1(-alpha) + sigma^2 I2(-alpha)`,
+/// - `alpha > 0`: `b^2 + sigma^2 - 2 a sigma I1(alpha) - sigma^2 I2(alpha)`,
+///
+/// (from `min(a, b_N) = a - (a - b_N)^+` and `= b_N - (b_N - a)^+`), whose small terms are tail integrals.
+pub fn normal_expected_squared(a: f64, b: f64, sigma: f64) -> NcpJet {
+    let alpha = (a - b) / sigma;
+    let t = upper_tails(alpha.abs());
+    let s2 = sigma * sigma;
+    let (value, cdf) = if alpha <= 0.0 {
+        (a * a - 2.0 * a * sigma * t.i1 + s2 * t.i2, t.i0)
+    } else {
+        (b * b + s2 - 2.0 * a * sigma * t.i1 - s2 * t.i2, 1.0 - t.i0)
+    };
+    // cdf = P(b_N < a) = Phi(alpha).
+    // d/da = 2 a P(b_N > a); d/db = 2 E[b_N 1{b_N < a}] = 2 (a Phi(alpha) - sigma G(alpha)), with
+    // G(alpha) = E[(alpha - Z)^+] = I1(-alpha) for alpha <= 0 and alpha + I1(alpha) otherwise, so that
+    // a Phi - sigma G = b Phi(alpha) - sigma pdf(alpha) on the right.
+    let db = if alpha <= 0.0 {
+        2.0 * (a * t.i0 - sigma * t.i1)
+    } else {
+        2.0 * (b * cdf - sigma * t.pdf)
+    };
+    let k = 2.0 * a * t.pdf / sigma;
+    NcpJet {
+        value,
+        da: 2.0 * a * (1.0 - cdf),
+        db,
+        daa: 2.0 * (1.0 - cdf) - k,
+        dab: k,
+        dbb: 2.0 * cdf - k,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hard_functions_vanish_exactly_on_complementary_pairs() {
+        for f in [NcpFunction::Min, NcpFunction::FischerBurmeister] {
+            for &(a, b) in &[
+                (0.0, 0.0),
+                (0.0, 3.0),
+                (2.5, 0.0),
+                (0.0, 1e8),
+                (1e-300, 0.0),
+            ] {
+                assert_eq!(f.value(a, b), 0.0, "{f:?} at ({a}, {b})");
+            }
+            for &(a, b) in &[(1.0, 1.0), (-1.0, 2.0), (2.0, -1e-9), (-1.0, -1.0)] {
+                assert!(f.value(a, b) != 0.0, "{f:?} at ({a}, {b})");
+            }
+        }
+    }
+
+    #[test]
+    fn smoothed_functions_tend_to_min_as_sigma_shrinks() {
+        for &(a, b) in &[(0.3f64, 1.2f64), (2.0, -1.0), (0.5, 0.5), (-1.0, 4.0)] {
+            let hard = a.min(b);
+            let mut previous = f64::INFINITY;
+            for k in 0..12 {
+                let s = 10f64.powi(-k);
+                for f in [
+                    NcpFunction::Logistic { sigma: s },
+                    NcpFunction::Normal { sigma: s },
+                ] {
+                    let gap = hard - f.value(a, b);
+                    assert!(gap >= 0.0, "smoothing lowers the min: {f:?} ({a}, {b})");
+                    assert!(gap <= s, "{f:?} ({a}, {b}) gap {gap}");
+                }
+                let gap = hard - NcpFunction::Logistic { sigma: s }.value(a, b);
+                assert!(gap <= previous);
+                previous = gap;
+            }
+        }
+    }
+
+    #[test]
+    fn fischer_burmeister_keeps_relative_accuracy_near_its_zero_set() {
+        // a + b - sqrt(a^2 + b^2) for a = 1, b = 1e-12 is 1e-12 - 5e-25 to full precision.
+        let v = NcpFunction::FischerBurmeister.value(1.0, 1e-12);
+        assert!((v - (1e-12 - 5e-25)).abs() <= 1e-27);
+        let j = NcpFunction::FischerBurmeister.jet(1.0, -1e-12);
+        assert!((j.da - 0.5e-24).abs() < 1e-38 && (j.db - 1.0 - 1e-12).abs() < 1e-15);
+    }
+
+    #[test]
+    fn expected_squared_residual_dominates_the_squared_mean() {
+        // Jensen: E[min^2] >= E[min]^2 (eq. 16 versus eq. 14).
+        for &(a, b, s) in &[
+            (0.3, 0.1, 0.2),
+            (1.0, 1.0, 0.5),
+            (-2.0, 3.0, 1.0),
+            (5.0, -5.0, 0.01),
+        ] {
+            let mean = NcpFunction::Normal { sigma: s }.value(a, b);
+            let sq = normal_expected_squared(a, b, s).value;
+            assert!(sq >= mean * mean * (1.0 - 1e-14), "({a}, {b}, {s})");
+        }
+    }
+}
