@@ -2,4 +2,5 @@
 
 mod geometry_laws;
 mod geometry_reference;
+mod ncp_functions;
 mod support;

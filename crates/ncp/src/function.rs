@@ -11,7 +11,7 @@
 //! `min(a, b + noise)` for logistic and normal noise of scale `s` on `b`.
 
 use crate::error::NcpError;
-use crate::special::{sigmoid, sigmoid_slope, softplus, upper_tails};
+use crate::special::{Tails, scaled_difference, sigmoid, sigmoid_slope, softplus, upper_tails_at};
 use serde::{Deserialize, Serialize};
 
 /// Which NCP function a complementarity row uses.
@@ -90,10 +90,11 @@ impl NcpFunction {
         match *self {
             NcpFunction::Min => a.min(b),
             NcpFunction::FischerBurmeister => fischer_burmeister(a, b),
-            NcpFunction::Logistic { sigma } => a.min(b) - sigma * softplus(-(a - b).abs() / sigma),
-            NcpFunction::Normal { sigma } => {
-                a.min(b) - sigma * upper_tails((a - b).abs() / sigma).i1
+            NcpFunction::Logistic { sigma } => {
+                let (c, c_lo) = scaled_difference(a, b, sigma);
+                a.min(b) - sigma * softplus_at(-c.abs(), -signed(c_lo, c))
             }
+            NcpFunction::Normal { sigma } => a.min(b) - sigma * tails(a, b, sigma).0.i1,
         }
     }
 
@@ -120,25 +121,24 @@ impl NcpFunction {
             }
             NcpFunction::FischerBurmeister => fischer_burmeister_jet(a, b),
             NcpFunction::Logistic { sigma } => {
-                let c = (a - b) / sigma;
-                let value = a.min(b) - sigma * softplus(-c.abs());
+                let (c, c_lo) = scaled_difference(a, b, sigma);
+                let value = a.min(b) - sigma * softplus_at(-c.abs(), -signed(c_lo, c));
                 let curvature = sigmoid_slope(c) / sigma;
+                // sigmoid(c + c_lo) to first order in c_lo.
+                let slope = sigmoid_slope(c) * c_lo;
                 NcpJet {
                     value,
-                    da: sigmoid(-c),
-                    db: sigmoid(c),
+                    da: sigmoid(-c) - slope,
+                    db: sigmoid(c) + slope,
                     daa: -curvature,
                     dab: curvature,
                     dbb: -curvature,
                 }
             }
             NcpFunction::Normal { sigma } => {
-                let alpha = (a - b) / sigma;
-                let t = upper_tails(alpha.abs());
-                // P(b_N < a) = Phi(alpha): the weight of the branch where the noisy b is the minimum.
-                let (phi_lo, phi_hi) = (t.i0, 1.0 - t.i0);
-                let db = if alpha > 0.0 { phi_hi } else { phi_lo };
-                let da = if alpha > 0.0 { phi_lo } else { phi_hi };
+                let (t, below, above) = tails(a, b, sigma);
+                // d/db = P(b_N < a), the weight of the branch where the noisy b is the minimum.
+                let (da, db) = (above, below);
                 let curvature = t.pdf / sigma;
                 NcpJet {
                     value: a.min(b) - sigma * t.i1,
@@ -151,6 +151,24 @@ impl NcpFunction {
             }
         }
     }
+}
+
+/// `lo` times the sign of `hi`: the correction to `|hi + lo|` beyond `|hi|`.
+fn signed(lo: f64, hi: f64) -> f64 {
+    if hi < 0.0 { -lo } else { lo }
+}
+
+/// `softplus(y + y_lo)` to first order in the rounding-level correction `y_lo`.
+fn softplus_at(y: f64, y_lo: f64) -> f64 {
+    softplus(y) + sigmoid(y) * y_lo
+}
+
+/// The normal tails at `|a - b| / sigma` (compensated), and `P(b_N < a)`, `P(b_N > a)` for
+/// `b_N ~ N(b, sigma^2)`, each from a tail so that neither is formed as `1 - p`.
+fn tails(a: f64, b: f64, sigma: f64) -> (Tails, f64, f64) {
+    let (alpha, alpha_lo) = scaled_difference(a, b, sigma);
+    let t = upper_tails_at(alpha.abs(), signed(alpha_lo, alpha));
+    if alpha > 0.0 { (t, 1.0 - t.i0, t.i0) } else { (t, t.i0, 1.0 - t.i0) }
 }
 
 fn fischer_burmeister(a: f64, b: f64) -> f64 {
@@ -198,14 +216,14 @@ fn fischer_burmeister_jet(a: f64, b: f64) -> NcpJet {
 /// (from `min(a, b_N) = a - (a - b_N)^+` and `= b_N - (b_N - a)^+`), whose small terms are tail integrals.
 pub fn normal_expected_squared(a: f64, b: f64, sigma: f64) -> NcpJet {
     let alpha = (a - b) / sigma;
-    let t = upper_tails(alpha.abs());
+    let (t, cdf, upper) = tails(a, b, sigma);
     let s2 = sigma * sigma;
-    let (value, cdf) = if alpha <= 0.0 {
-        (a * a - 2.0 * a * sigma * t.i1 + s2 * t.i2, t.i0)
+    let value = if alpha <= 0.0 {
+        a * a - 2.0 * a * sigma * t.i1 + s2 * t.i2
     } else {
-        (b * b + s2 - 2.0 * a * sigma * t.i1 - s2 * t.i2, 1.0 - t.i0)
+        b * b + s2 - 2.0 * a * sigma * t.i1 - s2 * t.i2
     };
-    // cdf = P(b_N < a) = Phi(alpha).
+    // cdf = P(b_N < a) = Phi(alpha), upper = 1 - cdf, each computed without cancellation.
     // d/da = 2 a P(b_N > a); d/db = 2 E[b_N 1{b_N < a}] = 2 (a Phi(alpha) - sigma G(alpha)), with
     // G(alpha) = E[(alpha - Z)^+] = I1(-alpha) for alpha <= 0 and alpha + I1(alpha) otherwise, so that
     // a Phi - sigma G = b Phi(alpha) - sigma pdf(alpha) on the right.
@@ -217,9 +235,9 @@ pub fn normal_expected_squared(a: f64, b: f64, sigma: f64) -> NcpJet {
     let k = 2.0 * a * t.pdf / sigma;
     NcpJet {
         value,
-        da: 2.0 * a * (1.0 - cdf),
+        da: 2.0 * a * upper,
         db,
-        daa: 2.0 * (1.0 - cdf) - k,
+        daa: 2.0 * upper - k,
         dab: k,
         dbb: 2.0 * cdf - k,
     }

@@ -11,18 +11,20 @@
 //!
 //! The closed forms on the right cancel badly once `x` exceeds about 2. They are the first members of the
 //! family `J_n(x) = int_x^inf (t - x)^n / n! pdf(t) dt`, which obeys `n J_n = J_(n-2) - x J_(n-1)` with
-//! `J_(-1) = pdf`. That recurrence is unstable upward and stable downward, so for `x >= 3` the tails come from
+//! `J_(-1) = pdf`. That recurrence is unstable upward and stable downward, so for `x >= 2` the tails come from
 //! Miller's backward recurrence (the continued fraction of the Mills ratio) normalised by `pdf(x)`, which has
-//! no subtraction at all. Below 3 the closed forms lose at most a factor of about 12 (`I1`) and 66 (`I2`)
-//! to cancellation; the test against 50-digit values (tests/it/ncp_reference.rs) measures what remains.
+//! no subtraction at all. Below 2 the closed forms lose at most a factor of about 6 (`I1`) and 20 (`I2`)
+//! to cancellation. The arguments `(a - b) / sigma` are carried with their rounding error
+//! ([`scaled_difference`]) and the tails corrected to first order ([`upper_tails_at`]). The test against
+//! 80-digit values (tests/it/ncp_functions.rs) measures at most 4.2 ulps over all functions.
 
 /// `1 / sqrt(2)` rounded to double, and the rounding error: `FRAC_1_SQRT_2 + FRAC_1_SQRT_2_LO` is exact to
 /// about 1e-33.
 const FRAC_1_SQRT_2_LO: f64 = -4.833_646_656_726_457e-17;
 /// `1 / sqrt(2 pi)`.
 const FRAC_1_SQRT_2PI: f64 = 0.398_942_280_401_432_7;
-/// Below this, the tails use the closed forms; above it, the backward recurrence.
-const RECURRENCE_FROM: f64 = 3.0;
+/// Below this, the tails use the closed forms; above it, the backward recurrence (at most 176 steps).
+const RECURRENCE_FROM: f64 = 2.0;
 /// Beyond this the density underflows to zero (exp(-745) is the smallest subnormal).
 const TAIL_ZERO_FROM: f64 = 38.6;
 
@@ -50,6 +52,21 @@ pub fn sigmoid_slope(x: f64) -> f64 {
     let e = (-x.abs()).exp();
     let d = 1.0 + e;
     e / (d * d)
+}
+
+/// `(a - b) / s` as an unevaluated sum `hi + lo`, correct to about `2^-104` relative: the smoothed
+/// functions are evaluated at arguments like `(a - b) / s = -700`, where the rounding of a plain division
+/// (half an ulp of 700) would cost hundreds of ulps of `exp(-700)`.
+pub fn scaled_difference(a: f64, b: f64, s: f64) -> (f64, f64) {
+    // Knuth's TwoSum: d + err = a - b exactly.
+    let d = a - b;
+    let v = d - a;
+    let err = (a - (d - v)) + (-b - v);
+    let hi = d / s;
+    // d - hi s exactly, by a fused multiply-add.
+    let r = (-hi).mul_add(s, d);
+    let lo = (r + err) / s;
+    if lo.is_finite() { (hi, lo) } else { (hi, 0.0) }
 }
 
 /// The standard normal density `exp(-x^2 / 2) / sqrt(2 pi)`, with the rounding error of `x^2` corrected
@@ -107,7 +124,7 @@ pub fn upper_tails(x: f64) -> Tails {
     // Miller's algorithm: run p_(n-2) = n p_n + x p_(n-1) down from p_(N+1) = 0, p_N = 1; then
     // J_n = pdf * p_n / p_(-1). The depth keeps the truncation below 1e-17 relative (checked in the tests);
     // the values grow at most like sqrt(N!) x^N, far from overflow for x < 38.6 and N <= 80.
-    let depth = 8 + (640.0 / (x * x)) as usize;
+    let depth = 16 + (640.0 / (x * x)) as usize;
     let mut next = 0.0; // p_(n+1)
     let mut current = 1.0; // p_n
     let (mut p2, mut p1, mut p0) = (0.0, 0.0, 0.0);
@@ -133,6 +150,21 @@ pub fn upper_tails(x: f64) -> Tails {
         i0: scale * p0,
         i1: scale * p1,
         i2: 2.0 * scale * p2,
+    }
+}
+
+/// The tails at `x + x_lo`, `x >= 0`, for a correction `|x_lo|` at rounding level: first-order Taylor
+/// terms from `d pdf/dx = -x pdf`, `d I0/dx = -pdf`, `d I1/dx = -I0`, `d I2/dx = -2 I1`.
+pub fn upper_tails_at(x: f64, x_lo: f64) -> Tails {
+    let t = upper_tails(x);
+    if x_lo == 0.0 {
+        return t;
+    }
+    Tails {
+        pdf: t.pdf * (1.0 - x * x_lo),
+        i0: t.i0 - t.pdf * x_lo,
+        i1: t.i1 - t.i0 * x_lo,
+        i2: t.i2 - 2.0 * t.i1 * x_lo,
     }
 }
 
