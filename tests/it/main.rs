@@ -3,4 +3,5 @@
 mod geometry_laws;
 mod geometry_reference;
 mod ncp_functions;
+mod ncp_solvers;
 mod support;

@@ -9,7 +9,8 @@ use rand_distr::{Distribution, StandardNormal};
 
 fn reference() -> serde_json::Value {
     let path = concat!(env!("CARGO_MANIFEST_DIR"), "/data/ncp_reference.json");
-    serde_json::from_str(&std::fs::read_to_string(path).expect("tests/data/ncp_reference.json")).unwrap()
+    serde_json::from_str(&std::fs::read_to_string(path).expect("tests/data/ncp_reference.json"))
+        .unwrap()
 }
 
 /// Error in units of the reference's last place; values below the normal range count in absolute terms.
@@ -34,9 +35,17 @@ fn ncp_functions_match_80_digit_values_to_a_few_ulps() {
         }
     };
     for case in cases {
-        let (a, b, s) = (case["a"].as_f64().unwrap(), case["b"].as_f64().unwrap(), case["sigma"].as_f64().unwrap());
+        let (a, b, s) = (
+            case["a"].as_f64().unwrap(),
+            case["b"].as_f64().unwrap(),
+            case["sigma"].as_f64().unwrap(),
+        );
         let fb = NcpFunction::FischerBurmeister.value(a, b);
-        record("fischer_burmeister".into(), ulps(fb, case["fischer_burmeister"].as_f64().unwrap()), case);
+        record(
+            "fischer_burmeister".into(),
+            ulps(fb, case["fischer_burmeister"].as_f64().unwrap()),
+            case,
+        );
         let jets = [
             ("logistic", NcpFunction::Logistic { sigma: s }.jet(a, b)),
             ("normal", NcpFunction::Normal { sigma: s }.jet(a, b)),
@@ -84,7 +93,7 @@ fn normal_density(z: f64) -> f64 {
 fn normal_expectation(g: impl Fn(f64) -> f64, b: f64, sigma: f64, kink: f64) -> f64 {
     let zk = ((kink - b) / sigma).clamp(-12.0, 12.0);
     let f = |z: f64| g(b + sigma * z) * normal_density(z);
-    simpson(&f, -12.0, zk, 4000) + simpson(&f, zk, 12.0, 4000)
+    simpson(f, -12.0, zk, 4000) + simpson(f, zk, 12.0, 4000)
 }
 
 #[test]
@@ -100,15 +109,27 @@ fn paper_eq_15_and_footnote_3_agree_with_quadrature() {
         let big_p = ncp::special::normal_cdf((a - b) / s);
         a - s * s * p - (a - b) * big_p
     };
-    for &(a, b, s) in &[(0.3, 0.1, 0.2), (1.0, 1.0, 0.5), (-2.0, 3.0, 1.0), (0.5, -0.4, 0.3), (0.0, 0.2, 0.1)] {
+    for &(a, b, s) in &[
+        (0.3, 0.1, 0.2),
+        (1.0, 1.0, 0.5),
+        (-2.0, 3.0, 1.0),
+        (0.5, -0.4, 0.3),
+        (0.0, 0.2, 0.1),
+    ] {
         let sq = normal_expectation(|x| a.min(x).powi(2), b, s, a);
         let mean = normal_expectation(|x| a.min(x), b, s, a);
         let ours_sq = normal_expected_squared(a, b, s).value;
         let ours_mean = NcpFunction::Normal { sigma: s }.value(a, b);
         let tol = 1e-11 * (1.0 + sq.abs());
-        assert!((paper_15(a, b, s) - sq).abs() < tol, "eq. 15 at ({a}, {b}, {s})");
+        assert!(
+            (paper_15(a, b, s) - sq).abs() < tol,
+            "eq. 15 at ({a}, {b}, {s})"
+        );
         assert!((ours_sq - sq).abs() < tol, "ours at ({a}, {b}, {s})");
-        assert!((paper_mean(a, b, s) - mean).abs() < tol, "footnote 3 at ({a}, {b}, {s})");
+        assert!(
+            (paper_mean(a, b, s) - mean).abs() < tol,
+            "footnote 3 at ({a}, {b}, {s})"
+        );
         assert!((ours_mean - mean).abs() < tol, "ours at ({a}, {b}, {s})");
     }
 }
@@ -116,7 +137,12 @@ fn paper_eq_15_and_footnote_3_agree_with_quadrature() {
 #[test]
 fn paper_eq_17_is_the_expected_min_under_logistic_noise() {
     // Logistic density of mean b and scale s, as the paper writes it: 1 / (s (e^(u/2) + e^(-u/2))^2).
-    for &(a, b, s) in &[(0.3f64, 0.1, 0.2), (1.0, 1.0, 0.5), (-2.0, 3.0, 1.0), (0.5, -0.4, 0.3)] {
+    for &(a, b, s) in &[
+        (0.3f64, 0.1, 0.2),
+        (1.0, 1.0, 0.5),
+        (-2.0, 3.0, 1.0),
+        (0.5, -0.4, 0.3),
+    ] {
         let density = |x: f64| {
             let u = (x - b) / s;
             1.0 / (s * ((0.5 * u).exp() + (-0.5 * u).exp()).powi(2))
@@ -124,7 +150,7 @@ fn paper_eq_17_is_the_expected_min_under_logistic_noise() {
         let f = |x: f64| a.min(x) * density(x);
         let (lo, hi) = (b - 60.0 * s, b + 60.0 * s);
         let k = a.clamp(lo, hi);
-        let e = simpson(&f, lo, k, 20000) + simpson(&f, k, hi, 20000);
+        let e = simpson(f, lo, k, 20000) + simpson(f, k, hi, 20000);
         let ours = NcpFunction::Logistic { sigma: s }.value(a, b);
         assert!((ours - e).abs() < 1e-10, "({a}, {b}, {s}): {ours} vs {e}");
     }
@@ -146,15 +172,25 @@ fn sample_mean(a: f64, b: f64, s: f64, logistic: bool, n: usize, seed: u64) -> (
         sum2 += v * v;
     }
     let mean = sum / n as f64;
-    (mean, ((sum2 / n as f64 - mean * mean).max(0.0) / n as f64).sqrt())
+    (
+        mean,
+        ((sum2 / n as f64 - mean * mean).max(0.0) / n as f64).sqrt(),
+    )
 }
 
 proptest! {
+    // A statistical test: its inputs come from a fixed seed, so that a run is reproducible and CI cannot
+    // flake on a five-sigma draw (PROPTEST_CASES still scales it).
+    #![proptest_config(ProptestConfig {
+        rng_seed: proptest::test_runner::RngSeed::Fixed(20261123),
+        ..ProptestConfig::default()
+    })]
+
     #[test]
     fn smoothed_functions_are_monte_carlo_expectations_of_the_noisy_min(
-        a in -2.0f64..2.0, t in -3.0f64..3.0, s in 0.01f64..2.0, seed in 0u64..1000,
+        a in -2.0f64..2.0, t in -2.0f64..2.0, s in 0.01f64..2.0, seed in 0u64..1000,
     ) {
-        // b within 3 sigma of a, so that 20,000 draws see both branches of the min.
+        // b within 2 sigma of a, so that 20,000 draws see both branches of the min hundreds of times.
         let b = a + t * s;
         for logistic in [true, false] {
             let (mean, se) = sample_mean(a, b, s, logistic, 20_000, seed);
@@ -163,6 +199,9 @@ proptest! {
             prop_assert!((f.value(a, b) - mean).abs() <= 5.0 * se, "{f:?} ({a}, {b}) {mean} +- {se}");
         }
     }
+}
+
+proptest! {
 
     #[test]
     fn smoothed_functions_tend_to_the_hard_min_linearly_in_sigma(
@@ -232,8 +271,14 @@ proptest! {
 #[test]
 fn non_positive_or_non_finite_sigma_is_an_error() {
     for s in [0.0, -1.0, f64::NAN, f64::INFINITY] {
-        assert!(matches!(NcpFunction::logistic(s), Err(ncp::NcpError::Sigma(_))));
-        assert!(matches!(NcpFunction::normal(s), Err(ncp::NcpError::Sigma(_))));
+        assert!(matches!(
+            NcpFunction::logistic(s),
+            Err(ncp::NcpError::Sigma(_))
+        ));
+        assert!(matches!(
+            NcpFunction::normal(s),
+            Err(ncp::NcpError::Sigma(_))
+        ));
     }
     assert!(NcpFunction::logistic(1e-12).is_ok() && NcpFunction::normal(1e3).is_ok());
 }

@@ -114,6 +114,8 @@ impl ErmSolver {
         let mut evaluations = 1;
         let mut iterations = 0;
         let mut trial = vec![0.0; c];
+        // Stall detection: the best objective so far and the accepted steps since it last fell measurably.
+        let (mut best_f, mut stalled) = (cur.f, 0);
         let status = loop {
             let pg: Vec<f64> = (0..c)
                 .map(|i| {
@@ -177,17 +179,33 @@ impl ErmSolver {
             if !solved {
                 break Status::SingularJacobian;
             }
-            // Search along the projection arc lambda(t) = max(lambda + t d, 0), active variables moved by
-            // their (projected) gradient step.
+            // Search along the projection arc lambda(t) = max(lambda + t d, 0); the active variables (within
+            // eps of the bound, pushed outwards) go to the bound at full step, so that they land on it
+            // instead of creeping towards it.
+            // When the full step's predicted decrease is below the rounding of f, f cannot be lowered
+            // measurably: the iterate is a minimiser to working precision (flat valleys of redundant rows
+            // otherwise make the iteration shuttle between points of equal f).
+            let predicted: f64 = (0..c)
+                .map(|i| {
+                    let step = if free[i] {
+                        (lambda[i] + d[i]).max(0.0)
+                    } else {
+                        0.0
+                    } - lambda[i];
+                    cur.g[i] * step
+                })
+                .sum();
+            if predicted.abs() <= 8.0 * f64::EPSILON * cur.f.abs() {
+                break Status::Converged;
+            }
             let mut t = 1.0;
             let accepted = loop {
                 for i in 0..c {
-                    let step = if free[i] {
-                        d[i]
+                    trial[i] = if free[i] {
+                        (lambda[i] + t * d[i]).max(0.0)
                     } else {
-                        -cur.g[i] / cur.h[i * c + i].abs().max(mu).max(1e-300)
+                        lambda[i] * (1.0 - t)
                     };
-                    trial[i] = (lambda[i] + t * step).max(0.0);
                 }
                 let e = evaluate(&reduced, sigma, &trial, false);
                 evaluations += 1;
@@ -212,6 +230,16 @@ impl ErmSolver {
             lambda.copy_from_slice(&trial);
             cur = evaluate(&reduced, sigma, &lambda, true);
             evaluations += 1;
+            if cur.f < best_f - 16.0 * f64::EPSILON * best_f.abs() {
+                best_f = cur.f;
+                stalled = 0;
+            } else {
+                stalled += 1;
+                // Five steps without a decrease above rounding: a minimiser to working precision.
+                if stalled >= 5 {
+                    break Status::Converged;
+                }
+            }
             mu = if t == 1.0 { mu / 10.0 } else { mu * 4.0 };
             if moved <= 4.0 * f64::EPSILON * (1.0 + inf_norm(&lambda)) {
                 break Status::Converged;

@@ -80,6 +80,27 @@ impl NcpFunction {
         }
     }
 
+    /// The smoothing scale, zero for the hard functions.
+    pub fn sigma(&self) -> f64 {
+        match *self {
+            NcpFunction::Logistic { sigma } | NcpFunction::Normal { sigma } => sigma,
+            _ => 0.0,
+        }
+    }
+
+    /// The same function with its smoothing raised to at least `floor` (hard functions are unchanged).
+    pub fn with_sigma_at_least(&self, floor: f64) -> Self {
+        match *self {
+            NcpFunction::Logistic { sigma } => NcpFunction::Logistic {
+                sigma: sigma.max(floor),
+            },
+            NcpFunction::Normal { sigma } => NcpFunction::Normal {
+                sigma: sigma.max(floor),
+            },
+            other => other,
+        }
+    }
+
     /// True for the functions whose roots are exactly the complementarity conditions.
     pub fn is_hard(&self) -> bool {
         matches!(self, NcpFunction::Min | NcpFunction::FischerBurmeister)
@@ -168,7 +189,11 @@ fn softplus_at(y: f64, y_lo: f64) -> f64 {
 fn tails(a: f64, b: f64, sigma: f64) -> (Tails, f64, f64) {
     let (alpha, alpha_lo) = scaled_difference(a, b, sigma);
     let t = upper_tails_at(alpha.abs(), signed(alpha_lo, alpha));
-    if alpha > 0.0 { (t, 1.0 - t.i0, t.i0) } else { (t, t.i0, 1.0 - t.i0) }
+    if alpha > 0.0 {
+        (t, 1.0 - t.i0, t.i0)
+    } else {
+        (t, t.i0, 1.0 - t.i0)
+    }
 }
 
 fn fischer_burmeister(a: f64, b: f64) -> f64 {

@@ -42,16 +42,76 @@ pub fn lemke(problem: &LinearMcp, settings: &LemkeSettings) -> Result<Solution, 
     }
     let reduced = problem.reduce()?;
     let lcp = reduced.lcp();
-    let (lambda, pivots, finished) = lemke_lcp(lcp.m_row_major(), lcp.q(), settings.max_pivots)?;
+    // Ray termination proves infeasibility in exact arithmetic; in floating point a nearly singular M can
+    // end on a ray that does not exist. Before saying "infeasible", retry with other covering vectors (the
+    // row scales, then ones, then seeded random multiples of them).
+    let c = lcp.q().len();
+    // Judged row by row in the equilibrated problem (each row divided by its largest entry), so that a
+    // row scaled by 1e-8 is held to the same standard as one scaled by 1e8.
+    let accuracy = 1e-10;
+    let mut total = 0;
+    let mut rays = 0;
+    // The best answer so far: (residual, lambda, finished).
+    let mut best: Option<(f64, Vec<f64>, bool)> = None;
+    for attempt in 0..4u64 {
+        let covering: Vec<f64> = match attempt {
+            0 => vec![1.0; c],
+            1 => {
+                // d = 1: undo the row scale.
+                let m = lcp.m_row_major();
+                (0..c)
+                    .map(|i| {
+                        let r = m[i * c..(i + 1) * c]
+                            .iter()
+                            .fold(lcp.q()[i].abs(), |s, v| s.max(v.abs()));
+                        if r > 0.0 { 1.0 / r } else { 1.0 }
+                    })
+                    .collect()
+            }
+            _ => {
+                let mut rng = crate::instances::SplitMix64::new(attempt);
+                (0..c).map(|_| rng.uniform(0.5, 2.0)).collect()
+            }
+        };
+        match lemke_lcp(lcp.m_row_major(), lcp.q(), settings.max_pivots, &covering) {
+            Attempt::Solved(lambda, pivots, finished) => {
+                total += pivots;
+                let residual = equilibrated_residual(lcp.m_row_major(), lcp.q(), &lambda);
+                let good = residual <= accuracy;
+                if best.as_ref().is_none_or(|b| residual < b.0) {
+                    best = Some((residual, lambda, finished));
+                }
+                if good || !finished {
+                    break;
+                }
+            }
+            Attempt::Ray(pivots) => {
+                total += pivots;
+                rays += 1;
+            }
+            Attempt::Breakdown(pivots) => total += pivots,
+        }
+    }
+    let Some((residual, lambda, finished)) = best else {
+        // Every attempt ended on a ray (or broke down): report infeasibility only if one saw a ray.
+        return Err(if rays > 0 {
+            NcpError::Infeasible { pivots: total }
+        } else {
+            NcpError::Unsupported("Lemke's method broke down numerically on every covering vector")
+        });
+    };
+    let pivots = total;
     let z = reduced.expand(&lambda);
     let mut w = vec![0.0; z.len()];
     problem.evaluate(&z, &mut w, None);
-    let residual = complementarity_residual(problem.n_free(), &z, &w);
-    let status = if finished {
+    let status = if !finished {
+        Status::MaxIterations
+    } else if residual <= accuracy {
         Status::Converged
     } else {
-        Status::MaxIterations
+        Status::Inaccurate
     };
+    let residual = complementarity_residual(problem.n_free(), &z, &w);
     Ok(Solution {
         z,
         w,
@@ -74,134 +134,174 @@ pub fn complementarity_residual(n_free: usize, z: &[f64], w: &[f64]) -> f64 {
 }
 
 /// Lemke on a plain LCP (row-major `m`); returns `z`, the pivot count, and whether it finished.
-fn lemke_lcp(m: &[f64], q: &[f64], max_pivots: usize) -> Result<(Vec<f64>, usize, bool), NcpError> {
+///
+/// The revised form: the tableau is never updated in place. Each pivot factors the current basis matrix
+/// from the original data and solves for the basic solution and the entering column, so rounding errors do
+/// not accumulate over the thousands of pivots of Murty's family or through nearly singular `M`.
+fn lemke_lcp(m: &[f64], q: &[f64], max_pivots: usize, covering: &[f64]) -> Attempt {
     let n = q.len();
     if q.iter().all(|&v| v >= 0.0) {
-        return Ok((vec![0.0; n], 0, true));
+        return Attempt::Solved(vec![0.0; n], 0, true);
     }
-    // Tableau rows: w_i - sum_j M_ij z_j - z0 = q_i, each row divided by its largest entry.
-    // Columns: w (0..n), z (n..2n), z0 (2n), right-hand side (2n + 1).
-    let width = 2 * n + 2;
-    let (z0, rhs) = (2 * n, 2 * n + 1);
-    let mut t = vec![0.0; n * width];
-    for i in 0..n {
-        let row_scale = m[i * n..(i + 1) * n]
-            .iter()
-            .fold(q[i].abs(), |s, v| s.max(v.abs()));
-        let s = if row_scale > 0.0 {
-            1.0 / row_scale
-        } else {
-            1.0
-        };
-        let r = &mut t[i * width..(i + 1) * width];
-        r[i] = s;
-        for j in 0..n {
-            r[n + j] = -m[i * n + j] * s;
+    // Row i of the system: w~_i - s_i (M z)_i - z0 = s_i q_i with w~_i = s_i w_i, i.e. covering vector d_i = 1 / s_i, the
+    // row's largest entry times `covering[i]`. Variables: w (0..n), z (n..2n), z0 (2n).
+    let s: Vec<f64> = (0..n)
+        .map(|i| {
+            let r = m[i * n..(i + 1) * n]
+                .iter()
+                .fold(q[i].abs(), |a, v| a.max(v.abs()));
+            1.0 / (covering[i] * if r > 0.0 { r } else { 1.0 })
+        })
+        .collect();
+    let z0 = 2 * n;
+    let column = |var: usize, out: &mut [f64]| {
+        for i in 0..n {
+            // The slack of row i is the scaled w~_i = s_i w_i, so that every basic value is in the same units.
+            out[i] = if var < n {
+                if i == var { 1.0 } else { 0.0 }
+            } else if var < 2 * n {
+                -s[i] * m[i * n + (var - n)]
+            } else {
+                -1.0
+            };
         }
-        r[z0] = -1.0;
-        r[rhs] = q[i] * s;
-    }
+    };
+    let rhs: Vec<f64> = (0..n).map(|i| s[i] * q[i]).collect();
     let mut basis: Vec<usize> = (0..n).collect();
-
-    // First pivot: z0 enters where q_i (scaled) is most negative, lexicographically.
-    let leave = lex_min_row(&t, n, width, z0, |_, v| v < 0.0, -1.0);
-    let mut pivots = 0;
-    let mut row = leave.expect("some q_i is negative");
+    let mut lu = DenseLu::new(n, LinearSolver::Hand);
+    let mut b = vec![0.0; n * n];
+    let mut col = vec![0.0; n];
+    let mut x = vec![0.0; n];
+    let mut a = vec![0.0; n];
+    let mut binv = vec![0.0; n * n];
     let mut entering = z0;
+    let mut pivots = 0;
+    let mut seen = std::collections::HashSet::new();
     loop {
-        pivot(&mut t, n, width, row, entering);
-        pivots += 1;
+        for (r, &var) in basis.iter().enumerate() {
+            column(var, &mut col);
+            for i in 0..n {
+                b[i * n + r] = col[i];
+            }
+        }
+        if !lu.factor(&b) {
+            // A singular basis only arises from rounding; let the caller retry with another covering vector.
+            return Attempt::Breakdown(pivots);
+        }
+        x.copy_from_slice(&rhs);
+        lu.solve(&mut x);
+        // Basic values at rounding level are degenerate zeros: make them exact, so that the ratio ties they
+        // create go to the lexicographic rule instead of to noise (which can cycle).
+        let x_max = x.iter().fold(0.0f64, |acc, v| acc.max(v.abs()));
+        for v in x.iter_mut() {
+            if v.abs() <= 1e-13 * x_max.max(1.0) {
+                *v = 0.0;
+            }
+        }
+        column(entering, &mut a);
+        lu.solve(&mut a);
+        // The first pivot (z0 entering) blocks where the scaled q is most negative; later pivots by the
+        // minimum ratio x_i / a_i over a_i > 0. Ties go to the lexicographic rule on rows of B^-1.
+        let first = entering == z0 && pivots == 0;
+        let sign = if first { -1.0 } else { 1.0 };
+        let a_max = a.iter().fold(0.0f64, |acc, v| acc.max(v.abs()));
+        let tol = 1e-12 * a_max.max(1.0);
+        let eligible: Vec<usize> = (0..n)
+            .filter(|&i| if first { a[i] < 0.0 } else { a[i] > tol })
+            .collect();
+        if eligible.is_empty() {
+            return Attempt::Ray(pivots);
+        }
+        let ratio = |i: usize| x[i] / (sign * a[i]);
+        let best = eligible
+            .iter()
+            .map(|&i| ratio(i))
+            .fold(f64::INFINITY, f64::min);
+        let near = |v: f64| (v - best).abs() <= 1e-11 * best.abs().max(1e-300);
+        let mut ties: Vec<usize> = eligible
+            .iter()
+            .copied()
+            .filter(|&i| near(ratio(i)))
+            .collect();
+        if ties.len() > 1 {
+            for k in 0..n {
+                col.fill(0.0);
+                col[k] = 1.0;
+                lu.solve(&mut col);
+                for i in 0..n {
+                    binv[i * n + k] = col[i];
+                }
+            }
+            for k in 0..n {
+                let key = |i: usize| binv[i * n + k] / (sign * a[i]);
+                let least = ties.iter().map(|&i| key(i)).fold(f64::INFINITY, f64::min);
+                let scale = ties.iter().map(|&i| key(i).abs()).fold(0.0f64, f64::max);
+                ties.retain(|&i| key(i) - least <= 1e-11 * scale.max(1e-300));
+                if ties.len() == 1 {
+                    break;
+                }
+            }
+        }
+        let row = ties[0];
         let left = basis[row];
         basis[row] = entering;
+        pivots += 1;
+        // The lexicographic rule cannot cycle in exact arithmetic; rounding can make it. A basis seen before
+        // (with the same entering variable) means a cycle.
+        let mut key = basis.clone();
+        key.sort_unstable();
+        key.push(left);
+        if !seen.insert(key) {
+            return Attempt::Breakdown(pivots);
+        }
         if left == z0 {
             break;
         }
         if pivots >= max_pivots {
-            return Ok((read_z(&t, &basis, n, width), pivots, false));
+            let z = basic_z(&basis, &mut lu, &mut b, &column, &rhs, n);
+            return Attempt::Solved(z, pivots, false);
         }
         entering = if left < n { left + n } else { left - n };
-        let col_max = (0..n).fold(0.0f64, |s, i| s.max(t[i * width + entering].abs()));
-        let tol = 1e-12 * col_max.max(1e-300);
-        match lex_min_row(&t, n, width, entering, |_, v| v > tol, 1.0) {
-            Some(r) => row = r,
-            None => return Err(NcpError::Infeasible { pivots }),
-        }
     }
-    let z = read_z(&t, &basis, n, width);
-    Ok((refine(m, q, &basis, z), pivots, true))
+    let z = basic_z(&basis, &mut lu, &mut b, &column, &rhs, n);
+    Attempt::Solved(refine(m, q, &basis, z), pivots, true)
 }
 
-/// Among rows whose entry in `col` passes `eligible`, the one minimising `(rhs, B^-1 row) / (sign * entry)`
-/// lexicographically.
-fn lex_min_row(
-    t: &[f64],
+/// How one run of Lemke's method ended.
+enum Attempt {
+    /// `z`, pivots, and whether `z0` left the basis (false: the pivot limit came first).
+    Solved(Vec<f64>, usize, bool),
+    /// No blocking row: a secondary ray.
+    Ray(usize),
+    /// A singular basis or a cycle, both from rounding.
+    Breakdown(usize),
+}
+
+/// The `z` part of the basic solution of `basis` (zero where the basis matrix is singular).
+fn basic_z(
+    basis: &[usize],
+    lu: &mut DenseLu,
+    b: &mut [f64],
+    column: &impl Fn(usize, &mut [f64]),
+    rhs: &[f64],
     n: usize,
-    width: usize,
-    col: usize,
-    eligible: impl Fn(usize, f64) -> bool,
-    sign: f64,
-) -> Option<usize> {
-    let rhs = width - 1;
-    let key = |i: usize, k: usize| {
-        let d = sign * t[i * width + col];
-        let v = if k == 0 {
-            t[i * width + rhs]
-        } else {
-            t[i * width + (k - 1)]
-        };
-        // For the first pivot (sign = -1) the ratio is rhs / -d, minimised by the most negative rhs.
-        v / d
-    };
-    let mut best: Option<usize> = None;
-    for i in 0..n {
-        if !eligible(i, t[i * width + col]) {
-            continue;
-        }
-        best = match best {
-            None => Some(i),
-            Some(b) => {
-                let mut choose = b;
-                for k in 0..=n {
-                    let (ki, kb) = (key(i, k), key(b, k));
-                    let tie = 1e-11 * ki.abs().max(kb.abs()).max(1e-300);
-                    if (ki - kb).abs() <= tie {
-                        continue;
-                    }
-                    choose = if ki < kb { i } else { b };
-                    break;
-                }
-                Some(choose)
-            }
-        };
-    }
-    best
-}
-
-fn pivot(t: &mut [f64], n: usize, width: usize, row: usize, col: usize) {
-    let p = t[row * width + col];
-    for j in 0..width {
-        t[row * width + j] /= p;
-    }
-    t[row * width + col] = 1.0;
-    for i in 0..n {
-        if i == row {
-            continue;
-        }
-        let f = t[i * width + col];
-        if f != 0.0 {
-            for j in 0..width {
-                t[i * width + j] -= f * t[row * width + j];
-            }
-            t[i * width + col] = 0.0;
+) -> Vec<f64> {
+    let mut col = vec![0.0; n];
+    for (r, &var) in basis.iter().enumerate() {
+        column(var, &mut col);
+        for i in 0..n {
+            b[i * n + r] = col[i];
         }
     }
-}
-
-fn read_z(t: &[f64], basis: &[usize], n: usize, width: usize) -> Vec<f64> {
     let mut z = vec![0.0; n];
-    for (i, &b) in basis.iter().enumerate() {
-        if (n..2 * n).contains(&b) {
-            z[b - n] = t[i * width + width - 1].max(0.0);
+    if !lu.factor(b) {
+        return z;
+    }
+    let mut x = rhs.to_vec();
+    lu.solve(&mut x);
+    for (r, &var) in basis.iter().enumerate() {
+        if (n..2 * n).contains(&var) {
+            z[var - n] = x[r].max(0.0);
         }
     }
     z
@@ -242,6 +342,25 @@ fn refine(m: &[f64], q: &[f64], basis: &[usize], z: Vec<f64>) -> Vec<f64> {
     } else {
         z
     }
+}
+
+/// `max_i |min(z_i, w_i / r_i)|` with `r_i` the largest entry of row `i` of `[M q]` (at least the
+/// smallest normal number), or infinity if `w` is not finite.
+fn equilibrated_residual(m: &[f64], q: &[f64], z: &[f64]) -> f64 {
+    let n = q.len();
+    (0..n).fold(0.0f64, |r, i| {
+        let row = &m[i * n..(i + 1) * n];
+        let scale = row
+            .iter()
+            .fold(q[i].abs(), |a, v| a.max(v.abs()))
+            .max(f64::MIN_POSITIVE);
+        let w = q[i] + (0..n).map(|j| row[j] * z[j]).sum::<f64>();
+        if w.is_finite() {
+            r.max((w / scale).min(z[i]).abs())
+        } else {
+            f64::INFINITY
+        }
+    })
 }
 
 fn lcp_residual(m: &[f64], q: &[f64], z: &[f64]) -> f64 {

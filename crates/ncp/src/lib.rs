@@ -35,6 +35,7 @@ mod dense;
 mod erm;
 mod error;
 mod function;
+pub mod instances;
 mod lemke;
 mod newton;
 mod problem;

@@ -20,6 +20,11 @@ pub trait Mcp {
     }
     /// Write `F(z)` into `value` and, when asked, the row-major `n x n` Jacobian `dF/dz` into `jacobian`.
     fn evaluate(&self, z: &[f64], value: &mut [f64], jacobian: Option<&mut [f64]>);
+    /// An exact solution of the hard problem, if the problem can compute one; smoothed solves that fail
+    /// from their warm start restart from it. `None` by default.
+    fn hard_solution(&self) -> Option<Vec<f64>> {
+        None
+    }
 }
 
 /// The linear case `F(z) = M z + q`: a mixed LCP, or a plain LCP when `n_free = 0`. This is the form of one
@@ -83,6 +88,11 @@ impl LinearMcp {
     /// `M` as a faer matrix.
     pub fn matrix(&self) -> Mat<f64> {
         Mat::from_fn(self.n, self.n, |i, j| self.m[i * self.n + j])
+    }
+
+    /// Number of leading equality rows.
+    pub fn n_free_rows(&self) -> usize {
+        self.n_free
     }
 
     /// `M` row-major.
@@ -183,6 +193,13 @@ impl Mcp for LinearMcp {
         if let Some(jac) = jacobian {
             jac.copy_from_slice(&self.m);
         }
+    }
+
+    fn hard_solution(&self) -> Option<Vec<f64>> {
+        crate::lemke::lemke(self, &crate::lemke::LemkeSettings::default())
+            .ok()
+            .filter(|s| s.converged())
+            .map(|s| s.z)
     }
 }
 

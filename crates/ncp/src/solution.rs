@@ -15,6 +15,9 @@ pub enum Status {
     LineSearchFailed,
     /// The Newton matrix was singular to working precision.
     SingularJacobian,
+    /// The method finished, but its answer misses the accuracy it promises (a numerical breakdown of an
+    /// exact method); `residual` says by how much.
+    Inaccurate,
     /// The problem returned a non-finite value at a trial point; the last finite iterate is kept.
     NonFinite,
 }

@@ -1,0 +1,407 @@
+//! The complementarity solvers against exact answers: planted solutions, active-set enumeration, Lemke's
+//! method, and each other; classic hard LCPs; smoothing limits; bad input.
+
+use ncp::instances::{MatrixKind, contact_step, murty, perturbed, planted_lcp};
+use ncp::{
+    ErmSettings, ErmSolver, LemkeSettings, LinearMcp, Mcp, NcpError, NcpFunction, NewtonSettings,
+    NewtonSolver, Status, complementarity_residual, enumerate_solutions, lemke,
+};
+use proptest::prelude::*;
+
+fn max_diff(a: &[f64], b: &[f64]) -> f64 {
+    a.iter()
+        .zip(b)
+        .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()))
+}
+
+fn newton(settings: NewtonSettings) -> NewtonSolver {
+    NewtonSolver::new(settings).expect("valid settings")
+}
+
+const KINDS: [MatrixKind; 4] = [
+    MatrixKind::PositiveDefinite,
+    MatrixKind::PMatrix,
+    MatrixKind::Monotone,
+    MatrixKind::SingularPsd,
+];
+
+proptest! {
+    #[test]
+    fn lemke_solves_random_families_to_1e_10_of_the_data_scale(kind in 0usize..4, n in 1usize..13, seed in 0u64..u64::MAX) {
+        let (p, planted) = planted_lcp(KINDS[kind], n, seed);
+        let s = lemke(&p, &LemkeSettings::default()).expect("a planted LCP has a solution");
+        prop_assert_eq!(s.info.status, Status::Converged);
+        prop_assert!(s.info.residual <= 1e-10 * p.scale(), "residual {}", s.info.residual);
+        prop_assert!(s.z.iter().all(|v| *v >= 0.0));
+        if matches!(KINDS[kind], MatrixKind::PositiveDefinite | MatrixKind::Monotone) {
+            // Unique solution (positive definite M).
+            prop_assert!(max_diff(&s.z, &planted) <= 1e-8 * p.scale());
+        }
+    }
+
+    #[test]
+    fn hard_newton_matches_enumeration_on_positive_definite_lcps(n in 1usize..7, seed in 0u64..u64::MAX, fb in any::<bool>()) {
+        let (p, _) = planted_lcp(MatrixKind::PositiveDefinite, n, seed);
+        let exact = enumerate_solutions(&p, 1e-12).unwrap();
+        prop_assert_eq!(exact.len(), 1, "positive definite: one solution");
+        let f = if fb { NcpFunction::FischerBurmeister } else { NcpFunction::Min };
+        let s = newton(NewtonSettings::default()).solve(&p, &vec![f; n], &vec![0.0; n]).unwrap();
+        prop_assert_eq!(s.info.status, Status::Converged);
+        prop_assert!(max_diff(&s.z, &exact[0]) <= 1e-9 * p.scale(), "{:?} vs {:?}", s.z, exact[0]);
+    }
+
+    #[test]
+    fn smoothed_newton_approaches_the_hard_solution_linearly_in_sigma(seed in 0u64..u64::MAX, normal in any::<bool>()) {
+        let p = contact_step(seed);
+        let exact = lemke(&p, &LemkeSettings::default()).unwrap();
+        let mut solver = newton(NewtonSettings::default());
+        let mut z = vec![0.0; 9];
+        for k in 1..=6 {
+            let sigma = 10f64.powi(-k);
+            let f = if normal { NcpFunction::Normal { sigma } } else { NcpFunction::Logistic { sigma } };
+            // Continuation: each sigma warm-starts from the previous one.
+            let info = solver.solve_in_place(&p, &[f; 6], &mut z).unwrap();
+            prop_assert_eq!(info.status, Status::Converged, "sigma {}", sigma);
+            // The velocities (unique, unlike the impulses when more rows are active than there are
+            // velocities) move by O(sigma).
+            let err = max_diff(&z[..3], &exact.z[..3]);
+            prop_assert!(err <= 20.0 * sigma * p.scale(), "sigma {}: {}", sigma, err);
+        }
+    }
+
+    #[test]
+    fn erm_holds_the_equality_rows_and_tends_to_the_hard_solution(seed in 0u64..u64::MAX) {
+        let p = contact_step(seed);
+        let exact = lemke(&p, &LemkeSettings::default()).unwrap();
+        let erm = ErmSolver::new(ErmSettings::default()).unwrap();
+        let mut z = exact.z.clone();
+        for k in 1..=5 {
+            let sigma = 10f64.powi(-k);
+            let s = erm.solve(&p, &[sigma; 6], &z).unwrap();
+            prop_assert_eq!(s.info.status, Status::Converged, "sigma {}: {:?}", sigma, s.info);
+            prop_assert!(s.w[..3].iter().all(|r| r.abs() <= 1e-13 * p.scale()), "equality rows {:?}", &s.w[..3]);
+            prop_assert!(s.z[3..].iter().all(|l| *l >= 0.0));
+            let err = max_diff(&s.z[..3], &exact.z[..3]);
+            prop_assert!(err <= 20.0 * sigma * p.scale(), "sigma {}: {}", sigma, err);
+            z = s.z;
+        }
+    }
+}
+
+#[test]
+fn lemke_walks_murtys_exponential_family_and_still_lands_on_the_unique_solution() {
+    for n in 2..=14 {
+        let p = murty(n);
+        let s = lemke(&p, &LemkeSettings::default()).unwrap();
+        assert_eq!(s.info.status, Status::Converged);
+        assert_eq!(
+            s.info.iterations,
+            1 << n,
+            "Murty's family costs Lemke 2^n pivots"
+        );
+        assert!(
+            s.info.residual <= 1e-12 * p.scale(),
+            "n = {n}: {}",
+            s.info.residual
+        );
+        let mut expected = vec![0.0; n];
+        expected[0] = 2f64.powi(n as i32);
+        assert_eq!(s.z, expected);
+        if n <= 8 {
+            assert_eq!(enumerate_solutions(&p, 1e-12).unwrap(), vec![expected]);
+        }
+    }
+    // With a pivot limit, the method reports that it stopped early rather than a wrong answer.
+    let s = lemke(&murty(12), &LemkeSettings { max_pivots: 100 }).unwrap();
+    assert_eq!(s.info.status, Status::MaxIterations);
+}
+
+#[test]
+fn lemke_handles_degenerate_singular_and_badly_scaled_problems() {
+    // q = 0: z = w = 0 on every row, the most degenerate start.
+    let p = LinearMcp::from_rows(0, &[vec![1.0, -1.0], vec![-1.0, 1.0]], &[0.0, 0.0]).unwrap();
+    let s = lemke(&p, &LemkeSettings::default()).unwrap();
+    assert_eq!(s.z, vec![0.0, 0.0]);
+    // Ties in every ratio test (identical rows, degenerate solution with z_2 = w_2 = 0).
+    let rows = vec![
+        vec![1.0, 1.0, 1.0],
+        vec![1.0, 1.0, 1.0],
+        vec![1.0, 1.0, 2.0],
+    ];
+    let p = LinearMcp::from_rows(0, &rows, &[-1.0, -1.0, -1.0]).unwrap();
+    let s = lemke(&p, &LemkeSettings::default()).unwrap();
+    assert!(s.info.residual <= 1e-14, "{:?}", s);
+    // Singular PSD with a solution set that is a segment: any point of it will do.
+    let p = LinearMcp::from_rows(0, &[vec![1.0, 1.0], vec![1.0, 1.0]], &[-1.0, -1.0]).unwrap();
+    let s = lemke(&p, &LemkeSettings::default()).unwrap();
+    assert!(s.info.residual <= 1e-14 && (s.z[0] + s.z[1] - 1.0).abs() < 1e-14);
+    // Rows scaled from 1e-8 to 1e8 have the same solutions.
+    for seed in 0..20 {
+        let (p, planted) = planted_lcp(MatrixKind::PositiveDefinite, 8, seed);
+        let n = 8;
+        let mut m = p.m_row_major().to_vec();
+        let mut q = p.q().to_vec();
+        for i in 0..n {
+            let s = 10f64.powi(2 * i as i32 - 8);
+            for j in 0..n {
+                m[i * n + j] *= s;
+            }
+            q[i] *= s;
+        }
+        let scaled = LinearMcp::from_row_major(0, m, q).unwrap();
+        let s = lemke(&scaled, &LemkeSettings::default()).unwrap();
+        assert!(
+            max_diff(&s.z, &planted) < 1e-9,
+            "seed {seed}: {:?} vs {planted:?} {:?} w {:?}",
+            s.z,
+            s.info,
+            s.w
+        );
+        assert!(complementarity_residual(0, &s.z, &s.w) <= 1e-10 * scaled.scale());
+    }
+}
+
+#[test]
+fn lemke_reports_an_infeasible_lcp_as_an_error() {
+    // w_1 = z_2 - 1 >= 0 and w_2 = -z_1 - 1 >= 0 cannot both hold for z >= 0; M is PSD (skew).
+    let p = LinearMcp::from_rows(0, &[vec![0.0, 1.0], vec![-1.0, 0.0]], &[-1.0, -1.0]).unwrap();
+    assert!(matches!(
+        lemke(&p, &LemkeSettings::default()),
+        Err(NcpError::Infeasible { .. })
+    ));
+}
+
+#[test]
+fn scene_sized_problems_agree_across_lemke_enumeration_and_hard_newton() {
+    let mut solver = newton(NewtonSettings::default());
+    for seed in 0..200 {
+        let p = contact_step(seed);
+        let exact = lemke(&p, &LemkeSettings::default()).unwrap();
+        assert!(exact.info.residual <= 1e-12 * p.scale(), "seed {seed}");
+        let all = enumerate_solutions(&p, 1e-11).unwrap();
+        // Impulses need not be unique (A = J M^-1 J^T has rank 3), but the velocities are.
+        assert!(
+            all.iter().all(|z| max_diff(&z[..3], &exact.z[..3]) < 1e-9),
+            "seed {seed}"
+        );
+        let s = solver
+            .solve(&p, &[NcpFunction::FischerBurmeister; 6], &[0.0; 9])
+            .unwrap();
+        assert_eq!(
+            s.info.status,
+            Status::Converged,
+            "seed {seed}: {:?}",
+            s.info
+        );
+        assert!(max_diff(&s.z[..3], &exact.z[..3]) < 1e-9, "seed {seed}");
+    }
+}
+
+#[test]
+fn warm_start_from_the_previous_step_saves_iterations() {
+    let mut solver = newton(NewtonSettings::default());
+    let f = [NcpFunction::Logistic { sigma: 0.1 }; 6];
+    let (mut cold, mut warm) = (0, 0);
+    for seed in 0..100 {
+        let p = contact_step(seed);
+        let s = solver.solve(&p, &f, &[0.0; 9]).unwrap();
+        let next = perturbed(&p, 1e-2, seed);
+        let c = solver.solve(&next, &f, &[0.0; 9]).unwrap();
+        let w = solver.solve(&next, &f, &s.z).unwrap();
+        assert!(c.converged() && w.converged());
+        assert!(max_diff(&c.z, &w.z) < 1e-10);
+        cold += c.info.iterations;
+        warm += w.info.iterations;
+    }
+    println!("iterations over 100 problems: cold {cold}, warm {warm}");
+    assert!(10 * warm < 7 * cold, "cold {cold}, warm {warm}");
+}
+
+#[test]
+fn faer_and_hand_back_ends_give_the_same_solutions() {
+    let mut hand = newton(NewtonSettings::default());
+    let mut faer = newton(NewtonSettings {
+        linear_solver: ncp::LinearSolver::Faer,
+        ..NewtonSettings::default()
+    });
+    for seed in 0..50 {
+        let p = contact_step(seed);
+        let f = [NcpFunction::Logistic { sigma: 0.01 }; 6];
+        let a = hand.solve(&p, &f, &[0.0; 9]).unwrap();
+        let b = faer.solve(&p, &f, &[0.0; 9]).unwrap();
+        assert!(a.converged() && b.converged());
+        assert!(max_diff(&a.z, &b.z) < 1e-12);
+    }
+}
+
+/// A nonlinear complementarity problem supplied through the trait: one free row `x^3 + x - lambda = 1` and
+/// one pair `0 <= lambda _|_ w = x + lambda^2 - 0.5 >= 0`.
+#[derive(Debug)]
+struct Cubic;
+
+impl Mcp for Cubic {
+    fn dim(&self) -> usize {
+        2
+    }
+    fn n_free(&self) -> usize {
+        1
+    }
+    fn evaluate(&self, z: &[f64], value: &mut [f64], jacobian: Option<&mut [f64]>) {
+        let (x, l) = (z[0], z[1]);
+        value[0] = x * x * x + x - l - 1.0;
+        value[1] = x + l * l - 0.5;
+        if let Some(j) = jacobian {
+            j.copy_from_slice(&[3.0 * x * x + 1.0, -1.0, 1.0, 2.0 * l]);
+        }
+    }
+}
+
+#[test]
+fn newton_solves_a_nonlinear_mcp_given_through_the_trait() {
+    // x^3 + x = 1 has x = 0.6823 > 0.5, so w > 0 at lambda = 0: the solution is (0.6823..., 0).
+    for f in [NcpFunction::FischerBurmeister, NcpFunction::Min] {
+        let s = newton(NewtonSettings::default())
+            .solve(&Cubic, &[f], &[3.0, 2.0])
+            .unwrap();
+        assert_eq!(s.info.status, Status::Converged, "{f:?}");
+        assert!((s.z[0].powi(3) + s.z[0] - 1.0).abs() < 1e-13 && s.z[1].abs() < 1e-13);
+    }
+}
+
+/// A problem that returns NaN away from the origin, as a broken model might.
+#[derive(Debug)]
+struct Poisoned;
+
+impl Mcp for Poisoned {
+    fn dim(&self) -> usize {
+        1
+    }
+    fn n_free(&self) -> usize {
+        1
+    }
+    fn evaluate(&self, z: &[f64], value: &mut [f64], jacobian: Option<&mut [f64]>) {
+        value[0] = if z[0].abs() > 0.5 {
+            f64::NAN
+        } else {
+            z[0] - 10.0
+        };
+        if let Some(j) = jacobian {
+            j[0] = 1.0;
+        }
+    }
+}
+
+#[test]
+fn bad_input_is_a_typed_error_and_bad_trial_points_never_leak_nan() {
+    let p = contact_step(1);
+    let f = [NcpFunction::Logistic { sigma: 0.1 }; 6];
+    let mut s = newton(NewtonSettings::default());
+    assert!(matches!(
+        s.solve(&p, &f, &[f64::NAN; 9]),
+        Err(NcpError::NonFinite { what: "z0", .. })
+    ));
+    assert!(matches!(
+        s.solve(&p, &f, &[0.0; 8]),
+        Err(NcpError::Dimension { what: "z0", .. })
+    ));
+    assert!(matches!(
+        s.solve(&p, &f[..5], &[0.0; 9]),
+        Err(NcpError::Dimension {
+            what: "functions",
+            ..
+        })
+    ));
+    let bad_sigma = [NcpFunction::Logistic { sigma: -1.0 }; 6];
+    assert!(matches!(
+        s.solve(&p, &bad_sigma, &[0.0; 9]),
+        Err(NcpError::Sigma(_))
+    ));
+    for bad in [
+        NewtonSettings {
+            tol: 0.0,
+            ..NewtonSettings::default()
+        },
+        NewtonSettings {
+            tol: f64::NAN,
+            ..NewtonSettings::default()
+        },
+        NewtonSettings {
+            max_iter: 0,
+            ..NewtonSettings::default()
+        },
+        NewtonSettings {
+            armijo: 0.7,
+            ..NewtonSettings::default()
+        },
+        NewtonSettings {
+            backtrack: 1.0,
+            ..NewtonSettings::default()
+        },
+    ] {
+        assert!(matches!(
+            NewtonSolver::new(bad),
+            Err(NcpError::Setting { .. })
+        ));
+    }
+    let erm = ErmSolver::new(ErmSettings::default()).unwrap();
+    assert!(matches!(
+        erm.solve(&p, &[0.0; 6], &[0.0; 9]),
+        Err(NcpError::Sigma(_))
+    ));
+    assert!(matches!(
+        erm.solve(&p, &[0.1; 5], &[0.0; 9]),
+        Err(NcpError::Dimension { .. })
+    ));
+    assert!(
+        ErmSolver::new(ErmSettings {
+            max_iter: 0,
+            ..ErmSettings::default()
+        })
+        .is_err()
+    );
+    // The Newton step from 0 lands on x = 10 where the problem is NaN; every trial is rejected and the
+    // last finite iterate comes back with its status.
+    let r = s.solve(&Poisoned, &[], &[0.0]).unwrap();
+    assert_eq!(r.info.status, Status::NonFinite);
+    assert!(r.z[0].is_finite() && r.z[0].abs() <= 0.5);
+    assert!(r.clone().into_converged().is_err());
+    // A singular free block cannot be eliminated for the exact methods.
+    let singular = LinearMcp::from_rows(1, &[vec![0.0, 1.0], vec![1.0, 0.0]], &[1.0, 1.0]).unwrap();
+    assert!(matches!(
+        lemke(&singular, &LemkeSettings::default()),
+        Err(NcpError::SingularFreeBlock { .. })
+    ));
+}
+
+#[test]
+fn smoothed_solves_survive_tiny_and_huge_sigma() {
+    let mut solver = newton(NewtonSettings::default());
+    for seed in 0..30 {
+        let p = contact_step(seed);
+        let exact = lemke(&p, &LemkeSettings::default()).unwrap();
+        for sigma in [1e-12, 1e-9, 1e-6, 1e2, 1e3] {
+            // From the hard solution for tiny sigma (the continuation's end), from zero for huge sigma.
+            let start = if sigma < 1.0 {
+                exact.z.clone()
+            } else {
+                vec![0.0; 9]
+            };
+            let s = solver
+                .solve(&p, &[NcpFunction::Logistic { sigma }; 6], &start)
+                .unwrap();
+            assert_eq!(
+                s.info.status,
+                Status::Converged,
+                "seed {seed} sigma {sigma}: {:?}",
+                s.info
+            );
+            assert!(s.z.iter().all(|v| v.is_finite()));
+            if sigma < 1.0 {
+                assert!(
+                    max_diff(&s.z, &exact.z) <= 1e-5 * p.scale().max(1.0),
+                    "sigma {sigma}"
+                );
+            }
+        }
+    }
+}
