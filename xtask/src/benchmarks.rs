@@ -21,14 +21,35 @@ pub struct Args {
     /// Print the tables only; leave the file alone.
     #[arg(long)]
     dry_run: bool,
+    /// Run only these sections (default: all).
+    #[arg(long, value_enum)]
+    only: Vec<Section>,
+}
+
+/// The generated sections of docs/benchmarks.md.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Section {
+    /// Ellipse signed distance against the reference cases and parry.
+    Geometry,
+    /// Complementarity solvers on scene-sized problems.
+    Ncp,
 }
 
 pub fn run(args: &Args) -> anyhow::Result<()> {
-    let section = geometry_section(&args.reference)?;
-    println!("{section}");
-    if !args.dry_run {
-        replace_section(&args.out, "geometry", &section)?;
-        println!("wrote {}", args.out.display());
+    let wanted = |s: Section| args.only.is_empty() || args.only.contains(&s);
+    let mut sections = Vec::new();
+    if wanted(Section::Geometry) {
+        sections.push(("geometry", geometry_section(&args.reference)?));
+    }
+    if wanted(Section::Ncp) {
+        sections.push(("ncp", crate::bench_ncp::section()?));
+    }
+    for (name, body) in sections {
+        println!("{body}");
+        if !args.dry_run {
+            replace_section(&args.out, name, &body)?;
+            println!("wrote section {name} of {}", args.out.display());
+        }
     }
     Ok(())
 }

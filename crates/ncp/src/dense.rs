@@ -113,18 +113,21 @@ impl DenseLu {
                         return false;
                     }
                     if p != k {
-                        for j in 0..n {
-                            lu.swap(k * n + j, p * n + j);
-                        }
+                        let (top, bottom) = lu.split_at_mut(p * n);
+                        top[k * n..(k + 1) * n].swap_with_slice(&mut bottom[..n]);
                         perm.swap(k, p);
                     }
-                    let pivot = lu[k * n + k];
-                    for i in k + 1..n {
-                        let l = lu[i * n + k] / pivot;
-                        lu[i * n + k] = l;
+                    // Eliminate below the pivot, row slices against the pivot row's tail.
+                    let (top, bottom) = lu.split_at_mut((k + 1) * n);
+                    let pivot_row = &top[k * n + k..(k + 1) * n];
+                    let inv = 1.0 / pivot_row[0];
+                    for row in bottom.chunks_exact_mut(n) {
+                        let tail = &mut row[k..];
+                        let l = tail[0] * inv;
+                        tail[0] = l;
                         if l != 0.0 {
-                            for j in k + 1..n {
-                                lu[i * n + j] -= l * lu[k * n + j];
+                            for (r, u) in tail[1..].iter_mut().zip(&pivot_row[1..]) {
+                                *r -= l * u;
                             }
                         }
                     }
@@ -202,18 +205,19 @@ impl DenseLu {
 fn substitute(lu: &[f64], perm: &[usize], b: &[f64], x: &mut [f64]) {
     let n = perm.len();
     for i in 0..n {
-        let mut s = b[perm[i]];
-        for j in 0..i {
-            s -= lu[i * n + j] * x[j];
-        }
-        x[i] = s;
+        let row = &lu[i * n..i * n + i];
+        x[i] = row
+            .iter()
+            .zip(&x[..i])
+            .fold(b[perm[i]], |s, (l, xj)| s - l * xj);
     }
     for i in (0..n).rev() {
-        let mut s = x[i];
-        for j in i + 1..n {
-            s -= lu[i * n + j] * x[j];
-        }
-        x[i] = s / lu[i * n + i];
+        let row = &lu[i * n..(i + 1) * n];
+        let s = row[i + 1..]
+            .iter()
+            .zip(&x[i + 1..])
+            .fold(x[i], |s, (u, xj)| s - u * xj);
+        x[i] = s / row[i];
     }
 }
 

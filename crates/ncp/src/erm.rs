@@ -20,6 +20,9 @@ use serde::{Deserialize, Serialize};
 /// Settings of [`ErmSolver`].
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct ErmSettings {
+    /// Also descend from the exact hard solution and keep the lower objective (the objective is not
+    /// convex; see [`ErmSolver::solve`]).
+    pub hard_start: bool,
     /// Stop when the projected gradient's infinity norm is below `tol * (1 + max(|lambda|, |w|))^2`
     /// (the objective is quadratic in the data's scale).
     pub tol: f64,
@@ -32,6 +35,7 @@ pub struct ErmSettings {
 impl Default for ErmSettings {
     fn default() -> Self {
         ErmSettings {
+            hard_start: true,
             tol: 1e-13,
             max_iter: 200,
             armijo: 1e-4,
@@ -98,17 +102,43 @@ impl ErmSolver {
     ) -> Result<Solution, NcpError> {
         let n = problem.dim();
         let nf = problem.n_free();
-        let c = n - nf;
         check_len("z0", z0.len(), n)?;
-        check_len("sigma", sigma.len(), c)?;
+        check_len("sigma", sigma.len(), n - nf)?;
         check_finite("z0", z0)?;
         if let Some(&s) = sigma.iter().find(|s| !(s.is_finite() && **s > 0.0)) {
             return Err(NcpError::Sigma(s));
         }
         let reduced = problem.reduce()?;
+        let start: Vec<f64> = z0[nf..].to_vec();
+        let (mut lambda, f, mut info) = self.minimise(&reduced, sigma, &start);
+        // The objective is not convex, so a warm start can sit in a local minimum. The global minimiser
+        // tends to the hard solution as sigma -> 0, so a second descent from Lemke's exact solution finds
+        // its basin; the lower objective wins.
+        if self.settings.hard_start {
+            let hard = crate::lemke::lemke(&reduced.lcp(), &crate::lemke::LemkeSettings::default());
+            if let Ok(hard) = hard {
+                let (l2, f2, i2) = self.minimise(&reduced, sigma, &hard.z);
+                let better =
+                    (i2.status == Status::Converged, -f2) > (info.status == Status::Converged, -f);
+                info.iterations += i2.iterations;
+                info.evaluations += i2.evaluations;
+                if better {
+                    (lambda, info.status, info.residual) = (l2, i2.status, i2.residual);
+                }
+            }
+        }
+        let z = reduced.expand(&lambda);
+        let mut w = vec![0.0; n];
+        problem.evaluate(&z, &mut w, None);
+        Ok(Solution { z, w, info })
+    }
+
+    /// Projected Newton from `start`; returns the minimiser, its objective and how it went.
+    fn minimise(&self, reduced: &Reduced, sigma: &[f64], start: &[f64]) -> (Vec<f64>, f64, Info) {
         let s = self.settings;
-        let mut lambda: Vec<f64> = z0[nf..].iter().map(|v| v.max(0.0)).collect();
-        let mut cur = evaluate(&reduced, sigma, &lambda, true);
+        let mut lambda: Vec<f64> = start.iter().map(|v| v.max(0.0)).collect();
+        let c = lambda.len();
+        let mut cur = evaluate(reduced, sigma, &lambda, true);
         let mut mu = 0.0f64;
         let mut lu = DenseLu::new(c, LinearSolver::Hand);
         let mut evaluations = 1;
@@ -207,7 +237,7 @@ impl ErmSolver {
                         lambda[i] * (1.0 - t)
                     };
                 }
-                let e = evaluate(&reduced, sigma, &trial, false);
+                let e = evaluate(reduced, sigma, &trial, false);
                 evaluations += 1;
                 let decrease: f64 = (0..c).map(|i| cur.g[i] * (trial[i] - lambda[i])).sum();
                 if e.f.is_finite() && e.f <= cur.f + s.armijo * decrease {
@@ -228,7 +258,7 @@ impl ErmSolver {
             };
             let moved = (0..c).fold(0.0f64, |m, i| m.max((trial[i] - lambda[i]).abs()));
             lambda.copy_from_slice(&trial);
-            cur = evaluate(&reduced, sigma, &lambda, true);
+            cur = evaluate(reduced, sigma, &lambda, true);
             evaluations += 1;
             if cur.f < best_f - 16.0 * f64::EPSILON * best_f.abs() {
                 best_f = cur.f;
@@ -255,19 +285,16 @@ impl ErmSolver {
                 .abs(),
             )
         });
-        let z = reduced.expand(&lambda);
-        let mut w = vec![0.0; n];
-        problem.evaluate(&z, &mut w, None);
-        Ok(Solution {
-            z,
-            w,
-            info: Info {
+        (
+            lambda,
+            cur.f,
+            Info {
                 status,
                 iterations,
                 residual: pg_norm,
                 evaluations,
             },
-        })
+        )
     }
 }
 

@@ -119,6 +119,34 @@ impl NcpFunction {
         }
     }
 
+    /// Value and first derivatives `(phi, d phi/d a, d phi/d b)`, sharing one exponential (logistic) or one
+    /// evaluation of the normal tails: the Newton solver's inner loop. Equal to the corresponding fields of
+    /// [`jet`](Self::jet).
+    pub fn first_order(&self, a: f64, b: f64) -> (f64, f64, f64) {
+        match *self {
+            NcpFunction::Logistic { sigma } => {
+                let (c, c_lo) = scaled_difference(a, b, sigma);
+                let e = (-c.abs()).exp();
+                let inv = 1.0 / (1.0 + e);
+                // sigmoid(|c|) = inv, sigmoid(-|c|) = e inv; corrections of first order in c_lo.
+                let slope = e * inv * inv;
+                let y_lo = -signed(c_lo, c);
+                let value = a.min(b) - sigma * (e.ln_1p() + e * inv * y_lo);
+                let (hi, lo) = (inv, e * inv);
+                let (db, da) = if c >= 0.0 { (hi, lo) } else { (lo, hi) };
+                (value, da - slope * c_lo, db + slope * c_lo)
+            }
+            NcpFunction::Normal { sigma } => {
+                let (t, below, above) = tails(a, b, sigma);
+                (a.min(b) - sigma * t.i1, above, below)
+            }
+            _ => {
+                let j = self.jet(a, b);
+                (j.value, j.da, j.db)
+            }
+        }
+    }
+
     /// Value and first and second derivatives. At the kinks of the hard functions the first derivative is
     /// one element of the generalised (Clarke) Jacobian: `min` takes `(1, 0)` when `a <= b`, and
     /// Fischer–Burmeister takes `(1 - 1/sqrt 2, 1 - 1/sqrt 2)` at the origin; their second derivatives are
@@ -319,6 +347,36 @@ mod tests {
         assert!((v - (1e-12 - 5e-25)).abs() <= 1e-27);
         let j = NcpFunction::FischerBurmeister.jet(1.0, -1e-12);
         assert!((j.da - 0.5e-24).abs() < 1e-38 && (j.db - 1.0 - 1e-12).abs() < 1e-15);
+    }
+
+    #[test]
+    fn first_order_agrees_with_the_jet() {
+        let functions = [
+            NcpFunction::Min,
+            NcpFunction::FischerBurmeister,
+            NcpFunction::Logistic { sigma: 0.1 },
+            NcpFunction::Logistic { sigma: 1e-9 },
+            NcpFunction::Normal { sigma: 0.3 },
+        ];
+        for f in functions {
+            for &(a, b) in &[
+                (0.3, 1.2),
+                (2.0, -1.0),
+                (0.5, 0.5),
+                (-1.0, 4.0),
+                (1e-3, 2e-3),
+                (7.0, 7.05),
+            ] {
+                let (v, da, db) = f.first_order(a, b);
+                let j = f.jet(a, b);
+                let close =
+                    |x: f64, y: f64| (x - y).abs() <= 2.0 * f64::EPSILON * x.abs().max(y.abs());
+                assert!(
+                    close(v, j.value) && close(da, j.da) && close(db, j.db),
+                    "{f:?} ({a}, {b})"
+                );
+            }
+        }
     }
 
     #[test]

@@ -109,6 +109,9 @@ struct Work {
     f_trial: Vec<f64>,
     jac_trial: Vec<f64>,
     phi_trial: Vec<f64>,
+    /// `(d phi/d a, d phi/d b)` per complementarity row, at the iterate and at the trial point.
+    dphi: Vec<f64>,
+    dphi_trial: Vec<f64>,
     normal: Vec<f64>,
     lm: Vec<f64>,
     grad: Vec<f64>,
@@ -129,6 +132,8 @@ impl Work {
             f_trial: vec![0.0; n],
             jac_trial: vec![0.0; n * n],
             phi_trial: vec![0.0; n],
+            dphi: vec![0.0; 2 * n],
+            dphi_trial: vec![0.0; 2 * n],
             normal: vec![0.0; n * n],
             lm: vec![0.0; n * n],
             grad: vec![0.0; n],
@@ -267,7 +272,7 @@ fn run(
     check_finite("F(z0)", &w.f)?;
     check_finite("dF/dz(z0)", &w.jac)?;
     let mut evaluations = 1;
-    let mut psi = ncp_residual(nf, functions, z, &w.f, &mut w.phi);
+    let mut psi = ncp_residual(nf, functions, z, &w.f, &mut w.phi, &mut w.dphi);
     let mut iterations = 0;
     loop {
         let residual = inf_norm(&w.phi);
@@ -290,7 +295,7 @@ fn run(
             return Ok(info!(Status::MaxIterations));
         }
         iterations += 1;
-        newton_matrix(n, nf, functions, z, &w.f, &w.jac, &mut w.h);
+        newton_matrix(n, nf, &w.dphi, &w.jac, &mut w.h);
         // Newton direction first: H dz = -Phi, along which psi falls at rate -2 psi.
         let mut newton_ok = w.lu.factor(&w.h);
         if newton_ok {
@@ -430,7 +435,14 @@ fn line_search(
         let finite = w.f_trial.iter().chain(&w.jac_trial).all(|v| v.is_finite());
         all_finite &= finite;
         let psi_trial = if finite {
-            ncp_residual(nf, functions, &w.z_trial, &w.f_trial, &mut w.phi_trial)
+            ncp_residual(
+                nf,
+                functions,
+                &w.z_trial,
+                &w.f_trial,
+                &mut w.phi_trial,
+                &mut w.dphi_trial,
+            )
         } else {
             f64::INFINITY
         };
@@ -439,6 +451,7 @@ fn line_search(
             std::mem::swap(&mut w.f, &mut w.f_trial);
             std::mem::swap(&mut w.jac, &mut w.jac_trial);
             std::mem::swap(&mut w.phi, &mut w.phi_trial);
+            std::mem::swap(&mut w.dphi, &mut w.dphi_trial);
             return Search::Accepted((t, evaluations), psi_trial);
         }
         t *= s.backtrack;
@@ -474,6 +487,7 @@ fn ncp_residual(
     z: &[f64],
     f: &[f64],
     phi: &mut [f64],
+    dphi: &mut [f64],
 ) -> f64 {
     let mut psi = 0.0;
     for i in 0..nf {
@@ -482,8 +496,10 @@ fn ncp_residual(
     }
     for (k, func) in functions.iter().enumerate() {
         let i = nf + k;
-        let v = func.value(z[i], f[i]);
+        let (v, da, db) = func.first_order(z[i], f[i]);
         phi[i] = v;
+        dphi[2 * k] = da;
+        dphi[2 * k + 1] = db;
         psi += v * v;
     }
     0.5 * psi
@@ -491,24 +507,16 @@ fn ncp_residual(
 
 /// The (generalised) Jacobian of `Phi`: equality rows copy `dF/dz`; complementarity row `i` is
 /// `phi_a e_i + phi_b dF_i/dz`.
-fn newton_matrix(
-    n: usize,
-    nf: usize,
-    functions: &[NcpFunction],
-    z: &[f64],
-    f: &[f64],
-    jac: &[f64],
-    h: &mut [f64],
-) {
+fn newton_matrix(n: usize, nf: usize, dphi: &[f64], jac: &[f64], h: &mut [f64]) {
     h[..nf * n].copy_from_slice(&jac[..nf * n]);
-    for (k, func) in functions.iter().enumerate() {
+    for k in 0..(n - nf) {
         let i = nf + k;
-        let jet = func.jet(z[i], f[i]);
+        let (da, db) = (dphi[2 * k], dphi[2 * k + 1]);
         let row = &mut h[i * n..(i + 1) * n];
         for (hj, jj) in row.iter_mut().zip(&jac[i * n..(i + 1) * n]) {
-            *hj = jet.db * jj;
+            *hj = db * jj;
         }
-        row[i] += jet.da;
+        row[i] += da;
     }
 }
 
