@@ -3,6 +3,7 @@
 mod bench_ncp;
 mod benchmarks;
 mod distance;
+mod lcp;
 
 use clap::{Parser, Subcommand};
 
@@ -24,6 +25,12 @@ enum Command {
     /// each output line is {"distance":d,"point_a":[x,y],"point_b":[x,y],"normal":[nx,ny],
     /// "witness_unique":bool} or {"error":"..."}; a bad line never stops the stream.
     Distance(distance::Args),
+    /// Complementarity problems through the ncp solvers: JSON lines in on stdin, JSON lines out.
+    ///
+    /// Each input line is {"M":[[...],...],"q":[...]} with optional "n_free" (leading equality rows)
+    /// and "z0" (warm start); each output line is {"z":[...],"w":[...],"iterations":k,
+    /// "status":"converged"|...,"residual":r} or {"error":"..."}; a bad line never stops the stream.
+    Lcp(lcp::Args),
     /// Measure speed against error and rewrite the generated tables of docs/benchmarks.md.
     Benchmarks(benchmarks::Args),
 }
@@ -31,6 +38,7 @@ enum Command {
 fn main() -> anyhow::Result<()> {
     match Cli::parse().command {
         Command::Distance(args) => distance::run(&args),
+        Command::Lcp(args) => lcp::run(&args),
         Command::Benchmarks(args) => benchmarks::run(&args),
     }
 }
