@@ -44,6 +44,34 @@ def normal_squared(a, b, s):
     return value, da, db
 
 
+def logistic_squared(a, b, s):
+    # E[min(a, b_L)^2] = a^2 - 2 a s log(1 + e^c) - 2 s^2 Li2(-e^c): the paper's footnote 3 with the sign of
+    # the last term corrected (checked by quadrature in check_logistic_squared below). Literal form, so only
+    # for |c| <= 700, where 80 digits absorb its cancellation.
+    if abs((a - b) / s) > 700:
+        return None
+    # The literal form cancels about |c| / ln(10) digits: work with that many more (c included).
+    with mp.workdps(80 + int(0.5 * abs((a - b) / s))):
+        c = (a - b) / s
+        value = a * a - 2 * a * s * mp.log1p(mp.exp(c)) - 2 * s * s * mp.polylog(2, -mp.exp(c))
+        da = 2 * a / (1 + mp.exp(c))
+        db = 2 * (a / (1 + mp.exp(-c)) - s * mp.log1p(mp.exp(c)))
+        return +value, +da, +db
+
+
+def check_logistic_squared():
+    """The corrected footnote formula against quadrature of its definition; the printed sign fails."""
+    for (a, b, s) in ((0.3, 0.1, 0.2), (-1.0, 0.5, 0.7), (2.0, -1.0, 1.5)):
+        a, b, s = mp.mpf(a), mp.mpf(b), mp.mpf(s)
+        dens = lambda x: 1 / (s * (mp.exp((x - b) / (2 * s)) + mp.exp((b - x) / (2 * s))) ** 2)
+        with mp.workdps(30):
+            quad = mp.quad(lambda x: min(a, x) ** 2 * dens(x), [-mp.inf, a, mp.inf])
+        c = (a - b) / s
+        printed = a * a - 2 * a * s * mp.log1p(mp.exp(c)) + 2 * s * s * mp.polylog(2, -mp.exp(c))
+        assert abs(logistic_squared(a, b, s)[0] - quad) < 1e-20, (a, b, s)
+        assert abs(printed - quad) > 1e-3, (a, b, s)
+
+
 def fischer_burmeister(a, b):
     return a + b - mp.sqrt(a * a + b * b)
 
@@ -64,6 +92,8 @@ def main():
                     v, da, db = f(A, B, S)
                     row[name] = [float(v), float(da), float(db)]
                 row["fischer_burmeister"] = float(fb)
+                ls = logistic_squared(A, B, S)
+                row["logistic_squared"] = None if ls is None else [float(v) for v in ls]
                 rows.append(row)
     # A sweep through the middle of the normal tails, where the closed forms cancel (|a - b| / sigma in 1..12).
     for k in range(1, 120):
@@ -77,8 +107,11 @@ def main():
                     v, da, db = f(A, B, S)
                     row[name] = [float(v), float(da), float(db)]
                 row["fischer_burmeister"] = float(fischer_burmeister(A, B))
+                ls = logistic_squared(A, B, S)
+                row["logistic_squared"] = None if ls is None else [float(v) for v in ls]
                 rows.append(row)
     json.dump({"generator": "tests/data/ncp_reference.py (mpmath, 80 digits)", "cases": rows}, __import__("sys").stdout)
 
 
+check_logistic_squared()
 main()

@@ -11,7 +11,9 @@
 //! `min(a, b + noise)` for logistic and normal noise of scale `s` on `b`.
 
 use crate::error::NcpError;
-use crate::special::{Tails, scaled_difference, sigmoid, sigmoid_slope, softplus, upper_tails_at};
+use crate::special::{
+    Tails, logistic_k2, scaled_difference, sigmoid, sigmoid_slope, softplus, upper_tails_at,
+};
 use serde::{Deserialize, Serialize};
 
 /// Which NCP function a complementarity row uses.
@@ -202,6 +204,24 @@ impl NcpFunction {
     }
 }
 
+/// `g(t) = ln(1 + t) - t / (1 + t)` for `0 <= t <= 1`, by its series `sum_k (-1)^k (k - 1) / k t^k` below
+/// `t = 1/2` (where the two terms cancel) and directly above.
+fn log1p_minus_ratio(t: f64) -> f64 {
+    if t > 0.5 {
+        return t.ln_1p() - t / (1.0 + t);
+    }
+    let (mut power, mut sum) = (t * t, 0.0);
+    for k in 2..=80 {
+        let term = power * (k - 1) as f64 / k as f64;
+        sum += if k % 2 == 0 { term } else { -term };
+        if term <= 1e-17 * sum.abs() {
+            break;
+        }
+        power *= t;
+    }
+    sum
+}
+
 /// `lo` times the sign of `hi`: the correction to `|hi + lo|` beyond `|hi|`.
 fn signed(lo: f64, hi: f64) -> f64 {
     if hi < 0.0 { -lo } else { lo }
@@ -293,6 +313,59 @@ pub fn normal_expected_squared(a: f64, b: f64, sigma: f64) -> NcpJet {
         daa: 2.0 * upper - k,
         dab: k,
         dbb: 2.0 * cdf - k,
+    }
+}
+
+/// The expected squared residual under logistic noise, the second formula of the paper's footnote 3 with
+/// its sign corrected: `E[min(a, b_L)^2] = a^2 - 2 a s ln(1 + e^c) - 2 s^2 Li2(-e^c)`, `c = (a - b) / s`,
+/// for `b_L` logistic of mean `b` and scale `s` (the footnote prints `+ 2 s^2 Li2`, which is negative at
+/// `a = 0.3, b = 0.1, s = 0.2`; docs/complementarity.md). With `K2(x) = -2 Li2(-e^x)` it is evaluated as
+///
+/// - `c <= 0`: `a^2 - 2 a s softplus(c) + s^2 K2(c)`,
+/// - `c > 0`: `b^2 + s^2 pi^2 / 3 - 2 a s softplus(-c) - s^2 K2(-c)`,
+///
+/// whose small terms are tail integrals, as for [`normal_expected_squared`].
+pub fn logistic_expected_squared(a: f64, b: f64, sigma: f64) -> NcpJet {
+    let (c, c_lo) = scaled_difference(a, b, sigma);
+    let x = -c.abs();
+    let x_lo = -signed(c_lo, c);
+    let e = x.exp();
+    let inv = 1.0 / (1.0 + e);
+    // softplus(x) and K2(x) at x + x_lo, to first order: softplus' = sigmoid, K2' = 2 softplus.
+    let softplus = e.ln_1p() + e * inv * x_lo;
+    let k2 = logistic_k2(x) + 2.0 * e.ln_1p() * x_lo;
+    let s2 = sigma * sigma;
+    // P(b_L > a) = sigmoid(-c), P(b_L < a) = sigmoid(c): e inv is the smaller, inv the larger; both
+    // corrected to first order in c_lo.
+    let shift = e * inv * inv * c_lo;
+    let (upper, lower) = if c > 0.0 {
+        (e * inv, inv)
+    } else {
+        (inv, e * inv)
+    };
+    let (upper, lower) = (upper - shift, lower + shift);
+    let value = if c <= 0.0 {
+        a * a - 2.0 * a * sigma * softplus + s2 * k2
+    } else {
+        let var = std::f64::consts::PI * std::f64::consts::PI / 3.0;
+        b * b + s2 * var - 2.0 * a * sigma * softplus - s2 * k2
+    };
+    // d/db = 2 E[b_L 1{b_L < a}] = 2 (a sigmoid(c) - s softplus(c)) = 2 (b - a sigmoid(-c) - s softplus(-c)).
+    // For c <= 0 both terms are about a e^c: written as 2 (sigmoid(c) (a - s) - s g(e^c)) with
+    // g(t) = ln(1 + t) - t / (1 + t) = t^2/2 - 2t^3/3 + ..., whose leading terms no longer cancel.
+    let db = if c <= 0.0 {
+        2.0 * (lower * (a - sigma) - sigma * log1p_minus_ratio(e))
+    } else {
+        2.0 * (b - a * upper - sigma * softplus)
+    };
+    let k = 2.0 * a * e * inv * inv / sigma;
+    NcpJet {
+        value,
+        da: 2.0 * a * upper,
+        db,
+        daa: 2.0 * upper - k,
+        dab: k,
+        dbb: 2.0 * lower - k,
     }
 }
 

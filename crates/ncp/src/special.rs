@@ -168,6 +168,58 @@ pub fn upper_tails_at(x: f64, x_lo: f64) -> Tails {
     }
 }
 
+/// `B_n / (n + 1)!` for even `n` from 2 to 20 (Bernoulli numbers), the coefficients of
+/// `Li2(z) = u - u^2 / 4 + sum_n B_n u^(n+1) / (n+1)!` with `u = -ln(1 - z)`.
+const DILOG_BERNOULLI: [f64; 10] = [
+    0.027777777777777776,
+    -0.0002777777777777778,
+    4.72411186696901e-06,
+    -9.185773074661964e-08,
+    1.8978869988971e-09,
+    -4.0647616451442256e-11,
+    8.921691020456452e-13,
+    -1.9939295860721074e-14,
+    4.518980029619918e-16,
+    -1.0356517612181247e-17,
+];
+
+/// The dilogarithm `Li2(-t) = -int_0^t ln(1 + s) / s ds` for `0 <= t <= 1`: its power series below
+/// `t = 1/2`, the Bernoulli series in `u = -ln(1 + t)` (`|u| <= ln 2`) above.
+pub fn dilog_of_negative(t: f64) -> f64 {
+    debug_assert!(
+        (0.0..=1.0).contains(&t),
+        "dilog_of_negative takes 0 <= t <= 1, got {t}"
+    );
+    if t <= 0.5 {
+        let (mut power, mut sum) = (-t, 0.0);
+        for k in 1..=60 {
+            let term = power / (k * k) as f64;
+            sum += term;
+            if term.abs() <= 1e-17 * sum.abs() {
+                break;
+            }
+            power *= -t;
+        }
+        sum
+    } else {
+        let u = -t.ln_1p();
+        let u2 = u * u;
+        // u - u^2/4 + sum c_n u^(n+1), n = 2, 4, ..., 20, by Horner in u^2.
+        let tail = DILOG_BERNOULLI
+            .iter()
+            .rev()
+            .fold(0.0, |acc, c| acc * u2 + c);
+        u - 0.25 * u2 + tail * u2 * u
+    }
+}
+
+/// `K2(x) = E[((x - Y)^+)^2]` for a standard logistic `Y` (density `e^-y / (1 + e^-y)^2`) and `x <= 0`:
+/// `-2 Li2(-e^x)`, no cancellation.
+pub fn logistic_k2(x: f64) -> f64 {
+    debug_assert!(!(x > 0.0), "logistic_k2 takes x <= 0, got {x}");
+    -2.0 * dilog_of_negative(x.exp())
+}
+
 /// `erfc(x / sqrt(2))` with the rounding of `x / sqrt(2)` corrected to first order (it would otherwise
 /// cost `x^2` ulps).
 fn erfc_of_x_over_sqrt2(x: f64) -> f64 {
@@ -207,6 +259,18 @@ mod tests {
                 (sigmoid_slope(x) - sigmoid(x) * sigmoid(-x)).abs() <= 1e-15 * sigmoid_slope(x)
             );
         }
+    }
+
+    #[test]
+    fn dilogarithm_matches_known_values_and_is_continuous_at_one_half() {
+        // Li2(-1) = -pi^2 / 12; Li2(-1/2) = -0.448414206923646...
+        let pi2 = std::f64::consts::PI * std::f64::consts::PI;
+        assert!((dilog_of_negative(1.0) + pi2 / 12.0).abs() < 2e-16);
+        assert!((dilog_of_negative(0.5) + 0.448_414_206_923_646_2).abs() < 2e-16);
+        let (below, above) = (dilog_of_negative(0.5), dilog_of_negative(0.5 + 1e-16));
+        assert!((below - above).abs() < 1e-15);
+        assert_eq!(dilog_of_negative(0.0), 0.0);
+        assert!((dilog_of_negative(1e-20) + 1e-20).abs() < 1e-35);
     }
 
     #[test]
