@@ -145,7 +145,7 @@ impl ErmSolver {
         let mut iterations = 0;
         let mut trial = vec![0.0; c];
         // Stall detection: the best objective so far and the accepted steps since it last fell measurably.
-        let (mut best_f, mut stalled) = (cur.f, 0);
+        let (mut best_f, mut stalled, mut blind) = (cur.f, 0, 0);
         let status = loop {
             let pg: Vec<f64> = (0..c)
                 .map(|i| {
@@ -159,7 +159,7 @@ impl ErmSolver {
             let residual = inf_norm(&pg);
             let scale = 1.0 + inf_norm(&lambda).max(inf_norm(&cur.w));
             tracing::trace!(iter = iterations, residual, mu, "ncp.erm");
-            if residual <= s.tol * scale * scale {
+            if residual <= s.tol * scale {
                 break Status::Converged;
             }
             if iterations == s.max_iter {
@@ -225,8 +225,41 @@ impl ErmSolver {
                     cur.g[i] * step
                 })
                 .sum();
-            if predicted.abs() <= 8.0 * f64::EPSILON * cur.f.abs() {
+            // The step itself measures the distance to the minimiser: at rounding level, stop; when f can no
+            // longer tell points apart, stop once the step is small (flat valleys of redundant rows).
+            let step_size = (0..c)
+                .map(|i| {
+                    if free[i] {
+                        ((lambda[i] + d[i]).max(0.0) - lambda[i]).abs()
+                    } else {
+                        lambda[i]
+                    }
+                })
+                .fold(0.0f64, f64::max);
+            let lambda_scale = 1.0 + inf_norm(&lambda);
+            if step_size <= 4.0 * f64::EPSILON * lambda_scale {
                 break Status::Converged;
+            }
+            // Below f's rounding the line search cannot judge a step: near the minimiser take the Newton
+            // step as it is (it converges quadratically there); in a flat valley, where such steps shuttle
+            // between points f cannot tell apart, stop after a few.
+            if predicted.abs() <= 8.0 * f64::EPSILON * cur.f.abs()
+                && step_size <= 1e-8 * lambda_scale
+            {
+                blind += 1;
+                if blind > 4 {
+                    break Status::Converged;
+                }
+                for i in 0..c {
+                    lambda[i] = if free[i] {
+                        (lambda[i] + d[i]).max(0.0)
+                    } else {
+                        0.0
+                    };
+                }
+                cur = evaluate(reduced, sigma, &lambda, true);
+                evaluations += 1;
+                continue;
             }
             let mut t = 1.0;
             let accepted = loop {
@@ -266,7 +299,7 @@ impl ErmSolver {
             } else {
                 stalled += 1;
                 // Five steps without a decrease above rounding: a minimiser to working precision.
-                if stalled >= 5 {
+                if stalled >= 5 && moved <= 1e-8 * (1.0 + inf_norm(&lambda)) {
                     break Status::Converged;
                 }
             }

@@ -1,0 +1,52 @@
+//! The one error type of the crate: an ill-posed question (a malformed scene, a non-finite state, a setting
+//! out of range), never a step that ran (that reports a status).
+
+/// One problem found in a scene description, naming the field.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SceneProblem {
+    /// Where: `body[1].joint.limits`, `contact[0].b`, `gravity`, ...
+    pub field: String,
+    /// What is wrong with it.
+    pub problem: String,
+}
+
+impl std::fmt::Display for SceneProblem {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}: {}", self.field, self.problem)
+    }
+}
+
+/// Why a dynamics question could not be posed.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum DynamicsError {
+    /// The scene is invalid; every problem found is listed.
+    #[error("invalid scene: {}", .0.iter().map(|p| p.to_string()).collect::<Vec<_>>().join("; "))]
+    Scene(Vec<SceneProblem>),
+    /// The scene text is not valid TOML for a scene.
+    #[error("scene file: {0}")]
+    Parse(String),
+    /// A state or control had the wrong size or a non-finite entry.
+    #[error("{what}: {problem}")]
+    Input {
+        /// `"x"`, `"u"`.
+        what: &'static str,
+        /// What is wrong.
+        problem: String,
+    },
+    /// A setting is out of range.
+    #[error("setting `{name}` = {value} is out of range: {expected}")]
+    Setting {
+        /// The field.
+        name: &'static str,
+        /// Its value.
+        value: f64,
+        /// The admissible range.
+        expected: &'static str,
+    },
+    /// The contact geometry could not be evaluated.
+    #[error(transparent)]
+    Geometry(#[from] geometry::GeometryError),
+    /// The complementarity problem could not be posed.
+    #[error(transparent)]
+    Ncp(#[from] ncp::NcpError),
+}

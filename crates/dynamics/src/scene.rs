@@ -1,0 +1,339 @@
+//! Scenes: planar rigid ellipses on hinge joints (to the world or to a parent body), with joint limits,
+//! viscous joint drag, gravity, actuated joints and an explicit list of contact pairs (SCENE.md).
+//!
+//! A scene is data: [`SceneSpec`] is what a TOML file holds (`scenes/finger.toml`), [`Scene::new`] checks it
+//! and reports every problem with the field it is in, and [`Scene::flicking_finger`] builds SCENE.md.
+//!
+//! Frames: every body has a joint frame at its hinge, rotated by its absolute angle `phi` (the sum of its
+//! own and its ancestors' joint angles). A body's `anchor` (its hinge) is given in its parent's joint frame
+//! (the world frame for a root body) and its `centre` in its own joint frame; the ellipse's x axis is the
+//! joint frame's x axis.
+
+use crate::error::{DynamicsError, SceneProblem};
+use geometry::Ellipse;
+use serde::{Deserialize, Serialize};
+
+/// A hinge joint.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct JointSpec {
+    /// `[lower, upper]` on the joint angle (two unilateral constraints), or none.
+    #[serde(default)]
+    pub limits: Option<[f64; 2]>,
+    /// Viscous drag coefficient: the joint feels `-damping * dtheta`.
+    #[serde(default)]
+    pub damping: f64,
+    /// Whether a control torque acts on this joint (controls are numbered in body order).
+    #[serde(default)]
+    pub actuated: bool,
+}
+
+/// One body as a scene file describes it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BodySpec {
+    /// Unique name.
+    pub name: String,
+    /// Ellipse semi-axes `[a, b]` along the body's x and y axes.
+    pub semi_axes: [f64; 2],
+    /// Mass density (per unit area); mass `pi a b density`, inertia `mass (a^2 + b^2) / 4` (SCENE.md).
+    #[serde(default = "one")]
+    pub density: f64,
+    /// `"world"` or the name of an earlier body.
+    pub parent: String,
+    /// Hinge position in the parent's joint frame.
+    pub anchor: [f64; 2],
+    /// Centre of the ellipse in the body's own joint frame.
+    pub centre: [f64; 2],
+    /// The hinge joint to the parent.
+    pub joint: JointSpec,
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+/// A modelled contact pair (SCENE.md: the scene models only the pairs it lists).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ContactSpec {
+    /// Body A (the normal points from A to B).
+    pub a: String,
+    /// Body B.
+    pub b: String,
+    /// Friction coefficient of the relaxed polyhedral cone.
+    pub friction: f64,
+}
+
+/// A scene file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneSpec {
+    /// Gravitational acceleration `[gx, gy]`.
+    pub gravity: [f64; 2],
+    /// Bodies, parents before children.
+    #[serde(rename = "body")]
+    pub bodies: Vec<BodySpec>,
+    /// Contact pairs.
+    #[serde(rename = "contact", default)]
+    pub contacts: Vec<ContactSpec>,
+}
+
+/// A checked body.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Body {
+    /// Name.
+    pub name: String,
+    /// Shape.
+    pub shape: Ellipse,
+    /// Mass.
+    pub mass: f64,
+    /// Moment of inertia about the centre.
+    pub inertia: f64,
+    /// Parent body index, `None` for the world.
+    pub parent: Option<usize>,
+    /// Hinge position in the parent's joint frame.
+    pub anchor: [f64; 2],
+    /// Centre in the body's joint frame.
+    pub centre: [f64; 2],
+    /// Joint limits, if any.
+    pub limits: Option<[f64; 2]>,
+    /// Viscous drag.
+    pub damping: f64,
+    /// Index of the control acting on this joint.
+    pub actuator: Option<usize>,
+}
+
+/// A checked contact pair.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ContactPair {
+    /// Body A.
+    pub a: usize,
+    /// Body B.
+    pub b: usize,
+    /// Friction coefficient.
+    pub friction: f64,
+}
+
+/// A checked, immutable scene. One generalised coordinate per body (its joint angle).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Scene {
+    spec: SceneSpec,
+    /// Gravity.
+    pub gravity: [f64; 2],
+    /// Bodies, parents first.
+    pub bodies: Vec<Body>,
+    /// Contact pairs.
+    pub contacts: Vec<ContactPair>,
+    /// Number of controls.
+    pub n_controls: usize,
+}
+
+impl Scene {
+    /// Check a description; `Err(Scene)` lists every problem found.
+    pub fn new(spec: SceneSpec) -> Result<Self, DynamicsError> {
+        let mut problems = Vec::new();
+        let mut bad = |field: String, problem: &str| {
+            problems.push(SceneProblem {
+                field,
+                problem: problem.into(),
+            })
+        };
+        if !spec.gravity.iter().all(|g| g.is_finite()) {
+            bad("gravity".into(), "must be finite");
+        }
+        if spec.bodies.is_empty() {
+            bad("body".into(), "a scene needs at least one body");
+        }
+        let mut bodies = Vec::new();
+        let mut n_controls = 0;
+        for (i, b) in spec.bodies.iter().enumerate() {
+            let f = |name: &str| format!("body[{i}].{name}");
+            if spec.bodies[..i].iter().any(|o| o.name == b.name) || b.name == "world" {
+                bad(f("name"), "must be unique and not \"world\"");
+            }
+            let shape = match Ellipse::new(b.semi_axes[0], b.semi_axes[1]) {
+                Ok(s) => Some(s),
+                Err(_) => {
+                    bad(f("semi_axes"), "must be finite and positive");
+                    None
+                }
+            };
+            if !(b.density.is_finite() && b.density > 0.0) {
+                bad(f("density"), "must be finite and positive");
+            }
+            let parent = if b.parent == "world" {
+                Some(None)
+            } else {
+                match spec.bodies[..i].iter().position(|o| o.name == b.parent) {
+                    Some(p) => Some(Some(p)),
+                    None => {
+                        bad(
+                            f("parent"),
+                            "must be \"world\" or the name of an earlier body",
+                        );
+                        None
+                    }
+                }
+            };
+            if !b.anchor.iter().chain(&b.centre).all(|v| v.is_finite()) {
+                bad(f("anchor/centre"), "must be finite");
+            }
+            if let Some([lo, hi]) = b.joint.limits
+                && !(lo.is_finite() && hi.is_finite() && lo < hi)
+            {
+                bad(f("joint.limits"), "must be finite with lower < upper");
+            }
+            if !(b.joint.damping.is_finite() && b.joint.damping >= 0.0) {
+                bad(f("joint.damping"), "must be finite and non-negative");
+            }
+            let actuator = b.joint.actuated.then(|| {
+                n_controls += 1;
+                n_controls - 1
+            });
+            if let (Some(shape), Some(parent)) = (shape, parent) {
+                let mass = std::f64::consts::PI * b.semi_axes[0] * b.semi_axes[1] * b.density;
+                bodies.push(Body {
+                    name: b.name.clone(),
+                    shape,
+                    mass,
+                    inertia: b.density * shape.unit_inertia(),
+                    parent,
+                    anchor: b.anchor,
+                    centre: b.centre,
+                    limits: b.joint.limits,
+                    damping: b.joint.damping,
+                    actuator,
+                });
+            }
+        }
+        let index = |name: &str| spec.bodies.iter().position(|b| b.name == name);
+        let mut contacts = Vec::new();
+        for (k, c) in spec.contacts.iter().enumerate() {
+            let f = |name: &str| format!("contact[{k}].{name}");
+            let (a, b) = (index(&c.a), index(&c.b));
+            if a.is_none() {
+                bad(f("a"), "names no body");
+            }
+            if b.is_none() {
+                bad(f("b"), "names no body");
+            }
+            if a.is_some() && a == b {
+                bad(f("b"), "a pair needs two different bodies");
+            }
+            if !(c.friction.is_finite() && c.friction >= 0.0) {
+                bad(f("friction"), "must be finite and non-negative");
+            }
+            if let (Some(a), Some(b)) = (a, b) {
+                contacts.push(ContactPair {
+                    a,
+                    b,
+                    friction: c.friction,
+                });
+            }
+        }
+        if !problems.is_empty() {
+            return Err(DynamicsError::Scene(problems));
+        }
+        Ok(Scene {
+            gravity: spec.gravity,
+            bodies,
+            contacts,
+            n_controls,
+            spec,
+        })
+    }
+
+    /// Parse and check a TOML scene.
+    pub fn from_toml_str(text: &str) -> Result<Self, DynamicsError> {
+        let spec: SceneSpec =
+            toml::from_str(text).map_err(|e| DynamicsError::Parse(e.to_string()))?;
+        Self::new(spec)
+    }
+
+    /// The description this scene was built from (for saving it beside results).
+    pub fn spec(&self) -> &SceneSpec {
+        &self.spec
+    }
+
+    /// The flicking finger of SCENE.md, identical to `scenes/finger.toml`.
+    pub fn flicking_finger() -> Self {
+        let joint = |limits, damping, actuated| JointSpec {
+            limits,
+            damping,
+            actuated,
+        };
+        let body = |name: &str, semi_axes, parent: &str, anchor, centre, joint| BodySpec {
+            name: name.into(),
+            semi_axes,
+            density: 1.0,
+            parent: parent.into(),
+            anchor,
+            centre,
+            joint,
+        };
+        let pi = std::f64::consts::PI;
+        Scene::new(SceneSpec {
+            gravity: [0.0, -4.0],
+            bodies: vec![
+                body(
+                    "link1",
+                    [0.8, 0.25],
+                    "world",
+                    [0.0, 0.0],
+                    [0.8, 0.0],
+                    joint(Some([-pi, 0.0]), 0.2, true),
+                ),
+                body(
+                    "link2",
+                    [0.8, 0.25],
+                    "link1",
+                    [1.6, 0.0],
+                    [0.8, 0.0],
+                    joint(Some([-2.0 * pi / 3.0, 0.0]), 0.2, true),
+                ),
+                body(
+                    "ellipse",
+                    [0.7, 0.5],
+                    "world",
+                    [0.0, -3.0],
+                    [0.0, 0.0],
+                    joint(None, 0.7, false),
+                ),
+            ],
+            contacts: vec![ContactSpec {
+                a: "link2".into(),
+                b: "ellipse".into(),
+                friction: 0.5,
+            }],
+        })
+        .expect("SCENE.md is a valid scene")
+    }
+
+    /// Number of generalised coordinates (one joint angle per body).
+    pub fn n_dof(&self) -> usize {
+        self.bodies.len()
+    }
+
+    /// Number of state entries `[q; v]`.
+    pub fn n_state(&self) -> usize {
+        2 * self.n_dof()
+    }
+
+    /// Number of unilateral constraint rows: two per joint with limits, two per contact pair.
+    pub fn n_constraints(&self) -> usize {
+        2 * self.bodies.iter().filter(|b| b.limits.is_some()).count() + 2 * self.contacts.len()
+    }
+
+    /// Whether body `j` is `i` or one of its ancestors (so joint `j` moves body `i`).
+    pub fn moves(&self, j: usize, i: usize) -> bool {
+        let mut k = Some(i);
+        while let Some(b) = k {
+            if b == j {
+                return true;
+            }
+            k = self.bodies[b].parent;
+        }
+        false
+    }
+}

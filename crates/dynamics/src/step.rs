@@ -1,0 +1,244 @@
+//! One time step `x' = f(x, u)` (paper section III-A, eq. 1; SCENE.md "One time step"): with `M`, `r`, `d`
+//! and `J` frozen at the start of the step, solve for the new velocities and the impulses
+//!
+//! ```text
+//! M (v' - v) = h (r + B u) + J^T lambda,   0 <= lambda _|_ d / h + J v' >= 0,   q' = q + h v'
+//! ```
+//!
+//! as a mixed LCP in `z = [v'; lambda]` with the model's NCP function per row (crate `ncp`).
+
+#![allow(non_snake_case)]
+
+use crate::constraint::{Constraints, ContactFrame};
+use crate::error::DynamicsError;
+use crate::kinematics::Kinematics;
+use crate::scene::Scene;
+use ncp::{
+    ErmSettings, ErmSolver, Info, LemkeSettings, LinearMcp, NcpFunction, NewtonSettings,
+    NewtonSolver, lemke,
+};
+use serde::{Deserialize, Serialize};
+
+/// How the complementarity rows are modelled.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "model", rename_all = "snake_case")]
+pub enum Complementarity {
+    /// The exact LCP, solved by Lemke's method.
+    Hard,
+    /// Logistic noise on each row's constraint velocity, paper eq. (17), solved by Newton.
+    Logistic {
+        /// Noise scale (the paper's default 0.1).
+        sigma: f64,
+    },
+    /// Normal noise, expected-residual minimisation, paper eq. (14) with (15).
+    Normal {
+        /// Noise standard deviation.
+        sigma: f64,
+    },
+}
+
+/// Settings of a step.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct StepSettings {
+    /// Complementarity model; the paper's default is logistic with sigma = 0.1 (section V-A).
+    pub model: Complementarity,
+    /// Time step (SCENE.md: 0.05).
+    pub h: f64,
+    /// Newton settings for the logistic model.
+    pub newton: NewtonSettings,
+    /// ERM settings for the normal model.
+    pub erm: ErmSettings,
+}
+
+impl Default for StepSettings {
+    fn default() -> Self {
+        StepSettings {
+            model: Complementarity::Logistic { sigma: 0.1 },
+            h: 0.05,
+            newton: NewtonSettings::default(),
+            erm: ErmSettings::default(),
+        }
+    }
+}
+
+impl StepSettings {
+    /// `Err` naming the first setting out of range.
+    pub fn validate(&self) -> Result<(), DynamicsError> {
+        if !(self.h.is_finite() && self.h > 0.0) {
+            return Err(DynamicsError::Setting {
+                name: "h",
+                value: self.h,
+                expected: "finite and positive",
+            });
+        }
+        if let Complementarity::Logistic { sigma } | Complementarity::Normal { sigma } = self.model
+            && !(sigma.is_finite() && sigma > 0.0)
+        {
+            return Err(DynamicsError::Setting {
+                name: "sigma",
+                value: sigma,
+                expected: "finite and positive",
+            });
+        }
+        self.newton.validate()?;
+        self.erm.validate()?;
+        Ok(())
+    }
+}
+
+/// The outcome of one step.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Step {
+    /// `[q + h v'; v']`.
+    pub x_next: Vec<f64>,
+    /// Row impulses, SCENE.md's row order.
+    pub lambda: Vec<f64>,
+    /// Constraint values `d(q)` at the start of the step.
+    pub d: Vec<f64>,
+    /// Contact geometry at the start of the step, one per pair.
+    pub contacts: Vec<ContactFrame>,
+    /// How the complementarity solve went.
+    pub info: Info,
+}
+
+/// A simulator: the scene, its settings and the solvers' warm-start state.
+#[derive(Debug)]
+pub struct Simulator {
+    scene: Scene,
+    settings: StepSettings,
+    newton: NewtonSolver,
+    erm: ErmSolver,
+    warm: Option<Vec<f64>>,
+}
+
+impl Simulator {
+    /// A simulator of `scene` with checked settings.
+    pub fn new(scene: Scene, settings: StepSettings) -> Result<Self, DynamicsError> {
+        settings.validate()?;
+        Ok(Simulator {
+            newton: NewtonSolver::new(settings.newton)?,
+            erm: ErmSolver::new(settings.erm)?,
+            scene,
+            settings,
+            warm: None,
+        })
+    }
+
+    /// The scene.
+    pub fn scene(&self) -> &Scene {
+        &self.scene
+    }
+
+    /// The settings.
+    pub fn settings(&self) -> &StepSettings {
+        &self.settings
+    }
+
+    /// Forget the warm start (the next step starts from `[v; 0]`).
+    pub fn reset_warm_start(&mut self) {
+        self.warm = None;
+    }
+
+    /// The mixed LCP of the step from `x` under `u`, with the start-of-step quantities.
+    pub fn problem(&self, x: &[f64], u: &[f64]) -> Result<(LinearMcp, Constraints), DynamicsError> {
+        let scene = &self.scene;
+        let n = scene.n_dof();
+        check("x", x, scene.n_state())?;
+        check("u", u, scene.n_controls)?;
+        let (q, v) = x.split_at(n);
+        let kin = Kinematics::new(scene, q);
+        let M = kin.mass_matrix(scene);
+        let mut r = kin.bias_forces(scene, v);
+        for (j, b) in scene.bodies.iter().enumerate() {
+            if let Some(k) = b.actuator {
+                r[j] += u[k];
+            }
+        }
+        let cons = Constraints::new(scene, &kin, q)?;
+        let m = cons.d.len();
+        let h = self.settings.h;
+        let dim = n + m;
+        let mut a = vec![0.0; dim * dim];
+        let mut b = vec![0.0; dim];
+        for i in 0..n {
+            for j in 0..n {
+                a[i * dim + j] = M[i * n + j];
+            }
+            for k in 0..m {
+                a[i * dim + n + k] = -cons.jacobian[k * n + i];
+            }
+            b[i] = -((0..n).map(|j| M[i * n + j] * v[j]).sum::<f64>() + h * r[i]);
+        }
+        for k in 0..m {
+            for j in 0..n {
+                a[(n + k) * dim + j] = cons.jacobian[k * n + j];
+            }
+            b[n + k] = cons.d[k] / h;
+        }
+        Ok((LinearMcp::from_row_major(n, a, b)?, cons))
+    }
+
+    /// One step from `x` under the controls `u`.
+    #[tracing::instrument(name = "dynamics.step", level = "debug", skip_all)]
+    pub fn step(&mut self, x: &[f64], u: &[f64]) -> Result<Step, DynamicsError> {
+        let (problem, cons) = self.problem(x, u)?;
+        let n = self.scene.n_dof();
+        let m = cons.d.len();
+        let mut z = match &self.warm {
+            Some(w) if w.len() == n + m => w.clone(),
+            _ => {
+                let mut z = vec![0.0; n + m];
+                z[..n].copy_from_slice(&x[n..]);
+                z
+            }
+        };
+        let info = match self.settings.model {
+            Complementarity::Hard => {
+                let s = lemke(&problem, &LemkeSettings::default())?;
+                z = s.z;
+                s.info
+            }
+            Complementarity::Logistic { sigma } => self.newton.solve_in_place(
+                &problem,
+                &vec![NcpFunction::Logistic { sigma }; m],
+                &mut z,
+            )?,
+            Complementarity::Normal { sigma } => {
+                let s = self.erm.solve(&problem, &vec![sigma; m], &z)?;
+                z = s.z;
+                s.info
+            }
+        };
+        let h = self.settings.h;
+        let mut x_next = vec![0.0; 2 * n];
+        for i in 0..n {
+            x_next[i] = x[i] + h * z[i];
+            x_next[n + i] = z[i];
+        }
+        let lambda = z[n..].to_vec();
+        self.warm = Some(z);
+        Ok(Step {
+            x_next,
+            lambda,
+            d: cons.d,
+            contacts: cons.contacts,
+            info,
+        })
+    }
+}
+
+fn check(what: &'static str, v: &[f64], len: usize) -> Result<(), DynamicsError> {
+    if v.len() != len {
+        return Err(DynamicsError::Input {
+            what,
+            problem: format!("has {} entries, expected {len}", v.len()),
+        });
+    }
+    if let Some(i) = v.iter().position(|e| !e.is_finite()) {
+        return Err(DynamicsError::Input {
+            what,
+            problem: format!("entry {i} is {}", v[i]),
+        });
+    }
+    Ok(())
+}

@@ -1,0 +1,134 @@
+//! The step against the independent high-precision values of shared/reference/finger_steps.json, to the
+//! tolerances of its README.
+
+use crate::support::reference_json;
+use dynamics::{Complementarity, Scene, Simulator, StepSettings};
+
+fn vector(v: &serde_json::Value) -> Vec<f64> {
+    v.as_array()
+        .unwrap()
+        .iter()
+        .map(|e| e.as_f64().unwrap())
+        .collect()
+}
+
+fn settings(case: &serde_json::Value) -> StepSettings {
+    let sigma = case["sigma"].as_f64();
+    let model = match case["model"].as_str().unwrap() {
+        "hard" => Complementarity::Hard,
+        "logistic" => Complementarity::Logistic {
+            sigma: sigma.unwrap(),
+        },
+        "normal" => Complementarity::Normal {
+            sigma: sigma.unwrap(),
+        },
+        other => panic!("unknown model {other}"),
+    };
+    StepSettings {
+        model,
+        h: case["h"].as_f64().unwrap(),
+        ..StepSettings::default()
+    }
+}
+
+fn max_diff(a: &[f64], b: &[f64]) -> f64 {
+    assert_eq!(a.len(), b.len());
+    a.iter()
+        .zip(b)
+        .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()))
+}
+
+#[test]
+fn single_steps_match_the_reference_in_all_three_models() {
+    let data = reference_json("finger_steps.json");
+    let steps = data["steps"].as_array().unwrap();
+    assert_eq!(steps.len(), 30);
+    let mut worst = (0.0f64, 0.0f64, 0.0f64);
+    for case in steps {
+        let mut sim = Simulator::new(Scene::flicking_finger(), settings(case)).unwrap();
+        let (x, u) = (vector(&case["x"]), vector(&case["u"]));
+        let step = sim.step(&x, &u).unwrap();
+        let tag = format!(
+            "{} {} {:?} h={}",
+            case["id"],
+            case["tag"],
+            sim.settings().model,
+            case["h"]
+        );
+        let d_err = max_diff(&step.d, &vector(&case["d"]));
+        let x_err = max_diff(&step.x_next, &vector(&case["x_next"]));
+        let lambda = vector(&case["lambda"]);
+        let scale = lambda.iter().fold(1.0f64, |m, l| m.max(l.abs()));
+        let l_err = max_diff(&step.lambda, &lambda) / scale;
+        println!(
+            "{tag}: d {d_err:.1e} x_next {x_err:.1e} lambda {l_err:.1e} ({:?})",
+            step.info
+        );
+        assert!(d_err <= 1e-12, "{tag}: d off by {d_err}");
+        assert!(x_err <= 1e-10, "{tag}: x_next off by {x_err}");
+        assert!(
+            l_err <= 1e-10,
+            "{tag}: lambda off by {l_err}: {:?} vs {lambda:?}",
+            step.lambda
+        );
+        worst = (worst.0.max(d_err), worst.1.max(x_err), worst.2.max(l_err));
+    }
+    println!(
+        "worst: d {:.1e}, x_next {:.1e}, lambda {:.1e}",
+        worst.0, worst.1, worst.2
+    );
+}
+
+#[test]
+fn the_rollout_matches_the_reference() {
+    let data = reference_json("finger_steps.json");
+    let r = &data["rollout"];
+    let settings = StepSettings {
+        model: Complementarity::Logistic {
+            sigma: r["sigma"].as_f64().unwrap(),
+        },
+        h: r["h"].as_f64().unwrap(),
+        ..StepSettings::default()
+    };
+    let mut sim = Simulator::new(Scene::flicking_finger(), settings).unwrap();
+    let u = vector(&r["u"]);
+    let states: Vec<Vec<f64>> = r["states"].as_array().unwrap().iter().map(vector).collect();
+    let lambdas: Vec<Vec<f64>> = r["lambdas"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(vector)
+        .collect();
+    let mut x = vector(&r["x0"]);
+    assert!(max_diff(&x, &states[0]) == 0.0);
+    let mut worst = 0.0f64;
+    for k in 0..lambdas.len() {
+        let step = sim.step(&x, &u).unwrap();
+        x = step.x_next;
+        let err = max_diff(&x, &states[k + 1]);
+        worst = worst.max(err);
+        assert!(err <= 1e-9, "step {k}: state off by {err}");
+        let scale = lambdas[k].iter().fold(1.0f64, |m, l| m.max(l.abs()));
+        assert!(
+            max_diff(&step.lambda, &lambdas[k]) <= 1e-9 * scale,
+            "step {k}: impulses"
+        );
+    }
+    println!(
+        "rollout: worst state error {worst:.1e} over {} steps",
+        lambdas.len()
+    );
+}
+
+#[test]
+fn the_shipped_scene_file_is_scene_md() {
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../scenes/finger.toml"
+    ))
+    .unwrap();
+    assert_eq!(
+        Scene::from_toml_str(&text).unwrap(),
+        Scene::flicking_finger()
+    );
+}
