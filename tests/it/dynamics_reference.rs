@@ -132,3 +132,44 @@ fn the_shipped_scene_file_is_scene_md() {
         Scene::flicking_finger()
     );
 }
+
+fn matrix(v: &serde_json::Value) -> Vec<f64> {
+    v.as_array()
+        .unwrap()
+        .iter()
+        .flat_map(|row| vector(row))
+        .collect()
+}
+
+#[test]
+fn logistic_step_derivatives_match_the_reference() {
+    let data = reference_json("finger_steps.json");
+    let mut worst = 0.0f64;
+    let mut checked = 0;
+    for case in data["steps"].as_array().unwrap() {
+        if case["model"] != "logistic" {
+            continue;
+        }
+        let mut sim = Simulator::new(Scene::flicking_finger(), settings(case)).unwrap();
+        let (x, u) = (vector(&case["x"]), vector(&case["u"]));
+        let (_, der) = sim.step_with_derivatives(&x, &u).unwrap();
+        for (name, ours, exact) in [
+            ("fx", &der.fx, matrix(&case["fx"])),
+            ("fu", &der.fu, matrix(&case["fu"])),
+        ] {
+            let scale = exact.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            let err = max_diff(ours, &exact) / scale;
+            println!("{} {} {name}: {err:.1e}", case["id"], case["tag"]);
+            assert!(
+                err <= 1e-7,
+                "{} {}: {name} off by {err} of its largest entry",
+                case["id"],
+                case["tag"]
+            );
+            worst = worst.max(err);
+        }
+        checked += 1;
+    }
+    assert_eq!(checked, 10);
+    println!("worst derivative error {worst:.1e} relative to the largest entry");
+}

@@ -43,6 +43,9 @@ pub enum DynamicsError {
         /// The admissible range.
         expected: &'static str,
     },
+    /// A capability this model does not have (yet), or a degenerate state it cannot differentiate at.
+    #[error("unsupported: {0}")]
+    Unsupported(&'static str),
     /// The contact geometry could not be evaluated.
     #[error(transparent)]
     Geometry(#[from] geometry::GeometryError),

@@ -23,6 +23,7 @@
 #![allow(clippy::needless_range_loop)]
 
 mod constraint;
+mod derivative;
 mod error;
 mod kinematics;
 mod scene;
@@ -30,6 +31,6 @@ mod step;
 
 pub use constraint::{Constraints, ContactFrame};
 pub use error::{DynamicsError, SceneProblem};
-pub use kinematics::Kinematics;
+pub use kinematics::{Kinematics, Scalar};
 pub use scene::{Body, BodySpec, ContactPair, ContactSpec, JointSpec, Scene, SceneSpec};
 pub use step::{Complementarity, Simulator, Step, StepSettings};
