@@ -137,7 +137,7 @@ fn matrix(v: &serde_json::Value) -> Vec<f64> {
     v.as_array()
         .unwrap()
         .iter()
-        .flat_map(|row| vector(row))
+        .flat_map(vector)
         .collect()
 }
 
