@@ -134,11 +134,7 @@ fn the_shipped_scene_file_is_scene_md() {
 }
 
 fn matrix(v: &serde_json::Value) -> Vec<f64> {
-    v.as_array()
-        .unwrap()
-        .iter()
-        .flat_map(vector)
-        .collect()
+    v.as_array().unwrap().iter().flat_map(vector).collect()
 }
 
 #[test]

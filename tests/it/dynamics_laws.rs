@@ -1,0 +1,290 @@
+//! Laws of the simulator that hold for all states: a symmetric positive definite mass matrix, constraint
+//! Jacobians that are the gradients of the distances, derivatives that agree with differences, energy that
+//! the step conserves to O(h) without drag and contact; and scene files that are checked field by field.
+
+use dynamics::{
+    Complementarity, Constraints, DynamicsError, Kinematics, Scene, Simulator, StepSettings,
+};
+use proptest::prelude::*;
+
+fn finger() -> Scene {
+    Scene::flicking_finger()
+}
+
+fn state() -> impl Strategy<Value = Vec<f64>> {
+    (
+        -3.0f64..0.0,
+        -2.0f64..0.0,
+        -3.2f64..3.2,
+        -3.0f64..3.0,
+        -3.0f64..3.0,
+        -3.0f64..3.0,
+    )
+        .prop_map(|(a, b, c, d, e, f)| vec![a, b, c, d, e, f])
+}
+
+proptest! {
+    #[test]
+    fn mass_matrix_is_symmetric_positive_definite(x in state()) {
+        let scene = finger();
+        let m = Kinematics::new(&scene, &x[..3]).mass_matrix(&scene);
+        for i in 0..3 {
+            for j in 0..3 {
+                prop_assert!((m[i * 3 + j] - m[j * 3 + i]).abs() < 1e-14);
+            }
+        }
+        // Leading minors (Sylvester).
+        let d1 = m[0];
+        let d2 = m[0] * m[4] - m[1] * m[3];
+        let d3 = m[0] * (m[4] * m[8] - m[5] * m[7]) - m[1] * (m[3] * m[8] - m[5] * m[6]) + m[2] * (m[3] * m[7] - m[4] * m[6]);
+        prop_assert!(d1 > 0.0 && d2 > 0.0 && d3 > 0.0);
+    }
+
+    #[test]
+    fn constraint_jacobian_rows_are_gradients_of_the_distances(x in state()) {
+        let scene = finger();
+        let q = &x[..3];
+        let c = Constraints::new(&scene, &Kinematics::new(&scene, q), q).unwrap();
+        prop_assume!(c.contacts[0].witness_unique);
+        let hstep = 1e-6;
+        for j in 0..3 {
+            let mut qp = q.to_vec();
+            let mut qm = q.to_vec();
+            qp[j] += hstep;
+            qm[j] -= hstep;
+            let dp = Constraints::new(&scene, &Kinematics::new(&scene, &qp), &qp).unwrap().d;
+            let dm = Constraints::new(&scene, &Kinematics::new(&scene, &qm), &qm).unwrap().d;
+            // Rows 0-3 (limits) exactly; rows 4 and 5 share d, whose gradient is their mean (J_n).
+            for k in 0..4 {
+                prop_assert!(((dp[k] - dm[k]) / (2.0 * hstep) - c.jacobian[k * 3 + j]).abs() < 1e-8);
+            }
+            let jn = 0.5 * (c.jacobian[4 * 3 + j] + c.jacobian[5 * 3 + j]);
+            let fd = (dp[4] - dm[4]) / (2.0 * hstep);
+            prop_assert!((fd - jn).abs() < 1e-6 * (1.0 + jn.abs()), "J_n[{}]: {} vs {}", j, fd, jn);
+        }
+    }
+
+    #[test]
+    fn logistic_step_derivatives_match_central_differences(x in state(), u in (-2.0f64..2.0, -2.0f64..2.0)) {
+        let settings = StepSettings { model: Complementarity::Logistic { sigma: 0.3 }, ..StepSettings::default() };
+        let mut sim = Simulator::new(finger(), settings).unwrap();
+        let u = [u.0, u.1];
+        let (_, der) = sim.step_with_derivatives(&x, &u).unwrap();
+        prop_assume!(sim.step(&x, &u).unwrap().contacts[0].witness_unique);
+        let eps = 1e-6;
+        let mut fresh = Simulator::new(finger(), settings).unwrap();
+        let mut f = |x: &[f64], u: &[f64]| { fresh.reset_warm_start(); fresh.step(x, u).unwrap().x_next };
+        let scale = der.fx.iter().fold(1.0f64, |m, v| m.max(v.abs()));
+        for j in 0..6 {
+            let mut xp = x.clone();
+            let mut xm = x.clone();
+            xp[j] += eps;
+            xm[j] -= eps;
+            let (p, m) = (f(&xp, &u), f(&xm, &u));
+            for i in 0..6 {
+                let fd = (p[i] - m[i]) / (2.0 * eps);
+                prop_assert!((fd - der.fx[i * 6 + j]).abs() < 1e-5 * scale, "fx[{}][{}]: {} vs {}", i, j, fd, der.fx[i * 6 + j]);
+            }
+        }
+        for k in 0..2 {
+            let mut up = u;
+            let mut um = u;
+            up[k] += eps;
+            um[k] -= eps;
+            let (p, m) = (f(&x, &up), f(&x, &um));
+            for i in 0..6 {
+                let fd = (p[i] - m[i]) / (2.0 * eps);
+                prop_assert!((fd - der.fu[i * 2 + k]).abs() < 1e-5 * scale);
+            }
+        }
+    }
+}
+
+/// The finger without drag, limits or contact: a double pendulum and a free spinner.
+fn conservative_scene() -> Scene {
+    let mut spec = Scene::flicking_finger().spec().clone();
+    for b in &mut spec.bodies {
+        b.joint.damping = 0.0;
+        b.joint.limits = None;
+    }
+    spec.contacts.clear();
+    Scene::new(spec).unwrap()
+}
+
+fn energy(scene: &Scene, x: &[f64]) -> f64 {
+    let (q, v) = x.split_at(3);
+    let kin = Kinematics::new(scene, q);
+    let m = kin.mass_matrix(scene);
+    let kinetic: f64 = (0..3)
+        .map(|i| {
+            (0..3)
+                .map(|j| 0.5 * v[i] * m[i * 3 + j] * v[j])
+                .sum::<f64>()
+        })
+        .sum();
+    let potential: f64 = scene
+        .bodies
+        .iter()
+        .zip(&kin.centre)
+        .map(|(b, c)| -b.mass * (scene.gravity[0] * c[0] + scene.gravity[1] * c[1]))
+        .sum();
+    kinetic + potential
+}
+
+#[test]
+fn energy_is_conserved_to_first_order_in_h_without_drag_or_contact() {
+    let scene = conservative_scene();
+    let x0 = [-0.7, -0.4, 0.3, 1.0, -0.5, 2.0];
+    let e0 = energy(&scene, &x0);
+    let mut drift = Vec::new();
+    for h in [0.004, 0.002, 0.001] {
+        let settings = StepSettings {
+            model: Complementarity::Hard,
+            h,
+            ..StepSettings::default()
+        };
+        let mut sim = Simulator::new(scene.clone(), settings).unwrap();
+        let mut x = x0.to_vec();
+        let steps = (0.5 / h) as usize;
+        let mut worst = 0.0f64;
+        for _ in 0..steps {
+            x = sim.step(&x, &[0.0, 0.0]).unwrap().x_next;
+            worst = worst.max((energy(&scene, &x) - e0).abs());
+        }
+        drift.push(worst);
+    }
+    println!("energy drift over 0.5 s for h = 0.004, 0.002, 0.001: {drift:?}");
+    // First order: halving h about halves the drift.
+    assert!(
+        drift[1] < 0.7 * drift[0] && drift[2] < 0.7 * drift[1],
+        "{drift:?}"
+    );
+    assert!(drift[2] < 0.05 * e0.abs().max(1.0));
+}
+
+#[test]
+fn contact_never_creates_energy_in_a_drag_free_scene() {
+    let mut spec = Scene::flicking_finger().spec().clone();
+    for b in &mut spec.bodies {
+        b.joint.damping = 0.0;
+    }
+    let scene = Scene::new(spec).unwrap();
+    let settings = StepSettings {
+        model: Complementarity::Hard,
+        h: 0.01,
+        ..StepSettings::default()
+    };
+    let mut sim = Simulator::new(scene.clone(), settings).unwrap();
+    // Start apart, falling onto the ellipse and the joint limits.
+    let mut x = vec![-0.9, -0.3, 0.2, -1.0, -1.0, 0.0];
+    let e0 = energy(&scene, &x);
+    let mut contacts = 0;
+    for _ in 0..300 {
+        let s = sim.step(&x, &[0.0, 0.0]).unwrap();
+        if s.lambda.iter().any(|l| *l > 0.0) {
+            contacts += 1;
+        }
+        x = s.x_next;
+        // Symplectic-Euler-like drift is bounded; contact and limits only remove energy.
+        assert!(
+            energy(&scene, &x) <= e0 + 0.05,
+            "energy {} rose above {e0}",
+            energy(&scene, &x)
+        );
+    }
+    assert!(contacts > 0, "the scenario must touch something");
+}
+
+#[test]
+fn a_malformed_scene_names_every_bad_field() {
+    let text = r#"
+gravity = [0.0, nan]
+[[body]]
+name = "a"
+semi_axes = [0.0, 1.0]
+parent = "nobody"
+anchor = [0.0, 0.0]
+centre = [1.0, 0.0]
+joint = { limits = [1.0, -1.0], damping = -0.1 }
+[[body]]
+name = "a"
+semi_axes = [1.0, 1.0]
+density = -2.0
+parent = "world"
+anchor = [0.0, 0.0]
+centre = [1.0, 0.0]
+joint = {}
+[[contact]]
+a = "a"
+b = "ghost"
+friction = -1.0
+"#;
+    let Err(DynamicsError::Scene(problems)) = Scene::from_toml_str(text) else {
+        panic!("must be rejected")
+    };
+    let fields: Vec<&str> = problems.iter().map(|p| p.field.as_str()).collect();
+    for expected in [
+        "gravity",
+        "body[0].semi_axes",
+        "body[0].parent",
+        "body[0].joint.limits",
+        "body[0].joint.damping",
+        "body[1].name",
+        "body[1].density",
+        "contact[0].b",
+        "contact[0].friction",
+    ] {
+        assert!(
+            fields.contains(&expected),
+            "{expected} missing from {fields:?}"
+        );
+    }
+    assert!(matches!(
+        Scene::from_toml_str("gravity = 3"),
+        Err(DynamicsError::Parse(_))
+    ));
+    assert!(matches!(
+        Scene::from_toml_str("gravity = [0.0, -4.0]\nbody = []"),
+        Err(DynamicsError::Scene(_))
+    ));
+}
+
+#[test]
+fn bad_states_and_settings_are_typed_errors() {
+    let mut sim = Simulator::new(finger(), StepSettings::default()).unwrap();
+    assert!(matches!(
+        sim.step(&[0.0; 5], &[0.0; 2]),
+        Err(DynamicsError::Input { what: "x", .. })
+    ));
+    assert!(matches!(
+        sim.step(&[0.0, 0.0, f64::NAN, 0.0, 0.0, 0.0], &[0.0; 2]),
+        Err(DynamicsError::Input { what: "x", .. })
+    ));
+    assert!(matches!(
+        sim.step(&[-0.5; 6], &[f64::INFINITY, 0.0]),
+        Err(DynamicsError::Input { what: "u", .. })
+    ));
+    for bad in [
+        StepSettings {
+            h: 0.0,
+            ..StepSettings::default()
+        },
+        StepSettings {
+            h: f64::NAN,
+            ..StepSettings::default()
+        },
+        StepSettings {
+            model: Complementarity::Logistic { sigma: 0.0 },
+            ..StepSettings::default()
+        },
+        StepSettings {
+            model: Complementarity::Normal { sigma: -1.0 },
+            ..StepSettings::default()
+        },
+    ] {
+        assert!(matches!(
+            Simulator::new(finger(), bad),
+            Err(DynamicsError::Setting { .. })
+        ));
+    }
+}
