@@ -5,9 +5,9 @@
 //! At the solution `z = [v'; lambda]` of `Phi(z; x, u) = 0`, with
 //! `Phi = [M (v' - v) - h (r + B u) - J^T lambda; phi_i(lambda_i, w_i)]` and `w = d / h + J v'`,
 //! `dz = -Phi_z^-1 Phi_x dx`. `Phi_z` is the Newton matrix of the solve; `Phi_x` comes from the same
-//! kinematics code run in forward-mode dual numbers (`num_dual::Dual64`, one direction per state and
-//! control entry), through `geometry::signed_distance_dual` for the contact rows. Then
-//! `q' = q + h v'` gives `fx = [[I + h dv'/dq, h dv'/dv]; [dv'/dq, dv'/dv]]` and `fu = [h dv'/du; dv'/du]`.
+//! kinematics code run in forward-mode dual numbers, through `geometry::signed_distance_dual` for the
+//! contact rows, eight directions per pass: all of the finger's state and control entries at
+//! once), then `q' = q + h v'` gives `fx = [[I + h dv'/dq, h dv'/dv]; [dv'/dq, dv'/dv]]` and `fu = [h dv'/du; dv'/du]`.
 //!
 //! For the hard model the derivative is that of the active set: rows with `lambda_i > 0` are held as
 //! equalities `w_i = 0`, the others dropped (`lambda_i = 0`); it is the derivative of the step wherever the
@@ -21,7 +21,10 @@ use crate::kinematics::{Kinematics, Scalar};
 use crate::scene::Scene;
 use crate::step::{Complementarity, Simulator, Step};
 use ncp::{DenseLu, LinearSolver, Mcp, NcpFunction};
-use num_dual::Dual64;
+use num_dual::DualSVec64;
+
+/// Directions per vector-dual pass: the finger's 6 states and 2 controls in one.
+const DIRECTIONS: usize = 8;
 
 /// `fx` (row-major `2n x 2n`, `fx[i][j] = dx'_i / dx_j`) and `fu` (row-major `2n x n_u`).
 #[derive(Debug, Clone, PartialEq)]
@@ -137,33 +140,41 @@ impl Simulator {
                 "the step's Jacobian is singular at this state",
             ));
         }
-        // One dual direction per entry of (x, u).
-        let mut dv = vec![0.0; n * (2 * n + nu)];
+        // The directions of (x, u), DIRECTIONS at a time in one vector-dual pass (one for the finger).
+        let cols = 2 * n + nu;
+        let mut dv = vec![0.0; n * cols];
         let mut rhs = vec![0.0; dim];
-        for dir in 0..(2 * n + nu) {
-            let xd: Vec<Dual64> = x
+        for first in (0..cols).step_by(DIRECTIONS) {
+            let seed = |idx: usize, v: f64| {
+                let d = DualSVec64::<DIRECTIONS>::from_re(v);
+                if (first..first + DIRECTIONS).contains(&idx) {
+                    d.derivative(idx - first)
+                } else {
+                    d
+                }
+            };
+            let xd: Vec<_> = x.iter().enumerate().map(|(j, &v)| seed(j, v)).collect();
+            let ud: Vec<_> = u
                 .iter()
                 .enumerate()
-                .map(|(j, &v)| Dual64::new(v, if j == dir { 1.0 } else { 0.0 }))
-                .collect();
-            let ud: Vec<Dual64> = u
-                .iter()
-                .enumerate()
-                .map(|(j, &v)| Dual64::new(v, if 2 * n + j == dir { 1.0 } else { 0.0 }))
+                .map(|(j, &v)| seed(2 * n + j, v))
                 .collect();
             let (free, w) = step_residual(scene, h, &xd, &ud, &z)?;
-            for i in 0..n {
-                rhs[i] = -free[i].eps;
-            }
-            for k in 0..m {
-                rhs[n + k] = -dphi[k].1 * w[k].eps;
-            }
-            lu.solve(&mut rhs);
-            for i in 0..n {
-                dv[i * (2 * n + nu) + dir] = rhs[i];
+            let eps = |d: &DualSVec64<DIRECTIONS>, k: usize| d.eps.0.as_ref().map_or(0.0, |e| e[k]);
+            for k in 0..DIRECTIONS.min(cols - first) {
+                for i in 0..n {
+                    rhs[i] = -eps(&free[i], k);
+                }
+                for r in 0..m {
+                    rhs[n + r] = -dphi[r].1 * eps(&w[r], k);
+                }
+                lu.solve(&mut rhs);
+                for i in 0..n {
+                    dv[i * cols + first + k] = rhs[i];
+                }
             }
         }
-        let (nx, cols) = (2 * n, 2 * n + nu);
+        let nx = 2 * n;
         let mut fx = vec![0.0; nx * nx];
         let mut fu = vec![0.0; nx * nu];
         for i in 0..n {
