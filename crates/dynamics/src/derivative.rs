@@ -23,8 +23,13 @@ use crate::step::{Complementarity, Simulator, Step};
 use ncp::{DenseLu, LinearSolver, Mcp, NcpFunction};
 use num_dual::DualSVec64;
 
-/// Directions per vector-dual pass: the finger's 6 states and 2 controls in one.
-const DIRECTIONS: usize = 8;
+/// Directions per vector-dual pass: the finger's three joint angles in one.
+const DIRECTIONS: usize = 3;
+
+/// Component `k` of a vector dual's derivative (zero when it carries none).
+fn eps(d: &DualSVec64<DIRECTIONS>, k: usize) -> f64 {
+    d.eps.0.as_ref().map_or(0.0, |e| e[k])
+}
 
 /// `fx` (row-major `2n x 2n`, `fx[i][j] = dx'_i / dx_j`) and `fu` (row-major `2n x n_u`).
 #[derive(Debug, Clone, PartialEq)]
@@ -89,7 +94,7 @@ impl Simulator {
         x: &[f64],
         u: &[f64],
     ) -> Result<(Step, StepDerivatives), DynamicsError> {
-        let step = self.step(x, u)?;
+        let (step, problem) = self.step_and_problem(x, u)?;
         let scene = self.scene();
         let n = scene.n_dof();
         let nu = scene.n_controls;
@@ -98,7 +103,6 @@ impl Simulator {
         let model = self.settings().model;
         let mut z = step.x_next[n..].to_vec();
         z.extend_from_slice(&step.lambda);
-        let (problem, _) = self.problem(x, u)?;
         let dim = n + m;
         let mut f = vec![0.0; dim];
         let mut jac = vec![0.0; dim * dim];
@@ -140,14 +144,14 @@ impl Simulator {
                 "the step's Jacobian is singular at this state",
             ));
         }
-        // The directions of (x, u), DIRECTIONS at a time in one vector-dual pass (one for the finger).
+        // Phi_x column by column. Only the q directions pass through the geometry (vector duals, DIRECTIONS
+        // at a time: one pass for the finger); v enters through M (v' - v) and r(q, v) alone, u through B.
         let cols = 2 * n + nu;
-        let mut dv = vec![0.0; n * cols];
-        let mut rhs = vec![0.0; dim];
-        for first in (0..cols).step_by(DIRECTIONS) {
+        let mut phi_x = vec![0.0; dim * cols];
+        for first in (0..n).step_by(DIRECTIONS) {
             let seed = |idx: usize, v: f64| {
                 let d = DualSVec64::<DIRECTIONS>::from_re(v);
-                if (first..first + DIRECTIONS).contains(&idx) {
+                if idx < n && (first..first + DIRECTIONS).contains(&idx) {
                     d.derivative(idx - first)
                 } else {
                     d
@@ -156,22 +160,60 @@ impl Simulator {
             let xd: Vec<_> = x.iter().enumerate().map(|(j, &v)| seed(j, v)).collect();
             let ud: Vec<_> = u
                 .iter()
-                .enumerate()
-                .map(|(j, &v)| seed(2 * n + j, v))
+                .map(|&v| DualSVec64::<DIRECTIONS>::from_re(v))
                 .collect();
             let (free, w) = step_residual(scene, h, &xd, &ud, &z)?;
-            let eps = |d: &DualSVec64<DIRECTIONS>, k: usize| d.eps.0.as_ref().map_or(0.0, |e| e[k]);
-            for k in 0..DIRECTIONS.min(cols - first) {
+            for k in 0..DIRECTIONS.min(n - first) {
                 for i in 0..n {
-                    rhs[i] = -eps(&free[i], k);
+                    phi_x[i * cols + first + k] = eps(&free[i], k);
                 }
                 for r in 0..m {
-                    rhs[n + r] = -dphi[r].1 * eps(&w[r], k);
+                    phi_x[(n + r) * cols + first + k] = dphi[r].1 * eps(&w[r], k);
                 }
-                lu.solve(&mut rhs);
+            }
+        }
+        let (q, v) = x.split_at(n);
+        let M = &jac; // rows 0..n, columns 0..n of the step's matrix are M
+        for first in (0..n).step_by(DIRECTIONS) {
+            let qd: Vec<_> = q
+                .iter()
+                .map(|&e| DualSVec64::<DIRECTIONS>::from_re(e))
+                .collect();
+            let vd: Vec<_> = v
+                .iter()
+                .enumerate()
+                .map(|(j, &e)| {
+                    let d = DualSVec64::<DIRECTIONS>::from_re(e);
+                    if (first..first + DIRECTIONS).contains(&j) {
+                        d.derivative(j - first)
+                    } else {
+                        d
+                    }
+                })
+                .collect();
+            let r = Kinematics::new(scene, &qd).bias_forces(scene, &vd);
+            for k in 0..DIRECTIONS.min(n - first) {
+                let j = first + k;
                 for i in 0..n {
-                    dv[i * cols + first + k] = rhs[i];
+                    // d/dv_j [M (v' - v) - h r] = -M_ij - h dr_i/dv_j.
+                    phi_x[i * cols + n + j] = -M[i * dim + j] - h * eps(&r[i], k);
                 }
+            }
+        }
+        for (j, b) in scene.bodies.iter().enumerate() {
+            if let Some(k) = b.actuator {
+                phi_x[j * cols + 2 * n + k] = -h;
+            }
+        }
+        let mut dv = vec![0.0; n * cols];
+        let mut rhs = vec![0.0; dim];
+        for c in 0..cols {
+            for i in 0..dim {
+                rhs[i] = -phi_x[i * cols + c];
+            }
+            lu.solve(&mut rhs);
+            for i in 0..n {
+                dv[i * cols + c] = rhs[i];
             }
         }
         let nx = 2 * n;

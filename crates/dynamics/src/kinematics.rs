@@ -103,19 +103,30 @@ impl<T: Scalar> Kinematics<T> {
         let n = scene.n_dof();
         let mut M = vec![T::from(0.0); n * n];
         for (i, b) in scene.bodies.iter().enumerate() {
-            let jc = self.point_jacobian(scene, i, self.centre[i]);
             for r in 0..n {
-                for c in 0..n {
-                    let w = if scene.moves(r, i) && scene.moves(c, i) {
-                        b.inertia
-                    } else {
-                        0.0
+                let Some(lr) = self.lever(scene, r, i, self.centre[i]) else {
+                    continue;
+                };
+                for c in r..n {
+                    let Some(lc) = self.lever(scene, c, i, self.centre[i]) else {
+                        continue;
                     };
-                    M[r * n + c] += (jc[0][r] * jc[0][c] + jc[1][r] * jc[1][c]) * b.mass + w;
+                    M[r * n + c] += (lr[0] * lc[0] + lr[1] * lc[1]) * b.mass + b.inertia;
                 }
             }
         }
+        for r in 0..n {
+            for c in 0..r {
+                M[r * n + c] = M[c * n + r];
+            }
+        }
         M
+    }
+
+    /// Column `j` of the Jacobian of the material point of `body` at `p`: `perp(p - h_j)` if joint `j`
+    /// moves the body, else `None`.
+    pub fn lever(&self, scene: &Scene, j: usize, body: usize, p: [T; 2]) -> Option<[T; 2]> {
+        scene.moves(j, body).then(|| perp(sub(p, self.hinge[j])))
     }
 
     /// Bias forces `r(q, v)`: gravity on every centre, `-damping * v` on every joint, and the Coriolis and
@@ -136,7 +147,6 @@ impl<T: Scalar> Kinematics<T> {
             })
             .collect();
         for (i, b) in scene.bodies.iter().enumerate() {
-            let jc = self.point_jacobian(scene, i, self.centre[i]);
             let cdot = self.point_velocity(scene, i, self.centre[i], v);
             let mut accel = [T::from(0.0); 2];
             for j in 0..n {
@@ -151,7 +161,9 @@ impl<T: Scalar> Kinematics<T> {
                 (-accel[1] + scene.gravity[1]) * b.mass,
             ];
             for k in 0..n {
-                r[k] += jc[0][k] * f[0] + jc[1][k] * f[1];
+                if let Some(l) = self.lever(scene, k, i, self.centre[i]) {
+                    r[k] += l[0] * f[0] + l[1] * f[1];
+                }
             }
         }
         r

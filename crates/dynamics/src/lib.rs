@@ -5,6 +5,7 @@
 //!   `scenes/finger.toml`) or [`Scene::flicking_finger`].
 //! - [`Kinematics`]: positions, point Jacobians, `M(q)`, `r(q, v)`.
 //! - [`Constraints`]: `d(q)` and `J(q)` in SCENE.md's row order.
+//! - [`Simulator::step_with_derivatives`]: exact `fx`, `fu` by the implicit function theorem.
 //! - [`Simulator::step`]: one step for the models [`Complementarity::Hard`], `Logistic` (eq. 17) and
 //!   `Normal` (eq. 14 with 15).
 //!
@@ -30,6 +31,7 @@ mod scene;
 mod step;
 
 pub use constraint::{Constraints, ContactFrame};
+pub use derivative::{StepDerivatives, step_residual};
 pub use error::{DynamicsError, SceneProblem};
 pub use kinematics::{Kinematics, Scalar};
 pub use scene::{Body, BodySpec, ContactPair, ContactSpec, JointSpec, Scene, SceneSpec};

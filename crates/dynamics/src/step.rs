@@ -181,6 +181,15 @@ impl Simulator {
     /// One step from `x` under the controls `u`.
     #[tracing::instrument(name = "dynamics.step", level = "debug", skip_all)]
     pub fn step(&mut self, x: &[f64], u: &[f64]) -> Result<Step, DynamicsError> {
+        Ok(self.step_and_problem(x, u)?.0)
+    }
+
+    /// The step and the mixed LCP it solved (whose matrix the derivatives reuse).
+    pub(crate) fn step_and_problem(
+        &mut self,
+        x: &[f64],
+        u: &[f64],
+    ) -> Result<(Step, LinearMcp), DynamicsError> {
         let (problem, cons) = self.problem(x, u)?;
         let n = self.scene.n_dof();
         let m = cons.d.len();
@@ -217,13 +226,14 @@ impl Simulator {
         }
         let lambda = z[n..].to_vec();
         self.warm = Some(z);
-        Ok(Step {
+        let step = Step {
             x_next,
             lambda,
             d: cons.d,
             contacts: cons.contacts,
             info,
-        })
+        };
+        Ok((step, problem))
     }
 }
 
