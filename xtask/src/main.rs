@@ -4,6 +4,7 @@ mod bench_ncp;
 mod benchmarks;
 mod distance;
 mod lcp;
+mod step;
 
 use clap::{Parser, Subcommand};
 
@@ -31,6 +32,12 @@ enum Command {
     /// and "z0" (warm start); each output line is {"z":[...],"w":[...],"iterations":k,
     /// "status":"converged"|...,"residual":r} or {"error":"..."}; a bad line never stops the stream.
     Lcp(lcp::Args),
+    /// One step of the simulator per JSON line on stdin: {"x":[6],"u":[2]} ->
+    /// {"x_next":[6],"lambda":[6],"d":[6],"status":..,"fx":[[..]],"fu":[[..]]} (fx[i][j] = dx'_i/dx_j,
+    /// with --derivatives) or {"error":"..."}.
+    Step(step::StepArgs),
+    /// Roll out a control sequence from a state; writes the trajectory and impulses as JSON or CSV.
+    Simulate(step::SimulateArgs),
     /// Measure speed against error and rewrite the generated tables of docs/benchmarks.md.
     Benchmarks(benchmarks::Args),
 }
@@ -39,6 +46,8 @@ fn main() -> anyhow::Result<()> {
     match Cli::parse().command {
         Command::Distance(args) => distance::run(&args),
         Command::Lcp(args) => lcp::run(&args),
+        Command::Step(args) => step::run_step(&args),
+        Command::Simulate(args) => step::run_simulate(&args),
         Command::Benchmarks(args) => benchmarks::run(&args),
     }
 }
