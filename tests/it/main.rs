@@ -1,5 +1,6 @@
 //! Integration scenarios, one module each, through public APIs only.
 
+mod dynamics_hard_cases;
 mod dynamics_laws;
 mod dynamics_reference;
 mod geometry_laws;

@@ -1,0 +1,207 @@
+//! The simulator on purpose-made hard cases: long rollouts, tiny and huge sigma, fast impacts, starting in
+//! penetration, joint limit and contact together, time steps from 1e-4 to 0.1, and the sigma -> 0 limit.
+
+use dynamics::{Complementarity, Scene, Simulator, StepSettings};
+use ncp::Status;
+
+fn sim(model: Complementarity, h: f64) -> Simulator {
+    Simulator::new(
+        Scene::flicking_finger(),
+        StepSettings {
+            model,
+            h,
+            ..StepSettings::default()
+        },
+    )
+    .unwrap()
+}
+
+const X0: [f64; 6] = [
+    -std::f64::consts::FRAC_PI_4,
+    -std::f64::consts::FRAC_PI_6,
+    0.0,
+    0.0,
+    0.0,
+    0.0,
+];
+
+/// Roll out `steps` steps under `control(k)`; returns the smallest contact distance seen and the largest
+/// speed, and panics on a non-finite state or an unconverged solve.
+fn rollout(
+    sim: &mut Simulator,
+    x0: &[f64],
+    steps: usize,
+    control: impl Fn(usize) -> [f64; 2],
+) -> (f64, f64) {
+    let mut x = x0.to_vec();
+    let (mut min_d, mut max_speed) = (f64::INFINITY, 0.0f64);
+    for k in 0..steps {
+        let s = sim
+            .step(&x, &control(k))
+            .unwrap_or_else(|e| panic!("step {k}: {e}"));
+        assert_eq!(
+            s.info.status,
+            Status::Converged,
+            "step {k} at {x:?}: {:?}",
+            s.info
+        );
+        assert!(s.x_next.iter().all(|v| v.is_finite()), "step {k}");
+        min_d = min_d.min(s.contacts[0].distance);
+        max_speed = s.x_next[3..].iter().fold(max_speed, |m, v| m.max(v.abs()));
+        x = s.x_next;
+    }
+    (min_d, max_speed)
+}
+
+/// A pushing, periodically reversing control that drives the finger into the ellipse and its limits.
+fn pushing(k: usize) -> [f64; 2] {
+    let phase = (k / 40) % 4;
+    [[1.5, -1.0], [-1.5, 1.0], [0.5, 2.0], [-0.5, -2.0]][phase]
+}
+
+#[test]
+fn a_long_logistic_rollout_stays_finite_and_bounded() {
+    let steps = if std::env::var("SLOW_TESTS").is_ok() {
+        100_000
+    } else {
+        20_000
+    };
+    let mut s = sim(Complementarity::Logistic { sigma: 0.1 }, 0.05);
+    let (min_d, max_speed) = rollout(&mut s, &X0, steps, pushing);
+    println!("{steps} logistic steps: min distance {min_d:.3}, max speed {max_speed:.2}");
+    assert!(
+        max_speed < 50.0,
+        "speeds stay bounded under bounded torques and drag"
+    );
+    assert!(min_d > -0.2);
+}
+
+#[test]
+fn the_hard_model_keeps_penetration_small_over_long_rollouts() {
+    for h in [0.05, 0.01] {
+        let mut s = sim(Complementarity::Hard, h);
+        let steps = (100.0 / h) as usize;
+        let (min_d, _) = rollout(&mut s, &X0, steps, |k| {
+            pushing((k as f64 * h / 0.05) as usize)
+        });
+        println!("hard, h = {h}: min distance over {steps} steps {min_d:.2e}");
+        // The constraint is linearised at the start of each step: penetration is O(h^2) per step.
+        assert!(min_d > -0.02, "h = {h}: penetration {min_d}");
+    }
+}
+
+#[test]
+fn sigma_from_1e_6_to_10_gives_finite_converged_rollouts() {
+    for sigma in [1e-6, 1e-4, 1e-2, 1.0, 10.0] {
+        for model in [
+            Complementarity::Logistic { sigma },
+            Complementarity::Normal { sigma },
+        ] {
+            let mut s = sim(model, 0.05);
+            let (min_d, max_speed) = rollout(&mut s, &X0, 300, pushing);
+            println!("{model:?}: min distance {min_d:.3}, max speed {max_speed:.2}");
+            assert!(max_speed < 50.0);
+        }
+    }
+}
+
+#[test]
+fn time_steps_from_1e_4_to_0_1_are_stable() {
+    for h in [1e-4, 1e-3, 1e-2, 0.1] {
+        let mut s = sim(Complementarity::Logistic { sigma: 0.1 }, h);
+        let steps = ((2.0 / h) as usize).min(20_000);
+        let (_, max_speed) = rollout(&mut s, &X0, steps, |k| {
+            pushing((k as f64 * h / 0.05) as usize)
+        });
+        assert!(max_speed < 50.0, "h = {h}");
+    }
+}
+
+#[test]
+fn impacts_at_speed_50_and_starts_in_penetration_are_handled() {
+    for model in [
+        Complementarity::Hard,
+        Complementarity::Logistic { sigma: 0.1 },
+        Complementarity::Normal { sigma: 0.1 },
+    ] {
+        // Link 2 slammed down onto the ellipse at 50 rad/s.
+        let mut s = sim(model, 0.01);
+        let x = [-1.2, -0.5, 0.3, -50.0, -50.0, 0.0];
+        let (_, max_speed) = rollout(&mut s, &x, 200, |_| [0.0, 0.0]);
+        assert!(
+            max_speed <= 50.0 * 1.01,
+            "{model:?}: contact must not add speed ({max_speed})"
+        );
+        // Deep in penetration (d about -0.1) at rest: the step pushes the bodies apart.
+        let mut s = sim(model, 0.05);
+        let x = deep_penetration();
+        let first = s.step(&x, &[0.0, 0.0]).unwrap();
+        assert!(first.contacts[0].distance < -0.09);
+        let next = s.step(&first.x_next, &[0.0, 0.0]).unwrap();
+        assert!(
+            next.contacts[0].distance > first.contacts[0].distance,
+            "{model:?} must separate"
+        );
+    }
+}
+
+/// A resting state of the finger with link 2 about 0.1 deep in the free ellipse.
+fn deep_penetration() -> Vec<f64> {
+    let s = sim(Complementarity::Hard, 0.05);
+    let scene = s.scene();
+    let mut best = (f64::INFINITY, vec![]);
+    for i in 0..200 {
+        let t1 = -1.0 - 0.5 * i as f64 / 200.0;
+        for j in 0..50 {
+            let t2 = -0.02 * j as f64;
+            let q = [t1, t2, 0.0];
+            let kin = dynamics::Kinematics::new(scene, &q);
+            let c = dynamics::Constraints::new(scene, &kin, &q).unwrap();
+            let err = (c.d[4] + 0.1).abs();
+            if err < best.0 {
+                best = (err, vec![t1, t2, 0.0, 0.0, 0.0, 0.0]);
+            }
+        }
+    }
+    assert!(best.0 < 0.005, "a pose with d = -0.1 exists");
+    best.1
+}
+
+#[test]
+fn smoothed_steps_converge_to_the_hard_step_as_sigma_shrinks() {
+    // In contact, pushed: the logistic step's distance from the hard step, per decade of sigma.
+    let x = [-1.3, -0.4, 0.2, -1.0, -0.5, 0.3];
+    let u = [0.5, -0.5];
+    let hard = sim(Complementarity::Hard, 0.05).step(&x, &u).unwrap();
+    assert!(
+        hard.lambda[4] + hard.lambda[5] > 0.0,
+        "the case must be in contact"
+    );
+    let mut errors = Vec::new();
+    for k in 1..=5 {
+        let sigma = 10f64.powi(-k);
+        let s = sim(Complementarity::Logistic { sigma }, 0.05)
+            .step(&x, &u)
+            .unwrap();
+        let err = s
+            .x_next
+            .iter()
+            .zip(&hard.x_next)
+            .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+        errors.push(err);
+    }
+    let orders: Vec<f64> = errors.windows(2).map(|w| (w[0] / w[1]).log10()).collect();
+    println!("logistic vs hard: errors {errors:?}, orders {orders:?}");
+    // The logistic root has e^(-lambda/s) + e^(-w/s) = 1: an active row with lambda >> sigma moves w by
+    // sigma e^(-lambda/sigma), so away from grazing the error falls faster than any power of sigma; the
+    // worst case (lambda and w both near 0) is the bound sigma ln 2 of the NCP function itself.
+    for (k, e) in errors.iter().enumerate() {
+        let sigma = 10f64.powi(-(k as i32) - 1);
+        assert!(*e <= sigma, "sigma {sigma}: error {e}");
+    }
+    assert!(
+        orders[0] > 1.0,
+        "faster than first order away from grazing: {orders:?}"
+    );
+    assert!(errors[4] < 1e-12);
+}
