@@ -33,6 +33,8 @@ pub enum Section {
     Geometry,
     /// Complementarity solvers on scene-sized problems.
     Ncp,
+    /// The simulator's step, derivatives and knobs.
+    Dynamics,
 }
 
 pub fn run(args: &Args) -> anyhow::Result<()> {
@@ -43,6 +45,9 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     }
     if wanted(Section::Ncp) {
         sections.push(("ncp", crate::bench_ncp::section()?));
+    }
+    if wanted(Section::Dynamics) {
+        sections.push(("dynamics", crate::bench_dynamics::section(&args.reference)?));
     }
     for (name, body) in sections {
         println!("{body}");

@@ -1,5 +1,6 @@
 //! `cargo xtask <experiment>`: the experiment driver, the only binary of the workspace.
 
+mod bench_dynamics;
 mod bench_ncp;
 mod benchmarks;
 mod distance;
