@@ -100,6 +100,61 @@ proptest! {
     }
 }
 
+proptest! {
+    #![proptest_config(ProptestConfig {
+        cases: std::env::var("PROPTEST_CASES").ok().and_then(|s| s.parse().ok()).unwrap_or(32),
+        ..ProptestConfig::default()
+    })]
+
+    #[test]
+    fn the_hessian_of_c_f_matches_differences_of_exact_first_derivatives(
+        x in state(),
+        u in (-2.0f64..2.0, -2.0f64..2.0),
+        c in proptest::collection::vec(-1.0f64..1.0, 6),
+        hard in any::<bool>(),
+    ) {
+        let model = if hard { Complementarity::Hard } else { Complementarity::Logistic { sigma: 0.3 } };
+        let settings = StepSettings { model, ..StepSettings::default() };
+        let mut sim = Simulator::new(finger(), settings).unwrap();
+        let u = [u.0, u.1];
+        let (step, _, hess) = sim.step_with_hessian(&x, &u, &c).unwrap();
+        prop_assume!(step.contacts[0].witness_unique);
+        // c^T [fx fu] at y = (x, u), by the exact first derivatives.
+        let mut grad = |y: &[f64]| {
+            sim.reset_warm_start();
+            let (_, d) = sim.step_with_derivatives(&y[..6], &y[6..]).unwrap();
+            let mut g = vec![0.0; 8];
+            for j in 0..6 {
+                g[j] = (0..6).map(|i| c[i] * d.fx[i * 6 + j]).sum();
+            }
+            for k in 0..2 {
+                g[6 + k] = (0..6).map(|i| c[i] * d.fu[i * 2 + k]).sum();
+            }
+            g
+        };
+        let y: Vec<f64> = x.iter().chain(&u).copied().collect();
+        let eps = 1e-6;
+        let scale = hess.iter().fold(1.0f64, |m, v| m.max(v.abs()));
+        for k in 0..8 {
+            let (mut yp, mut ym) = (y.clone(), y.clone());
+            yp[k] += eps;
+            ym[k] -= eps;
+            let (gp, gm) = (grad(&yp), grad(&ym));
+            for i in 0..8 {
+                let fd = (gp[i] - gm[i]) / (2.0 * eps);
+                prop_assert!((fd - hess[i * 8 + k]).abs() < 1e-5 * scale, "H[{}][{}]: {} vs {}", i, k, fd, hess[i * 8 + k]);
+            }
+        }
+        prop_assert!(hess.iter().any(|v| v.abs() > 1e-6), "a non-trivial Hessian");
+        // Symmetric, as a Hessian must be.
+        for i in 0..8 {
+            for k in 0..8 {
+                prop_assert!((hess[i * 8 + k] - hess[k * 8 + i]).abs() < 1e-9 * scale);
+            }
+        }
+    }
+}
+
 /// The finger without drag, limits or contact: a double pendulum and a free spinner.
 fn conservative_scene() -> Scene {
     let mut spec = Scene::flicking_finger().spec().clone();

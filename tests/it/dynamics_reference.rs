@@ -169,3 +169,52 @@ fn logistic_step_derivatives_match_the_reference() {
     assert_eq!(checked, 10);
     println!("worst derivative error {worst:.1e} relative to the largest entry");
 }
+
+#[test]
+fn hessians_of_c_f_match_differences_at_the_reference_contact_states() {
+    let data = reference_json("finger_steps.json");
+    let c = [0.3, -0.7, 1.0, 0.2, -0.1, 0.5];
+    let mut checked = 0;
+    for case in data["steps"].as_array().unwrap() {
+        if case["model"] != "logistic" {
+            continue;
+        }
+        let mut sim = Simulator::new(Scene::flicking_finger(), settings(case)).unwrap();
+        let (x, u) = (vector(&case["x"]), vector(&case["u"]));
+        let (step, _, hess) = sim.step_with_hessian(&x, &u, &c).unwrap();
+        let in_contact = step.lambda[4] + step.lambda[5] > 1e-3;
+        let y: Vec<f64> = x.iter().chain(&u).copied().collect();
+        let mut grad = |y: &[f64]| {
+            sim.reset_warm_start();
+            let (_, d) = sim.step_with_derivatives(&y[..6], &y[6..]).unwrap();
+            let mut g = vec![0.0; 8];
+            for j in 0..6 {
+                g[j] = (0..6).map(|i| c[i] * d.fx[i * 6 + j]).sum();
+            }
+            for k in 0..2 {
+                g[6 + k] = (0..6).map(|i| c[i] * d.fu[i * 2 + k]).sum();
+            }
+            g
+        };
+        let scale = hess.iter().fold(1e-300f64, |m, v| m.max(v.abs()));
+        let mut worst = 0.0f64;
+        for k in 0..8 {
+            // Step scaled to sigma h, the width of the smoothing in distance.
+            let eps = 1e-4 * case["sigma"].as_f64().unwrap() * case["h"].as_f64().unwrap();
+            let (mut yp, mut ym) = (y.clone(), y.clone());
+            yp[k] += eps;
+            ym[k] -= eps;
+            let (gp, gm) = (grad(&yp), grad(&ym));
+            for i in 0..8 {
+                worst = worst.max(((gp[i] - gm[i]) / (2.0 * eps) - hess[i * 8 + k]).abs() / scale);
+            }
+        }
+        println!(
+            "{} {} (contact {in_contact}): Hessian vs differences {worst:.1e} of {scale:.1e}",
+            case["id"], case["tag"]
+        );
+        assert!(worst < 1e-5, "{}: {worst}", case["tag"]);
+        checked += usize::from(in_contact);
+    }
+    assert!(checked >= 3, "the reference has contact cases: {checked}");
+}

@@ -63,6 +63,16 @@ fn step(c: &mut Criterion) {
             black_box(sim.step_with_derivatives(x, &[0.3, -0.2]).unwrap())
         })
     });
+    let mut sim = Simulator::new(Scene::flicking_finger(), StepSettings::default()).unwrap();
+    let mut k = 0;
+    let c = [0.3, -0.7, 1.0, 0.2, -0.1, 0.5];
+    group.bench_function("logistic_0.1_with_hessian_of_c_f", |b| {
+        b.iter(|| {
+            let x = &states[k % states.len()];
+            k += 1;
+            black_box(sim.step_with_hessian(x, &[0.3, -0.2], &c).unwrap())
+        })
+    });
     // For comparison: forward differences of the same step, one extra step per state and control entry.
     let mut sim = Simulator::new(Scene::flicking_finger(), StepSettings::default()).unwrap();
     let mut k = 0;

@@ -21,7 +21,7 @@ use crate::kinematics::{Kinematics, Scalar};
 use crate::scene::Scene;
 use crate::step::{Complementarity, Simulator, Step};
 use ncp::{DenseLu, LinearSolver, Mcp, NcpFunction};
-use num_dual::DualSVec64;
+use num_dual::{Dual2SVec64, DualSVec64};
 
 /// Directions per vector-dual pass: the finger's three joint angles in one.
 const DIRECTIONS: usize = 3;
@@ -48,6 +48,18 @@ pub fn step_residual<T: Scalar>(
     x: &[T],
     u: &[T],
     z: &[f64],
+) -> Result<(Vec<T>, Vec<T>), DynamicsError> {
+    let z: Vec<T> = z.iter().map(|&e| T::from(e)).collect();
+    step_residual_at(scene, h, x, u, &z)
+}
+
+/// As [`step_residual`], with `z` in the dual type too.
+pub fn step_residual_at<T: Scalar>(
+    scene: &Scene,
+    h: f64,
+    x: &[T],
+    u: &[T],
+    z: &[T],
 ) -> Result<(Vec<T>, Vec<T>), DynamicsError> {
     let n = scene.n_dof();
     let (q, v) = x.split_at(n);
@@ -86,14 +98,8 @@ pub fn step_residual<T: Scalar>(
 }
 
 impl Simulator {
-    /// One step and its exact derivatives (logistic and hard models; the normal model's ERM derivatives
-    /// are not implemented yet and return an error).
-    #[tracing::instrument(name = "dynamics.step_derivatives", level = "debug", skip_all)]
-    pub fn step_with_derivatives(
-        &mut self,
-        x: &[f64],
-        u: &[f64],
-    ) -> Result<(Step, StepDerivatives), DynamicsError> {
+    /// The step, its Newton matrix and `dz/d(x, u)`.
+    fn linearise(&mut self, x: &[f64], u: &[f64]) -> Result<Linearised, DynamicsError> {
         let (step, problem) = self.step_and_problem(x, u)?;
         let scene = self.scene();
         let n = scene.n_dof();
@@ -205,17 +211,44 @@ impl Simulator {
                 phi_x[j * cols + 2 * n + k] = -h;
             }
         }
-        let mut dv = vec![0.0; n * cols];
+        let mut dz = vec![0.0; dim * cols];
         let mut rhs = vec![0.0; dim];
         for c in 0..cols {
             for i in 0..dim {
                 rhs[i] = -phi_x[i * cols + c];
             }
             lu.solve(&mut rhs);
-            for i in 0..n {
-                dv[i * cols + c] = rhs[i];
+            for i in 0..dim {
+                dz[i * cols + c] = rhs[i];
             }
         }
+        Ok(Linearised {
+            step,
+            z,
+            newton: H,
+            dz,
+            dphi,
+        })
+    }
+
+    /// One step and its exact derivatives (logistic and hard models; the normal model's ERM derivatives
+    /// are not implemented yet and return an error).
+    #[tracing::instrument(name = "dynamics.step_derivatives", level = "debug", skip_all)]
+    pub fn step_with_derivatives(
+        &mut self,
+        x: &[f64],
+        u: &[f64],
+    ) -> Result<(Step, StepDerivatives), DynamicsError> {
+        let lin = self.linearise(x, u)?;
+        let der = self.first_derivatives(&lin);
+        Ok((lin.step, der))
+    }
+
+    fn first_derivatives(&self, lin: &Linearised) -> StepDerivatives {
+        let scene = self.scene();
+        let (n, nu, h) = (scene.n_dof(), scene.n_controls, self.settings().h);
+        let cols = 2 * n + nu;
+        let dv = &lin.dz;
         let nx = 2 * n;
         let mut fx = vec![0.0; nx * nx];
         let mut fu = vec![0.0; nx * nu];
@@ -231,6 +264,137 @@ impl Simulator {
                 fu[(n + i) * nu + k] = d;
             }
         }
-        Ok((step, StepDerivatives { fx, fu }))
+        StepDerivatives { fx, fu }
+    }
+
+    /// One step, its first derivatives, and for a given `c` (length `2n`, the value gradient of DDP) the
+    /// Hessian of `c^T f(x, u)` with respect to `y = (x, u)`, row-major `(2n + n_u)^2`: the `f_xx`, `f_xu`,
+    /// `f_uu` terms contracted with `c`. Second-order adjoint: with `Phi_z^T mu = -g`, `g = dz' c`,
+    /// `d^2 (c^T f) / dy^2 = T^T (d^2 (mu^T Phi) / d(z, y)^2) T`, `T = [dz/dy; I]`, the inner Hessian along
+    /// the columns of `T` in one pass of second-order vector duals (`num_dual::Dual2SVec64`).
+    #[tracing::instrument(name = "dynamics.step_hessian", level = "debug", skip_all)]
+    pub fn step_with_hessian(
+        &mut self,
+        x: &[f64],
+        u: &[f64],
+        c: &[f64],
+    ) -> Result<(Step, StepDerivatives, Vec<f64>), DynamicsError> {
+        let scene = self.scene().clone();
+        let (n, nu, h) = (scene.n_dof(), scene.n_controls, self.settings().h);
+        if c.len() != 2 * n || !c.iter().all(|e| e.is_finite()) {
+            return Err(DynamicsError::Input {
+                what: "c",
+                problem: format!("needs {} finite entries", 2 * n),
+            });
+        }
+        let cols = 2 * n + nu;
+        if cols > HESSIAN_DIRECTIONS {
+            return Err(DynamicsError::Unsupported(
+                "Hessians of scenes with more than 8 state and control entries",
+            ));
+        }
+        let model = self.settings().model;
+        let lin = self.linearise(x, u)?;
+        let der = self.first_derivatives(&lin);
+        let dim = lin.z.len();
+        let m = dim - n;
+        // g = (dx'/dz)^T c: x' = [q + h v'; v'].
+        let mut g = vec![0.0; dim];
+        for i in 0..n {
+            g[i] = h * c[i] + c[n + i];
+        }
+        // mu from Phi_z^T mu = -g.
+        let mut transposed = vec![0.0; dim * dim];
+        for i in 0..dim {
+            for j in 0..dim {
+                transposed[j * dim + i] = lin.newton[i * dim + j];
+            }
+        }
+        let mut lu = DenseLu::new(dim, LinearSolver::Hand);
+        if !lu.factor(&transposed) {
+            return Err(DynamicsError::Unsupported(
+                "the step's Jacobian is singular at this state",
+            ));
+        }
+        let mut mu: Vec<f64> = g.iter().map(|e| -e).collect();
+        lu.solve(&mut mu);
+        // (z, y) = (z0 + dz s, y0 + s) with s the vector-dual variables.
+        type D2 = Dual2SVec64<HESSIAN_DIRECTIONS>;
+        let s: Vec<D2> = (0..cols).map(|k| D2::from_re(0.0).derivative(k)).collect();
+        let affine = |base: f64, coeffs: &[f64]| {
+            coeffs
+                .iter()
+                .zip(&s)
+                .fold(D2::from_re(base), |acc, (a, sk)| acc + *sk * *a)
+        };
+        let zs: Vec<D2> = (0..dim)
+            .map(|i| affine(lin.z[i], &lin.dz[i * cols..(i + 1) * cols]))
+            .collect();
+        let unit = |k: usize| {
+            (0..cols)
+                .map(|j| if j == k { 1.0 } else { 0.0 })
+                .collect::<Vec<f64>>()
+        };
+        let xs: Vec<D2> = (0..2 * n).map(|k| affine(x[k], &unit(k))).collect();
+        let us: Vec<D2> = (0..nu).map(|k| affine(u[k], &unit(2 * n + k))).collect();
+        let (free, w) = step_residual_at(&scene, h, &xs, &us, &zs)?;
+        let mut psi = D2::from_re(0.0);
+        for i in 0..n {
+            psi += free[i] * mu[i];
+        }
+        for k in 0..m {
+            let (lambda, wk) = (zs[n + k], w[k]);
+            let phi = match model {
+                Complementarity::Logistic { sigma } => logistic(lambda, wk, sigma),
+                Complementarity::Hard => {
+                    if lin.dphi[k].1 > 0.5 {
+                        wk
+                    } else {
+                        lambda
+                    }
+                }
+                Complementarity::Normal { .. } => {
+                    unreachable!("linearise rejects the normal model")
+                }
+            };
+            psi += phi * mu[n + k];
+        }
+        let hess = psi.v2.0.map_or_else(
+            || vec![0.0; cols * cols],
+            |hm| {
+                let mut out = vec![0.0; cols * cols];
+                for i in 0..cols {
+                    for j in 0..cols {
+                        out[i * cols + j] = hm[(i, j)];
+                    }
+                }
+                out
+            },
+        );
+        Ok((lin.step, der, hess))
+    }
+}
+
+/// Directions of the second-order pass: the finger's 6 state and 2 control entries.
+const HESSIAN_DIRECTIONS: usize = 8;
+
+/// What the first-order linearisation of a step keeps.
+struct Linearised {
+    step: Step,
+    z: Vec<f64>,
+    newton: Vec<f64>,
+    /// `dz/d(x, u)`, row-major `(n + m) x (2n + n_u)`.
+    dz: Vec<f64>,
+    /// `(d phi/d lambda, d phi/d w)` per row at the solution.
+    dphi: Vec<(f64, f64)>,
+}
+
+/// The logistic NCP function of paper eq. (17) in any dual type: `min(a, b) - s softplus(-|a - b| / s)`.
+fn logistic<T: Scalar>(a: T, b: T, sigma: f64) -> T {
+    let c = (a - b) / sigma;
+    if c.re() > 0.0 {
+        b - (-c).exp().ln_1p() * sigma
+    } else {
+        a - c.exp().ln_1p() * sigma
     }
 }
