@@ -188,8 +188,8 @@ fn hessians_of_c_f_match_differences_at_the_reference_contact_states() {
             sim.reset_warm_start();
             let (_, d) = sim.step_with_derivatives(&y[..6], &y[6..]).unwrap();
             let mut g = vec![0.0; 8];
-            for j in 0..6 {
-                g[j] = (0..6).map(|i| c[i] * d.fx[i * 6 + j]).sum();
+            for (j, gj) in g.iter_mut().enumerate().take(6) {
+                *gj = (0..6).map(|i| c[i] * d.fx[i * 6 + j]).sum();
             }
             for k in 0..2 {
                 g[6 + k] = (0..6).map(|i| c[i] * d.fu[i * 2 + k]).sum();
