@@ -3,7 +3,8 @@
 //! the step conserves to O(h) without drag and contact; and scene files that are checked field by field.
 
 use dynamics::{
-    Complementarity, Constraints, DynamicsError, Kinematics, Scene, Simulator, StepSettings,
+    Complementarity, Constraints, DynamicsError, Kinematics, Scene, Simulator, StateCovariance,
+    StepSettings,
 };
 use proptest::prelude::*;
 
@@ -342,4 +343,66 @@ fn bad_states_and_settings_are_typed_errors() {
             Err(DynamicsError::Setting { .. })
         ));
     }
+}
+
+#[test]
+fn noise_from_a_state_covariance_follows_eq_18() {
+    // In contact, pushed: the step's distance from the hard step grows with the state's uncertainty.
+    let x = [-1.3, -0.4, 0.2, -1.0, -0.5, 0.3];
+    let u = [0.5, -0.5];
+    let hard = Simulator::new(
+        finger(),
+        StepSettings {
+            model: Complementarity::Hard,
+            ..StepSettings::default()
+        },
+    )
+    .unwrap()
+    .step(&x, &u)
+    .unwrap();
+    let mut gaps = Vec::new();
+    for s in [1e-4, 1e-3, 1e-2] {
+        let mut sim = Simulator::new(finger(), StepSettings::default()).unwrap();
+        let eye = |v: f64| {
+            (0..9)
+                .map(|k| if k % 4 == 0 { v } else { 0.0 })
+                .collect::<Vec<f64>>()
+        };
+        sim.set_state_covariance(Some(StateCovariance {
+            q: eye(s * s),
+            v: eye(0.0),
+        }))
+        .unwrap();
+        let step = sim.step(&x, &u).unwrap();
+        assert_eq!(step.info.status, ncp::Status::Converged);
+        gaps.push(
+            step.x_next
+                .iter()
+                .zip(&hard.x_next)
+                .fold(0.0f64, |m, (a, b)| m.max((a - b).abs())),
+        );
+        assert!(matches!(
+            sim.step_with_derivatives(&x, &u),
+            Err(DynamicsError::Unsupported(_))
+        ));
+    }
+    println!("gap to the hard step for position std 1e-4, 1e-3, 1e-2: {gaps:?}");
+    assert!(gaps[0] < gaps[1] && gaps[1] < gaps[2], "{gaps:?}");
+    let mut sim = Simulator::new(finger(), StepSettings::default()).unwrap();
+    let bad = StateCovariance {
+        q: vec![1.0, 2.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+        v: vec![0.0; 9],
+    };
+    assert!(matches!(
+        sim.set_state_covariance(Some(bad)),
+        Err(DynamicsError::Input {
+            what: "covariance",
+            ..
+        })
+    ));
+    let short = StateCovariance {
+        q: vec![0.0; 4],
+        v: vec![0.0; 9],
+    };
+    assert!(sim.set_state_covariance(Some(short)).is_err());
 }

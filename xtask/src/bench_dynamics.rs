@@ -198,7 +198,10 @@ pub fn section(reference_dir: &Path) -> anyhow::Result<String> {
     let c = [0.3, -0.7, 1.0, 0.2, -0.1, 0.5];
     let hessian_ns = time_ns(200, || {
         k += 1;
-        black_box(s.step_with_hessian(&states[k % states.len()], &U, &c).unwrap());
+        black_box(
+            s.step_with_hessian(&states[k % states.len()], &U, &c)
+                .unwrap(),
+        );
     });
     out.push_str(&format!(
         "\nStep + first derivatives + the Hessian of c^T f (8 x 8, second-order adjoint), logistic sigma = 0.1, same states: {hessian_ns:.0} ns.\n"

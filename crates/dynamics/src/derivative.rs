@@ -100,6 +100,11 @@ pub fn step_residual_at<T: Scalar>(
 impl Simulator {
     /// The step, its Newton matrix and `dz/d(x, u)`.
     fn linearise(&mut self, x: &[f64], u: &[f64]) -> Result<Linearised, DynamicsError> {
+        if self.has_state_covariance() {
+            return Err(DynamicsError::Unsupported(
+                "derivatives with per-row noise from a state covariance (sigma then depends on q)",
+            ));
+        }
         let (step, problem) = self.step_and_problem(x, u)?;
         let scene = self.scene();
         let n = scene.n_dof();

@@ -35,4 +35,4 @@ pub use derivative::{StepDerivatives, step_residual};
 pub use error::{DynamicsError, SceneProblem};
 pub use kinematics::{Kinematics, Scalar};
 pub use scene::{Body, BodySpec, ContactPair, ContactSpec, JointSpec, Scene, SceneSpec};
-pub use step::{Complementarity, Simulator, Step, StepSettings};
+pub use step::{Complementarity, Simulator, StateCovariance, Step, StepSettings};

@@ -109,6 +109,35 @@ pub struct Simulator {
     newton: NewtonSolver,
     erm: ErmSolver,
     warm: Option<Vec<f64>>,
+    covariance: Option<StateCovariance>,
+}
+
+/// A Gaussian state estimate's covariance, from which each row's noise follows (paper eq. 18):
+/// `Sigma_b = J (Sigma_q / h^2 + Sigma_v) J^T`, row `i` smoothed with `sigma_i = sqrt((Sigma_b)_ii)`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StateCovariance {
+    /// `Sigma_q`, row-major `n x n` (positions).
+    pub q: Vec<f64>,
+    /// `Sigma_v`, row-major `n x n` (velocities).
+    pub v: Vec<f64>,
+}
+
+/// Per-row noise from eq. (18), floored at `1e-12` of the model's constant sigma (a row the covariance does
+/// not reach stays smooth rather than hard).
+fn row_sigmas(cov: &StateCovariance, jacobian: &[f64], n: usize, h: f64, sigma: f64) -> Vec<f64> {
+    let m = jacobian.len() / n;
+    (0..m)
+        .map(|k| {
+            let row = &jacobian[k * n..(k + 1) * n];
+            let mut var = 0.0;
+            for i in 0..n {
+                for j in 0..n {
+                    var += row[i] * (cov.q[i * n + j] / (h * h) + cov.v[i * n + j]) * row[j];
+                }
+            }
+            var.max(0.0).sqrt().max(1e-12 * sigma)
+        })
+        .collect()
 }
 
 impl Simulator {
@@ -121,6 +150,7 @@ impl Simulator {
             scene,
             settings,
             warm: None,
+            covariance: None,
         })
     }
 
@@ -132,6 +162,44 @@ impl Simulator {
     /// The settings.
     pub fn settings(&self) -> &StepSettings {
         &self.settings
+    }
+
+    /// Smooth each row with the noise a state covariance implies (paper eq. 18) instead of the model's
+    /// constant sigma; `None` returns to the constant. Both matrices must be `n x n`, finite, symmetric and
+    /// positive semi-definite (checked on the diagonal and by symmetry).
+    pub fn set_state_covariance(
+        &mut self,
+        covariance: Option<StateCovariance>,
+    ) -> Result<(), DynamicsError> {
+        if let Some(cov) = &covariance {
+            let n = self.scene.n_dof();
+            for (what, m) in [("covariance q", &cov.q), ("covariance v", &cov.v)] {
+                let ok = m.len() == n * n
+                    && m.iter().all(|e| e.is_finite())
+                    && (0..n).all(|i| m[i * n + i] >= 0.0)
+                    && (0..n).all(|i| {
+                        (0..n).all(|j| {
+                            (m[i * n + j] - m[j * n + i]).abs()
+                                <= 1e-12 * (1.0 + m[i * n + j].abs())
+                        })
+                    });
+                if !ok {
+                    return Err(DynamicsError::Input {
+                        what: "covariance",
+                        problem: format!(
+                            "{what} must be {n}x{n}, finite, symmetric, with a non-negative diagonal"
+                        ),
+                    });
+                }
+            }
+        }
+        self.covariance = covariance;
+        Ok(())
+    }
+
+    /// Whether rows take their noise from a state covariance.
+    pub fn has_state_covariance(&self) -> bool {
+        self.covariance.is_some()
     }
 
     /// Forget the warm start (the next step starts from `[v; 0]`).
@@ -201,19 +269,27 @@ impl Simulator {
                 z
             }
         };
+        let sigmas = |sigma: f64| -> Vec<f64> {
+            match &self.covariance {
+                None => vec![sigma; m],
+                Some(cov) => row_sigmas(cov, &cons.jacobian, n, self.settings.h, sigma),
+            }
+        };
         let info = match self.settings.model {
             Complementarity::Hard => {
                 let s = lemke(&problem, &LemkeSettings::default())?;
                 z = s.z;
                 s.info
             }
-            Complementarity::Logistic { sigma } => self.newton.solve_in_place(
-                &problem,
-                &vec![NcpFunction::Logistic { sigma }; m],
-                &mut z,
-            )?,
+            Complementarity::Logistic { sigma } => {
+                let functions: Vec<NcpFunction> = sigmas(sigma)
+                    .into_iter()
+                    .map(|sigma| NcpFunction::Logistic { sigma })
+                    .collect();
+                self.newton.solve_in_place(&problem, &functions, &mut z)?
+            }
             Complementarity::Normal { sigma } => {
-                let s = self.erm.solve(&problem, &vec![sigma; m], &z)?;
+                let s = self.erm.solve(&problem, &sigmas(sigma), &z)?;
                 z = s.z;
                 s.info
             }
