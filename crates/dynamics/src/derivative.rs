@@ -106,6 +106,11 @@ impl Simulator {
             ));
         }
         let (step, problem) = self.step_and_problem(x, u)?;
+        if step.info.status != ncp::Status::Converged {
+            return Err(DynamicsError::Unsupported(
+                "derivatives of a step whose complementarity solve did not converge",
+            ));
+        }
         let scene = self.scene();
         let n = scene.n_dof();
         let nu = scene.n_controls;
@@ -141,19 +146,39 @@ impl Simulator {
                 }
             };
         }
-        let mut H = jac.clone();
-        for k in 0..m {
-            let row = &mut H[(n + k) * dim..(n + k + 1) * dim];
-            for e in row.iter_mut() {
-                *e *= dphi[k].1;
+        let build = |dphi: &[(f64, f64)]| {
+            let mut H = jac.clone();
+            for k in 0..m {
+                let row = &mut H[(n + k) * dim..(n + k + 1) * dim];
+                for e in row.iter_mut() {
+                    *e *= dphi[k].1;
+                }
+                row[n + k] += dphi[k].0;
             }
-            row[n + k] += dphi[k].0;
-        }
+            H
+        };
+        let mut H = build(&dphi);
         let mut lu = DenseLu::new(dim, LinearSolver::Hand);
-        if !lu.factor(&H) {
-            return Err(DynamicsError::Unsupported(
-                "the step's Jacobian is singular at this state",
-            ));
+        // Redundant active rows (more than the velocities can satisfy independently) make the matrix
+        // singular: exactly for the hard model's active set, to working precision for a smoothed row whose
+        // d phi / d lambda has underflowed (lambda >> sigma). The velocities are still unique. Hold the
+        // smallest impulses of such rows fixed, one at a time, until the remaining active rows are
+        // independent: the derivative of that branch of impulses, and the derivative of v'.
+        while !lu.factor(&H) {
+            let weakest = (0..m)
+                .filter(|&k| dphi[k].1 > 0.5 && dphi[k].0 < 1e-12)
+                .min_by(|&a, &b| z[n + a].total_cmp(&z[n + b]));
+            match weakest {
+                Some(k) => {
+                    dphi[k] = (1.0, 0.0);
+                    H = build(&dphi);
+                }
+                None => {
+                    return Err(DynamicsError::Unsupported(
+                        "the step's Jacobian is singular at this state",
+                    ));
+                }
+            }
         }
         // Phi_x column by column. Only the q directions pass through the geometry (vector duals, DIRECTIONS
         // at a time: one pass for the finger); v enters through M (v' - v) and r(q, v) alone, u through B.
@@ -349,16 +374,13 @@ impl Simulator {
         }
         for k in 0..m {
             let (lambda, wk) = (zs[n + k], w[k]);
-            let phi = match model {
-                Complementarity::Logistic { sigma } => logistic(lambda, wk, sigma),
-                Complementarity::Hard => {
-                    if lin.dphi[k].1 > 0.5 {
-                        wk
-                    } else {
-                        lambda
-                    }
-                }
-                Complementarity::Normal { .. } => {
+            // Rows the linearisation held fixed (redundant active rows) stay fixed here, so that mu and dz/dy
+            // describe the same system.
+            let phi = match (model, lin.dphi[k]) {
+                (_, (a, b)) if a == 1.0 && b == 0.0 => lambda,
+                (Complementarity::Hard, _) => wk,
+                (Complementarity::Logistic { sigma }, _) => logistic(lambda, wk, sigma),
+                (Complementarity::Normal { .. }, _) => {
                     unreachable!("linearise rejects the normal model")
                 }
             };
