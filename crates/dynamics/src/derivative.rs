@@ -72,7 +72,22 @@ pub fn step_residual_at<T: Scalar>(
         }
     }
     let cons = Constraints::new(scene, &kin, q)?;
-    let m = cons.d.len();
+    Ok(assemble(n, h, &M, &r, &cons.jacobian, &cons.d, v, z))
+}
+
+/// The step's equations from their ingredients: `M (v' - v) - h r - J^T lambda` and `d / h + J v'`
+/// (`r` already holds `B u`).
+fn assemble<T: Scalar>(
+    n: usize,
+    h: f64,
+    M: &[T],
+    r: &[T],
+    jac: &[T],
+    d: &[T],
+    v: &[T],
+    z: &[T],
+) -> (Vec<T>, Vec<T>) {
+    let m = d.len();
     let (v_next, lambda) = z.split_at(n);
     let mut free = Vec::with_capacity(n);
     for i in 0..n {
@@ -81,20 +96,86 @@ pub fn step_residual_at<T: Scalar>(
             s += M[i * n + j] * (-v[j] + v_next[j]);
         }
         for k in 0..m {
-            s -= cons.jacobian[k * n + i] * lambda[k];
+            s -= jac[k * n + i] * lambda[k];
         }
         free.push(s);
     }
     let w = (0..m)
         .map(|k| {
-            let mut s = cons.d[k] / h;
+            let mut s = d[k] / h;
             for j in 0..n {
-                s += cons.jacobian[k * n + j] * v_next[j];
+                s += jac[k * n + j] * v_next[j];
             }
             s
         })
         .collect();
-    Ok((free, w))
+    (free, w)
+}
+
+/// The Hessian pass's residual for a three-joint scene: the geometry and kinematics run in second-order
+/// duals over the three joint angles only, then their values are lifted into the eight-direction duals by
+/// their second-order Taylor polynomials (exact to second order), where they meet v, u, v' and lambda.
+fn residual_lifted(
+    scene: &Scene,
+    h: f64,
+    x: &[f64],
+    xs: &[Dual2SVec64<HESSIAN_DIRECTIONS>],
+    us: &[Dual2SVec64<HESSIAN_DIRECTIONS>],
+    zs: &[Dual2SVec64<HESSIAN_DIRECTIONS>],
+) -> Result<
+    (
+        Vec<Dual2SVec64<HESSIAN_DIRECTIONS>>,
+        Vec<Dual2SVec64<HESSIAN_DIRECTIONS>>,
+    ),
+    DynamicsError,
+> {
+    type D3 = Dual2SVec64<3>;
+    type D8 = Dual2SVec64<HESSIAN_DIRECTIONS>;
+    let n = 3;
+    let q3: Vec<D3> = (0..n).map(|i| D3::from_re(x[i]).derivative(i)).collect();
+    let kin3 = Kinematics::new(scene, &q3);
+    let m3 = kin3.mass_matrix(scene);
+    let cons3 = Constraints::new(scene, &kin3, &q3)?;
+    let s: Vec<D8> = (0..n).map(|k| D8::from_re(0.0).derivative(k)).collect();
+    let mut ss = Vec::with_capacity(n * n);
+    for i in 0..n {
+        for j in 0..n {
+            ss.push(s[i] * s[j]);
+        }
+    }
+    let lift = |d: &D3| -> D8 {
+        let mut out = D8::from_re(d.re);
+        if let Some(g) = &d.v1.0 {
+            for i in 0..n {
+                out += s[i] * g[(0, i)];
+            }
+        }
+        if let Some(hm) = &d.v2.0 {
+            for i in 0..n {
+                for j in 0..n {
+                    out += ss[i * n + j] * (0.5 * hm[(i, j)]);
+                }
+            }
+        }
+        out
+    };
+    let lift2 = |p: &[D3; 2]| [lift(&p[0]), lift(&p[1])];
+    let kin8 = Kinematics {
+        phi: kin3.phi.iter().map(lift).collect(),
+        hinge: kin3.hinge.iter().map(lift2).collect(),
+        centre: kin3.centre.iter().map(lift2).collect(),
+    };
+    let v = &xs[n..];
+    let mut r = kin8.bias_forces(scene, v);
+    for (j, b) in scene.bodies.iter().enumerate() {
+        if let Some(k) = b.actuator {
+            r[j] += us[k];
+        }
+    }
+    let M: Vec<D8> = m3.iter().map(lift).collect();
+    let jac: Vec<D8> = cons3.jacobian.iter().map(lift).collect();
+    let d: Vec<D8> = cons3.d.iter().map(lift).collect();
+    Ok(assemble(n, h, &M, &r, &jac, &d, v, zs))
 }
 
 impl Simulator {
@@ -367,7 +448,11 @@ impl Simulator {
         };
         let xs: Vec<D2> = (0..2 * n).map(|k| affine(x[k], &unit(k))).collect();
         let us: Vec<D2> = (0..nu).map(|k| affine(u[k], &unit(2 * n + k))).collect();
-        let (free, w) = step_residual_at(&scene, h, &xs, &us, &zs)?;
+        let (free, w) = if n == 3 {
+            residual_lifted(&scene, h, x, &xs, &us, &zs)?
+        } else {
+            step_residual_at(&scene, h, &xs, &us, &zs)?
+        };
         let mut psi = D2::from_re(0.0);
         for i in 0..n {
             psi += free[i] * mu[i];
