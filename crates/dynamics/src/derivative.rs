@@ -77,6 +77,7 @@ pub fn step_residual_at<T: Scalar>(
 
 /// The step's equations from their ingredients: `M (v' - v) - h r - J^T lambda` and `d / h + J v'`
 /// (`r` already holds `B u`).
+#[allow(clippy::too_many_arguments)]
 fn assemble<T: Scalar>(
     n: usize,
     h: f64,
