@@ -127,18 +127,7 @@ proptest! {
         let (step, _, hess) = sim.step_with_hessian(&x, &u, &c).unwrap();
         prop_assume!(step.contacts[0].witness_unique);
         // c^T [fx fu] at y = (x, u), by the exact first derivatives.
-        let mut grad = |y: &[f64]| {
-            sim.reset_warm_start();
-            let (_, d) = sim.step_with_derivatives(&y[..6], &y[6..]).unwrap();
-            let mut g = vec![0.0; 8];
-            for (j, gj) in g.iter_mut().enumerate().take(6) {
-                *gj = (0..6).map(|i| c[i] * d.fx[i * 6 + j]).sum();
-            }
-            for k in 0..2 {
-                g[6 + k] = (0..6).map(|i| c[i] * d.fu[i * 2 + k]).sum();
-            }
-            g
-        };
+        let mut grad = |y: &[f64]| crate::support::c_gradient(&mut sim, &c, y);
         let y: Vec<f64> = x.iter().chain(&u).copied().collect();
         let scale = hess.iter().fold(1.0f64, |m, v| m.max(v.abs()));
         let mut difference = |k: usize, eps: f64| {

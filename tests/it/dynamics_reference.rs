@@ -184,18 +184,7 @@ fn hessians_of_c_f_match_differences_at_the_reference_contact_states() {
         let (step, _, hess) = sim.step_with_hessian(&x, &u, &c).unwrap();
         let in_contact = step.lambda[4] + step.lambda[5] > 1e-3;
         let y: Vec<f64> = x.iter().chain(&u).copied().collect();
-        let mut grad = |y: &[f64]| {
-            sim.reset_warm_start();
-            let (_, d) = sim.step_with_derivatives(&y[..6], &y[6..]).unwrap();
-            let mut g = vec![0.0; 8];
-            for (j, gj) in g.iter_mut().enumerate().take(6) {
-                *gj = (0..6).map(|i| c[i] * d.fx[i * 6 + j]).sum();
-            }
-            for k in 0..2 {
-                g[6 + k] = (0..6).map(|i| c[i] * d.fu[i * 2 + k]).sum();
-            }
-            g
-        };
+        let mut grad = |y: &[f64]| crate::support::c_gradient(&mut sim, &c, y);
         let scale = hess.iter().fold(1e-300f64, |m, v| m.max(v.abs()));
         let mut worst = 0.0f64;
         for k in 0..8 {

@@ -2,7 +2,6 @@
 
 use geometry::{Ellipse, signed_distance_coords};
 use serde::{Deserialize, Serialize};
-use std::io::{BufRead, Write};
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -54,20 +53,7 @@ pub fn answer_line(line: &str, derivatives: bool) -> Result<String, String> {
 }
 
 pub fn run(args: &Args) -> anyhow::Result<()> {
-    let stdin = std::io::stdin();
-    let mut out = std::io::BufWriter::new(std::io::stdout().lock());
-    for line in stdin.lock().lines() {
-        let line = line?;
-        if line.trim().is_empty() {
-            continue;
-        }
-        match answer_line(&line, args.derivatives) {
-            Ok(json) => writeln!(out, "{json}")?,
-            Err(message) => writeln!(out, "{}", serde_json::json!({ "error": message }))?,
-        }
-    }
-    out.flush()?;
-    Ok(())
+    crate::jsonl::filter(|line| answer_line(line, args.derivatives))
 }
 
 #[cfg(test)]

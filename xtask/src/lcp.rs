@@ -6,7 +6,6 @@ use ncp::{
     Solution, enumerate_solutions, lemke,
 };
 use serde::{Deserialize, Serialize};
-use std::io::{BufRead, Write};
 
 /// A solver for `cargo xtask lcp`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -119,20 +118,7 @@ pub fn answer_line(line: &str, args: &Args) -> Result<String, String> {
 }
 
 pub fn run(args: &Args) -> anyhow::Result<()> {
-    let stdin = std::io::stdin();
-    let mut out = std::io::BufWriter::new(std::io::stdout().lock());
-    for line in stdin.lock().lines() {
-        let line = line?;
-        if line.trim().is_empty() {
-            continue;
-        }
-        match answer_line(&line, args) {
-            Ok(json) => writeln!(out, "{json}")?,
-            Err(message) => writeln!(out, "{}", serde_json::json!({ "error": message }))?,
-        }
-    }
-    out.flush()?;
-    Ok(())
+    crate::jsonl::filter(|line| answer_line(line, args))
 }
 
 #[cfg(test)]

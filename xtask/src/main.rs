@@ -4,6 +4,7 @@ mod bench_dynamics;
 mod bench_ncp;
 mod benchmarks;
 mod distance;
+mod jsonl;
 mod lcp;
 mod step;
 

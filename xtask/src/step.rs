@@ -3,7 +3,7 @@
 use anyhow::Context;
 use dynamics::{Complementarity, Scene, Simulator, StepSettings};
 use serde::{Deserialize, Serialize};
-use std::io::{BufRead, Write};
+use std::io::Write;
 use std::path::PathBuf;
 
 /// The complementarity model on the command line.
@@ -119,20 +119,7 @@ pub fn answer_line(sim: &mut Simulator, line: &str, derivatives: bool) -> Result
 
 pub fn run_step(args: &StepArgs) -> anyhow::Result<()> {
     let mut sim = args.sim.simulator()?;
-    let stdin = std::io::stdin();
-    let mut out = std::io::BufWriter::new(std::io::stdout().lock());
-    for line in stdin.lock().lines() {
-        let line = line?;
-        if line.trim().is_empty() {
-            continue;
-        }
-        match answer_line(&mut sim, &line, args.derivatives) {
-            Ok(json) => writeln!(out, "{json}")?,
-            Err(message) => writeln!(out, "{}", serde_json::json!({ "error": message }))?,
-        }
-    }
-    out.flush()?;
-    Ok(())
+    crate::jsonl::filter(|line| answer_line(&mut sim, line, args.derivatives))
 }
 
 #[derive(Debug, clap::Args)]

@@ -65,12 +65,7 @@ pub fn step_residual_at<T: Scalar>(
     let (q, v) = x.split_at(n);
     let kin = Kinematics::new(scene, q);
     let M = kin.mass_matrix(scene);
-    let mut r = kin.bias_forces(scene, v);
-    for (j, b) in scene.bodies.iter().enumerate() {
-        if let Some(k) = b.actuator {
-            r[j] += u[k];
-        }
-    }
+    let r = kin.applied_forces(scene, v, u);
     let cons = Constraints::new(scene, &kin, q)?;
     Ok(assemble(n, h, &M, &r, &cons.jacobian, &cons.d, v, z))
 }
@@ -167,12 +162,7 @@ fn residual_lifted(
         centre: kin3.centre.iter().map(lift2).collect(),
     };
     let v = &xs[n..];
-    let mut r = kin8.bias_forces(scene, v);
-    for (j, b) in scene.bodies.iter().enumerate() {
-        if let Some(k) = b.actuator {
-            r[j] += us[k];
-        }
-    }
+    let r = kin8.applied_forces(scene, v, us);
     let M: Vec<D8> = m3.iter().map(lift).collect();
     let jac: Vec<D8> = cons3.jacobian.iter().map(lift).collect();
     let d: Vec<D8> = cons3.d.iter().map(lift).collect();

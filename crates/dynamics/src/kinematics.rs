@@ -129,6 +129,17 @@ impl<T: Scalar> Kinematics<T> {
         scene.moves(j, body).then(|| perp(sub(p, self.hinge[j])))
     }
 
+    /// The generalised forces of a step: `r(q, v) + B u`, the controls acting on their actuated joints.
+    pub fn applied_forces(&self, scene: &Scene, v: &[T], u: &[T]) -> Vec<T> {
+        let mut r = self.bias_forces(scene, v);
+        for (j, b) in scene.bodies.iter().enumerate() {
+            if let Some(k) = b.actuator {
+                r[j] += u[k];
+            }
+        }
+        r
+    }
+
     /// Bias forces `r(q, v)`: gravity on every centre, `-damping * v` on every joint, and the Coriolis and
     /// centripetal forces `-sum_i m_i Jc_i^T (dJc_i/dt v)`, with `dJc_i/dt v = sum_j v_j perp(dc_i/dt - dh_j/dt)`.
     pub fn bias_forces(&self, scene: &Scene, v: &[T]) -> Vec<T> {

@@ -216,12 +216,7 @@ impl Simulator {
         let (q, v) = x.split_at(n);
         let kin = Kinematics::new(scene, q);
         let M = kin.mass_matrix(scene);
-        let mut r = kin.bias_forces(scene, v);
-        for (j, b) in scene.bodies.iter().enumerate() {
-            if let Some(k) = b.actuator {
-                r[j] += u[k];
-            }
-        }
+        let r = kin.applied_forces(scene, v, u);
         let cons = Constraints::new(scene, &kin, q)?;
         let m = cons.d.len();
         let h = self.settings.h;
