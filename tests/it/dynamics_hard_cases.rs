@@ -16,14 +16,7 @@ fn sim(model: Complementarity, h: f64) -> Simulator {
     .unwrap()
 }
 
-const X0: [f64; 6] = [
-    -std::f64::consts::FRAC_PI_4,
-    -std::f64::consts::FRAC_PI_6,
-    0.0,
-    0.0,
-    0.0,
-    0.0,
-];
+const X0: [f64; 6] = dynamics::FLICKING_FINGER_X0;
 
 /// Roll out `steps` steps under `control(k)`; returns the smallest contact distance seen and the largest
 /// speed, and panics on a non-finite state or an unconverged solve.

@@ -7,14 +7,7 @@ use std::hint::black_box;
 use std::path::Path;
 use std::time::Instant;
 
-const X0: [f64; 6] = [
-    -std::f64::consts::FRAC_PI_4,
-    -std::f64::consts::FRAC_PI_6,
-    0.0,
-    0.0,
-    0.0,
-    0.0,
-];
+const X0: [f64; 6] = dynamics::FLICKING_FINGER_X0;
 const U: [f64; 2] = [0.3, -0.2];
 
 fn sim(model: Complementarity, h: f64) -> Simulator {

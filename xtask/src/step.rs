@@ -154,16 +154,7 @@ pub fn run_simulate(args: &SimulateArgs) -> anyhow::Result<()> {
     let scene = sim.scene().clone();
     let x0 = match &args.x0 {
         Some(x) => x.clone(),
-        None if scene.n_state() == 6 => {
-            vec![
-                -std::f64::consts::FRAC_PI_4,
-                -std::f64::consts::FRAC_PI_6,
-                0.0,
-                0.0,
-                0.0,
-                0.0,
-            ]
-        }
+        None if scene.n_state() == 6 => dynamics::FLICKING_FINGER_X0.to_vec(),
         None => vec![0.0; scene.n_state()],
     };
     let controls: Vec<Vec<f64>> = match &args.controls {

@@ -8,14 +8,7 @@ use std::hint::black_box;
 /// States along the reference rollout's contact phase (link 2 on the free ellipse), by simulation.
 fn contact_states() -> Vec<Vec<f64>> {
     let mut sim = Simulator::new(Scene::flicking_finger(), StepSettings::default()).unwrap();
-    let mut x = vec![
-        -std::f64::consts::FRAC_PI_4,
-        -std::f64::consts::FRAC_PI_6,
-        0.0,
-        0.0,
-        0.0,
-        0.0,
-    ];
+    let mut x = dynamics::FLICKING_FINGER_X0.to_vec();
     let mut out = Vec::new();
     for _ in 0..75 {
         let s = sim.step(&x, &[0.3, -0.2]).unwrap();

@@ -10,10 +10,9 @@
 //!   `Normal` (eq. 14 with 15).
 //!
 //! ```
-//! use dynamics::{Scene, Simulator, StepSettings};
+//! use dynamics::{FLICKING_FINGER_X0, Scene, Simulator, StepSettings};
 //! let mut sim = Simulator::new(Scene::flicking_finger(), StepSettings::default())?;
-//! let x0 = [-std::f64::consts::FRAC_PI_4, -std::f64::consts::FRAC_PI_6, 0.0, 0.0, 0.0, 0.0];
-//! let step = sim.step(&x0, &[0.0, 0.0])?;
+//! let step = sim.step(&FLICKING_FINGER_X0, &[0.0, 0.0])?;
 //! // Apart and at rest, the free ellipse feels (next to) nothing; gravity turns the finger clockwise.
 //! assert!(step.x_next[5].abs() < 1e-12);
 //! assert!(step.x_next[3] < 0.0);
@@ -34,5 +33,7 @@ pub use constraint::{Constraints, ContactFrame};
 pub use derivative::{StepDerivatives, step_residual};
 pub use error::{DynamicsError, SceneProblem};
 pub use kinematics::{Kinematics, Scalar};
-pub use scene::{Body, BodySpec, ContactPair, ContactSpec, JointSpec, Scene, SceneSpec};
+pub use scene::{
+    Body, BodySpec, ContactPair, ContactSpec, FLICKING_FINGER_X0, JointSpec, Scene, SceneSpec,
+};
 pub use step::{Complementarity, Simulator, StateCovariance, Step, StepSettings};

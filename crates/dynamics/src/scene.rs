@@ -13,6 +13,16 @@ use crate::error::{DynamicsError, SceneProblem};
 use geometry::Ellipse;
 use serde::{Deserialize, Serialize};
 
+/// SCENE.md's default initial state of the flicking finger: `[-pi/4, -pi/6, 0, 0, 0, 0]` (apart, at rest).
+pub const FLICKING_FINGER_X0: [f64; 6] = [
+    -std::f64::consts::FRAC_PI_4,
+    -std::f64::consts::FRAC_PI_6,
+    0.0,
+    0.0,
+    0.0,
+    0.0,
+];
+
 /// A hinge joint.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]

@@ -305,15 +305,7 @@ pub fn normal_expected_squared(a: f64, b: f64, sigma: f64) -> NcpJet {
     } else {
         2.0 * (b * cdf - sigma * t.pdf)
     };
-    let k = 2.0 * a * t.pdf / sigma;
-    NcpJet {
-        value,
-        da: 2.0 * a * upper,
-        db,
-        daa: 2.0 * upper - k,
-        dab: k,
-        dbb: 2.0 * cdf - k,
-    }
+    expected_square_jet(value, db, a, upper, cdf, t.pdf / sigma)
 }
 
 /// The expected squared residual under logistic noise, the second formula of the paper's footnote 3 with
@@ -358,7 +350,21 @@ pub fn logistic_expected_squared(a: f64, b: f64, sigma: f64) -> NcpJet {
     } else {
         2.0 * (b - a * upper - sigma * softplus)
     };
-    let k = 2.0 * a * e * inv * inv / sigma;
+    expected_square_jet(value, db, a, upper, lower, e * inv * inv / sigma)
+}
+
+/// The jet of `E[min(a, b + noise)^2]` from its value, `d/db`, the probabilities `P(b + noise > a)`
+/// (`upper`) and `P(b + noise < a)` (`lower`), and the noise density at `a` (`density`): `d/da = 2 a upper`,
+/// `d2/da2 = 2 upper - 2 a density`, `d2/da db = 2 a density`, `d2/db2 = 2 lower - 2 a density`.
+fn expected_square_jet(
+    value: f64,
+    db: f64,
+    a: f64,
+    upper: f64,
+    lower: f64,
+    density: f64,
+) -> NcpJet {
+    let k = 2.0 * a * density;
     NcpJet {
         value,
         da: 2.0 * a * upper,
