@@ -198,3 +198,99 @@ fn smoothed_steps_converge_to_the_hard_step_as_sigma_shrinks() {
     );
     assert!(errors[4] < 1e-12);
 }
+
+/// A three-link finger on the same ellipse: four joints, three controls, two contact pairs. Its 11 state
+/// and control entries take two vector-dual passes, and its Hessian is refused (more than 8 directions).
+const THREE_LINKS: &str = r#"
+gravity = [0.0, -4.0]
+[[body]]
+name = "link1"
+semi_axes = [0.6, 0.2]
+density = 1.0
+parent = "world"
+anchor = [0.0, 0.0]
+centre = [0.6, 0.0]
+joint = { limits = [-3.2, 0.0], damping = 0.2, actuated = true }
+[[body]]
+name = "link2"
+semi_axes = [0.6, 0.2]
+density = 1.0
+parent = "link1"
+anchor = [1.2, 0.0]
+centre = [0.6, 0.0]
+joint = { damping = 0.2, actuated = true }
+[[body]]
+name = "link3"
+semi_axes = [0.4, 0.15]
+density = 1.0
+parent = "link2"
+anchor = [1.2, 0.0]
+centre = [0.4, 0.0]
+joint = { damping = 0.2, actuated = true }
+[[body]]
+name = "ellipse"
+semi_axes = [0.7, 0.5]
+density = 1.0
+parent = "world"
+anchor = [0.0, -3.0]
+centre = [0.0, 0.0]
+joint = { damping = 0.7 }
+[[contact]]
+a = "link3"
+b = "ellipse"
+friction = 0.5
+[[contact]]
+a = "link2"
+b = "ellipse"
+friction = 0.5
+"#;
+
+#[test]
+fn derivatives_of_a_four_joint_scene_match_central_differences() {
+    let scene = Scene::from_toml_str(THREE_LINKS).unwrap();
+    let settings = StepSettings {
+        model: Complementarity::Logistic { sigma: 0.2 },
+        ..StepSettings::default()
+    };
+    let mut sim = Simulator::new(scene.clone(), settings).unwrap();
+    // Link 3 bent down towards the ellipse's top, the ellipse turning.
+    let x = [-1.2, -0.6, -0.8, 0.4, 0.5, -1.0, 1.5, 0.2];
+    let u = [0.2, -0.3, 0.1];
+    let (step, der) = sim.step_with_derivatives(&x, &u).unwrap();
+    assert_eq!(step.info.status, Status::Converged);
+    assert!(step.lambda.iter().any(|&l| l > 1e-3), "{:?}", step.lambda);
+    let mut fresh = Simulator::new(scene, settings).unwrap();
+    let mut f = |x: &[f64], u: &[f64]| {
+        fresh.reset_warm_start();
+        fresh.step(x, u).unwrap().x_next
+    };
+    let scale = der.fx.iter().fold(1.0f64, |m, v| m.max(v.abs()));
+    let eps = 1e-6;
+    for j in 0..11 {
+        let (mut xp, mut xm, mut up, mut um) = (x.to_vec(), x.to_vec(), u.to_vec(), u.to_vec());
+        if j < 8 {
+            xp[j] += eps;
+            xm[j] -= eps;
+        } else {
+            up[j - 8] += eps;
+            um[j - 8] -= eps;
+        }
+        let (p, m) = (f(&xp, &up), f(&xm, &um));
+        for i in 0..8 {
+            let fd = (p[i] - m[i]) / (2.0 * eps);
+            let exact = if j < 8 {
+                der.fx[i * 8 + j]
+            } else {
+                der.fu[i * 3 + j - 8]
+            };
+            assert!(
+                (fd - exact).abs() < 1e-6 * scale,
+                "d x'_{i} / d y_{j}: {fd} vs {exact}"
+            );
+        }
+    }
+    assert!(matches!(
+        sim.step_with_hessian(&x, &u, &[0.0; 8]),
+        Err(dynamics::DynamicsError::Unsupported(_))
+    ));
+}

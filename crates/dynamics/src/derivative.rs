@@ -19,17 +19,12 @@ use crate::constraint::Constraints;
 use crate::error::DynamicsError;
 use crate::kinematics::{Kinematics, Scalar};
 use crate::scene::Scene;
-use crate::step::{Complementarity, Simulator, Step};
-use ncp::{DenseLu, LinearSolver, Mcp, NcpFunction};
-use num_dual::{Dual2SVec64, DualSVec64};
-
-/// Directions per vector-dual pass: the finger's three joint angles in one.
-const DIRECTIONS: usize = 3;
-
-/// Component `k` of a vector dual's derivative (zero when it carries none).
-fn eps(d: &DualSVec64<DIRECTIONS>, k: usize) -> f64 {
-    d.eps.0.as_ref().map_or(0.0, |e| e[k])
-}
+use crate::step::{Complementarity, Simulator, Step, check, row_sigmas};
+use nalgebra::{SMatrix, SVector};
+use ncp::{
+    DenseLu, LinearSolver, Mcp, NcpFunction, normal_expected_squared, normal_expected_squared_third,
+};
+use num_dual::{Derivative, Dual2SVec64, DualSVec64};
 
 /// `fx` (row-major `2n x 2n`, `fx[i][j] = dx'_i / dx_j`) and `fu` (row-major `2n x n_u`).
 #[derive(Debug, Clone, PartialEq)]
@@ -108,73 +103,367 @@ fn assemble<T: Scalar>(
     (free, w)
 }
 
-/// The Hessian pass's residual for a three-joint scene: the geometry and kinematics run in second-order
-/// duals over the three joint angles only, then their values are lifted into the eight-direction duals by
-/// their second-order Taylor polynomials (exact to second order), where they meet v, u, v' and lambda.
-fn residual_lifted(
-    scene: &Scene,
-    h: f64,
-    x: &[f64],
-    xs: &[Dual2SVec64<HESSIAN_DIRECTIONS>],
-    us: &[Dual2SVec64<HESSIAN_DIRECTIONS>],
-    zs: &[Dual2SVec64<HESSIAN_DIRECTIONS>],
-) -> Result<
-    (
-        Vec<Dual2SVec64<HESSIAN_DIRECTIONS>>,
-        Vec<Dual2SVec64<HESSIAN_DIRECTIONS>>,
-    ),
-    DynamicsError,
-> {
-    type D3 = Dual2SVec64<3>;
-    type D8 = Dual2SVec64<HESSIAN_DIRECTIONS>;
-    let n = 3;
-    let q3: Vec<D3> = (0..n).map(|i| D3::from_re(x[i]).derivative(i)).collect();
-    let kin3 = Kinematics::new(scene, &q3);
-    let m3 = kin3.mass_matrix(scene);
-    let cons3 = Constraints::new(scene, &kin3, &q3)?;
-    let s: Vec<D8> = (0..n).map(|k| D8::from_re(0.0).derivative(k)).collect();
-    let mut ss = Vec::with_capacity(n * n);
-    for i in 0..n {
-        for j in 0..n {
-            ss.push(s[i] * s[j]);
+/// Directions of a vector-dual pass over `y = (x, u)`: the finger's 6 state and 2 control entries at once.
+const DIRECTIONS: usize = 8;
+
+type D1 = DualSVec64<DIRECTIONS>;
+type D2 = Dual2SVec64<DIRECTIONS>;
+type Q1 = DualSVec64<3>;
+type Q2 = Dual2SVec64<3>;
+type R2 = Dual2SVec64<6>;
+
+/// The step's ingredients at `(x, u)` in some scalar type: `M`, `r + B u`, `J`, `d` and each row's noise.
+struct Ingredients<T> {
+    M: Vec<T>,
+    r: Vec<T>,
+    jac: Vec<T>,
+    d: Vec<T>,
+    sigma: Vec<T>,
+}
+
+/// The second-order ingredients before lifting: functions of `q` (three directions) and the forces, a
+/// function of `(q, v)` (six); `r` holds `B u` in value only (it is linear in `u`).
+struct SecondOrder {
+    n: usize,
+    /// `(joint, direction of its control in y)`.
+    actuated: Vec<(usize, usize)>,
+    M: Vec<Q2>,
+    jac: Vec<Q2>,
+    d: Vec<Q2>,
+    sigma: Vec<Q2>,
+    r: Vec<R2>,
+}
+
+impl SecondOrder {
+    /// The first-order ingredients over all of `y`.
+    fn first_order(&self) -> Ingredients<D1> {
+        let q = |v: &[Q2]| v.iter().map(truncate).collect::<Vec<_>>();
+        let mut r: Vec<D1> = self.r.iter().map(truncate).collect();
+        for &(j, k) in &self.actuated {
+            r[j] += D1::from_re(0.0).derivative(k);
+        }
+        Ingredients {
+            M: q(&self.M),
+            r,
+            jac: q(&self.jac),
+            d: q(&self.d),
+            sigma: q(&self.sigma),
         }
     }
-    let lift = |d: &D3| -> D8 {
-        let mut out = D8::from_re(d.re);
-        if let Some(g) = &d.v1.0 {
-            for i in 0..n {
-                out += s[i] * g[(0, i)];
-            }
+
+    /// All of it lifted to second-order duals over `y`.
+    fn lifted(&self) -> Ingredients<D2> {
+        let q = |v: &[Q2]| v.iter().map(lift_second).collect::<Vec<_>>();
+        let mut r: Vec<D2> = self.r.iter().map(lift_second).collect();
+        for &(j, k) in &self.actuated {
+            r[j] += D2::from_re(0.0).derivative(k);
         }
-        if let Some(hm) = &d.v2.0 {
-            for i in 0..n {
-                for j in 0..n {
-                    out += ss[i * n + j] * (0.5 * hm[(i, j)]);
+        Ingredients {
+            M: q(&self.M),
+            r,
+            jac: q(&self.jac),
+            d: q(&self.d),
+            sigma: q(&self.sigma),
+        }
+    }
+
+    /// `mu^T K(p, y)` for the logistic and hard models with the contractions done before lifting:
+    /// `(M mu_f)^T (v' - v) - h mu_f^T r - (J mu_f)^T lambda + sum_k mu_k row_k(lambda_k, w_k)`, the first
+    /// two factors of each product functions of `q` alone (the same value as [`system`], fewer operations
+    /// in eight directions).
+    fn contracted(&self, h: f64, x: &[f64], p: &[D2], mu: &[f64], kinds: &[RowKind]) -> D2 {
+        let n = self.n;
+        let m = self.d.len();
+        let (mu_f, mu_c) = mu.split_at(n);
+        let zero = Q2::from_re(0.0);
+        let rho = self
+            .r
+            .iter()
+            .zip(mu_f)
+            .fold(R2::from_re(0.0), |acc, (r, w)| acc + *r * *w);
+        let mut psi = lift_second(&rho) * (-h);
+        for j in 0..n {
+            let a = (0..n).fold(zero, |acc, i| acc + self.M[i * n + j] * mu_f[i]);
+            let v = D2::from_re(x[n + j]).derivative(n + j);
+            psi += lift_second(&a) * (p[j] - v);
+        }
+        for k in 0..m {
+            let b = (0..n).fold(zero, |acc, i| acc + self.jac[k * n + i] * mu_f[i]);
+            let lambda = p[n + k];
+            psi -= lift_second(&b) * lambda;
+            let row = match kinds[k] {
+                RowKind::Fixed => lambda,
+                RowKind::Contact | RowKind::Logistic => {
+                    let mut w = lift_second(&self.d[k]) / h;
+                    for j in 0..n {
+                        w += lift_second(&self.jac[k * n + j]) * p[j];
+                    }
+                    if kinds[k] == RowKind::Contact {
+                        w
+                    } else {
+                        logistic(lambda, w, lift_second(&self.sigma[k]))
+                    }
                 }
+                RowKind::Stationary => unreachable!("stationary rows belong to the normal model"),
+            };
+            psi += row * mu_c[k];
+        }
+        psi
+    }
+}
+
+/// The first-order part of a second-order dual over the leading entries of `y`.
+fn truncate<const N: usize>(d: &Dual2SVec64<N>) -> D1 {
+    let mut grad = SVector::<f64, DIRECTIONS>::zeros();
+    if let Some(g) = &d.v1.0 {
+        for i in 0..N {
+            grad[i] = g[(0, i)];
+        }
+    }
+    D1::new(d.re, Derivative::some(grad))
+}
+
+/// The unknowns at the solution, the Jacobian of the equations in them, and each row's kind.
+type Equations = (Vec<f64>, Vec<f64>, Vec<RowKind>);
+
+/// What a complementarity row of the linearised step is.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum RowKind {
+    /// `lambda_i` held at its value: an inactive hard row, a normal row on its bound, or a redundant row.
+    Fixed,
+    /// An active hard row, `w_i = 0`.
+    Contact,
+    /// The logistic function of eq. (17), `phi(lambda_i, w_i; sigma_i) = 0`.
+    Logistic,
+    /// A normal (ERM) row off its bound: the stationarity `d E_i / d lambda_i - (J nu)_i = 0`.
+    Stationary,
+}
+
+/// The equations whose root the step is, in the unknowns `p`:
+///
+/// - logistic and hard: `p = [v'; lambda]`, `[M (v' - v) - h r - J^T lambda; row_i(lambda_i, w_i)]`;
+/// - normal (eq. 14 with 15 as an optimisation over `lambda >= 0` with `v'` from the equations of motion):
+///   `p = [v'; lambda; nu]` and the first-order conditions
+///   `[M (v' - v) - h r - J^T lambda; J^T e_b + M nu; e_a,i - (J nu)_i or lambda_i]`, `e = E[min(lambda, w +
+///   sigma xi)^2]` per row, its derivatives in `(lambda, w)` carried to second order by their Taylor
+///   polynomials around the solution (exact for first and second derivatives of the step).
+fn system<T: Scalar>(
+    n: usize,
+    h: f64,
+    ing: &Ingredients<T>,
+    v: &[T],
+    p: &[T],
+    kinds: &[RowKind],
+    normal: bool,
+) -> Vec<T> {
+    let m = ing.d.len();
+    let (vn, rest) = p.split_at(n);
+    let lambda = &rest[..m];
+    let mut out = Vec::with_capacity(p.len());
+    for i in 0..n {
+        let mut s = -ing.r[i] * h;
+        for j in 0..n {
+            s += ing.M[i * n + j] * (vn[j] - v[j]);
+        }
+        for k in 0..m {
+            s -= ing.jac[k * n + i] * lambda[k];
+        }
+        out.push(s);
+    }
+    let w: Vec<T> = (0..m)
+        .map(|k| {
+            let mut s = ing.d[k] / h;
+            for j in 0..n {
+                s += ing.jac[k * n + j] * vn[j];
+            }
+            s
+        })
+        .collect();
+    if !normal {
+        for k in 0..m {
+            out.push(match kinds[k] {
+                RowKind::Fixed => lambda[k],
+                RowKind::Contact => w[k],
+                RowKind::Logistic => logistic(lambda[k], w[k], ing.sigma[k]),
+                RowKind::Stationary => unreachable!("stationary rows belong to the normal model"),
+            });
+        }
+        return out;
+    }
+    let nu = &rest[m..m + n];
+    let mut ea = Vec::with_capacity(m);
+    let mut eb = Vec::with_capacity(m);
+    for k in 0..m {
+        let (l0, w0, sigma) = (lambda[k].re(), w[k].re(), ing.sigma[k].re());
+        let j = normal_expected_squared(l0, w0, sigma);
+        let [aaa, aab, abb, bbb] = normal_expected_squared_third(l0, w0, sigma);
+        let (dl, dw) = (lambda[k] - l0, w[k] - w0);
+        let (ll, lw, ww) = (dl * dl * 0.5, dl * dw, dw * dw * 0.5);
+        ea.push(dl * j.daa + dw * j.dab + ll * aaa + lw * aab + ww * abb + j.da);
+        eb.push(dl * j.dab + dw * j.dbb + ll * aab + lw * abb + ww * bbb + j.db);
+    }
+    for i in 0..n {
+        let mut s = T::from(0.0);
+        for k in 0..m {
+            s += ing.jac[k * n + i] * eb[k];
+        }
+        for j in 0..n {
+            s += ing.M[i * n + j] * nu[j];
+        }
+        out.push(s);
+    }
+    for k in 0..m {
+        out.push(match kinds[k] {
+            RowKind::Fixed => lambda[k],
+            RowKind::Stationary => {
+                let mut s = ea[k];
+                for j in 0..n {
+                    s -= ing.jac[k * n + j] * nu[j];
+                }
+                s
+            }
+            _ => unreachable!("normal rows are fixed or stationary"),
+        });
+    }
+    out
+}
+
+/// A first-order dual over the joint angles as one over `y`, whose first entries are those angles.
+fn lift_first(d: &Q1) -> D1 {
+    let mut grad = SVector::<f64, DIRECTIONS>::zeros();
+    if let Some(g) = &d.eps.0 {
+        for i in 0..3 {
+            grad[i] = g[i];
+        }
+    }
+    D1::new(d.re, Derivative::some(grad))
+}
+
+/// A second-order dual over the first `N` entries of `y` as one over all of `y`: `y_i = y0_i + s_i`
+/// exactly, so its gradient and Hessian fill the leading block.
+fn lift_second<const N: usize>(d: &Dual2SVec64<N>) -> D2 {
+    let mut grad = SMatrix::<f64, 1, DIRECTIONS>::zeros();
+    let mut hess = SMatrix::<f64, DIRECTIONS, DIRECTIONS>::zeros();
+    if let Some(g) = &d.v1.0 {
+        for i in 0..N {
+            grad[(0, i)] = g[(0, i)];
+        }
+    }
+    if let Some(hm) = &d.v2.0 {
+        for i in 0..N {
+            for j in 0..N {
+                hess[(i, j)] = hm[(i, j)];
             }
         }
-        out
-    };
-    let lift2 = |p: &[D3; 2]| [lift(&p[0]), lift(&p[1])];
-    let kin8 = Kinematics {
-        phi: kin3.phi.iter().map(lift).collect(),
-        hinge: kin3.hinge.iter().map(lift2).collect(),
-        centre: kin3.centre.iter().map(lift2).collect(),
-    };
-    let v = &xs[n..];
-    let r = kin8.applied_forces(scene, v, us);
-    let M: Vec<D8> = m3.iter().map(lift).collect();
-    let jac: Vec<D8> = cons3.jacobian.iter().map(lift).collect();
-    let d: Vec<D8> = cons3.d.iter().map(lift).collect();
-    Ok(assemble(n, h, &M, &r, &jac, &d, v, zs))
+    }
+    D2::new(d.re, Derivative::some(grad), Derivative::some(hess))
 }
 
 impl Simulator {
-    /// The step, its Newton matrix and `dz/d(x, u)`.
-    fn linearise(&mut self, x: &[f64], u: &[f64]) -> Result<Linearised, DynamicsError> {
-        if self.has_state_covariance() {
+    /// Each row's noise in the scalar type of `jac`: the model's constant, or eq. (18) through `J(q)`.
+    fn noise<T: Scalar>(&self, jac: &[T], m: usize) -> Vec<T> {
+        let sigma = match self.settings().model {
+            Complementarity::Hard => 0.0,
+            Complementarity::Logistic { sigma } | Complementarity::Normal { sigma } => sigma,
+        };
+        match self.state_covariance() {
+            Some(cov) => row_sigmas(cov, jac, self.scene().n_dof(), self.settings().h, sigma),
+            None => vec![T::from(sigma); m],
+        }
+    }
+
+    /// The ingredients in first-order duals over `y[first..first + 8]`. With three joints or fewer the
+    /// geometry (the expensive part) runs in three directions only and is lifted.
+    fn first_order_ingredients(
+        &self,
+        x: &[f64],
+        u: &[f64],
+        first: usize,
+    ) -> Result<Ingredients<D1>, DynamicsError> {
+        let scene = self.scene();
+        let n = scene.n_dof();
+        let ys: Vec<D1> = x
+            .iter()
+            .chain(u)
+            .enumerate()
+            .map(|(j, &e)| {
+                let d = D1::from_re(e);
+                if (first..first + DIRECTIONS).contains(&j) {
+                    d.derivative(j - first)
+                } else {
+                    d
+                }
+            })
+            .collect();
+        let (xs, us) = ys.split_at(2 * n);
+        let kin = Kinematics::new(scene, &xs[..n]);
+        let r = kin.applied_forces(scene, &xs[n..], us);
+        let (M, jac, d) = if first == 0 && n <= 3 {
+            let q: Vec<Q1> = (0..n).map(|i| Q1::from_re(x[i]).derivative(i)).collect();
+            let kin3 = Kinematics::new(scene, &q);
+            let cons = Constraints::new(scene, &kin3, &q)?;
+            let lift = |v: &[Q1]| v.iter().map(lift_first).collect::<Vec<_>>();
+            (
+                lift(&kin3.mass_matrix(scene)),
+                lift(&cons.jacobian),
+                lift(&cons.d),
+            )
+        } else {
+            let cons = Constraints::new(scene, &kin, &xs[..n])?;
+            (kin.mass_matrix(scene), cons.jacobian, cons.d)
+        };
+        let sigma = self.noise(&jac, d.len());
+        Ok(Ingredients {
+            M,
+            r,
+            jac,
+            d,
+            sigma,
+        })
+    }
+
+    /// The ingredients in second-order duals (three joints or fewer, `2n + n_u <= 8`): the geometry over the
+    /// joint angles, the forces over `(q, v)`, to be lifted to all of `y`.
+    fn second_order_ingredients(&self, x: &[f64], u: &[f64]) -> Result<SecondOrder, DynamicsError> {
+        let scene = self.scene();
+        let n = scene.n_dof();
+        let q: Vec<Q2> = (0..n).map(|i| Q2::from_re(x[i]).derivative(i)).collect();
+        let kin3 = Kinematics::new(scene, &q);
+        let cons = Constraints::new(scene, &kin3, &q)?;
+        let qv: Vec<R2> = (0..2 * n)
+            .map(|i| R2::from_re(x[i]).derivative(i))
+            .collect();
+        let u6: Vec<R2> = u.iter().map(|&e| R2::from_re(e)).collect();
+        let r = Kinematics::new(scene, &qv[..n]).applied_forces(scene, &qv[n..], &u6);
+        let sigma = self.noise(&cons.jacobian, cons.d.len());
+        Ok(SecondOrder {
+            n,
+            actuated: scene
+                .bodies
+                .iter()
+                .enumerate()
+                .filter_map(|(j, b)| b.actuator.map(|k| (j, 2 * n + k)))
+                .collect(),
+            M: kin3.mass_matrix(scene),
+            jac: cons.jacobian,
+            d: cons.d,
+            sigma,
+            r,
+        })
+    }
+
+    /// The step, the Jacobian of its equations in their unknowns and `dp/d(x, u)`.
+    /// With `second` (the Hessian pass computes them anyway) the first-order ingredients are read off it.
+    fn linearise(
+        &mut self,
+        x: &[f64],
+        u: &[f64],
+        second: Option<&SecondOrder>,
+    ) -> Result<Linearised, DynamicsError> {
+        let model = self.settings().model;
+        if self.has_state_covariance() && matches!(model, Complementarity::Normal { .. }) {
             return Err(DynamicsError::Unsupported(
-                "derivatives with per-row noise from a state covariance (sigma then depends on q)",
+                "derivatives of the normal model with per-row noise from a state covariance",
             ));
         }
         let (step, problem) = self.step_and_problem(x, u)?;
@@ -188,38 +477,104 @@ impl Simulator {
         let nu = scene.n_controls;
         let m = step.lambda.len();
         let h = self.settings().h;
-        let model = self.settings().model;
         let mut z = step.x_next[n..].to_vec();
         z.extend_from_slice(&step.lambda);
         let dim = n + m;
         let mut f = vec![0.0; dim];
         let mut jac = vec![0.0; dim * dim];
         problem.evaluate(&z, &mut f, Some(&mut jac));
-        // Phi_z: the equation rows as they are, complementarity rows phi_a e_i + phi_b (row of w).
+        let normal = matches!(model, Complementarity::Normal { .. });
+        let (p, H, kinds) = if normal {
+            self.normal_system(&z, &f, &jac, n)?
+        } else {
+            self.complementarity_system(&z, &f, &jac, n)?
+        };
+        let np = p.len();
+        let mut lu = DenseLu::new(np, LinearSolver::Hand);
+        if !lu.factor(&H) {
+            return Err(DynamicsError::Unsupported(
+                "the step's Jacobian is singular at this state",
+            ));
+        }
+        // The equations' derivatives in y = (x, u), eight directions per pass (one pass for the finger).
+        let cols = 2 * n + nu;
+        let pc: Vec<D1> = p.iter().map(|&e| D1::from_re(e)).collect();
+        let mut dp = vec![0.0; np * cols];
+        let mut rhs = vec![0.0; np];
+        for first in (0..cols).step_by(DIRECTIONS) {
+            let ing = match second {
+                Some(so) if first == 0 => so.first_order(),
+                _ => self.first_order_ingredients(x, u, first)?,
+            };
+            let v: Vec<D1> = (0..n)
+                .map(|j| {
+                    let d = D1::from_re(x[n + j]);
+                    if (first..first + DIRECTIONS).contains(&(n + j)) {
+                        d.derivative(n + j - first)
+                    } else {
+                        d
+                    }
+                })
+                .collect();
+            let res = system(n, h, &ing, &v, &pc, &kinds, normal);
+            for k in 0..DIRECTIONS.min(cols - first) {
+                for (i, e) in rhs.iter_mut().enumerate() {
+                    *e = -res[i].eps.0.as_ref().map_or(0.0, |g| g[k]);
+                }
+                lu.solve(&mut rhs);
+                for i in 0..np {
+                    dp[i * cols + first + k] = rhs[i];
+                }
+            }
+        }
+        Ok(Linearised {
+            step,
+            p,
+            H,
+            dp,
+            kinds,
+        })
+    }
+
+    /// Logistic and hard models: `p = z`, the Newton matrix with each row's `(d phi/d lambda, d phi/d w)`;
+    /// redundant active rows held fixed.
+    fn complementarity_system(
+        &self,
+        z: &[f64],
+        f: &[f64],
+        jac: &[f64],
+        n: usize,
+    ) -> Result<Equations, DynamicsError> {
+        let dim = z.len();
+        let m = dim - n;
+        let model = self.settings().model;
+        let sigmas: Vec<f64> = match self.state_covariance() {
+            Some(_) => {
+                let rows: Vec<f64> = (0..m)
+                    .flat_map(|k| jac[(n + k) * dim..(n + k) * dim + n].to_vec())
+                    .collect();
+                self.noise(&rows, m)
+            }
+            None => self.noise(&vec![0.0; m * n], m),
+        };
+        let mut kinds = Vec::with_capacity(m);
         let mut dphi = vec![(0.0, 0.0); m];
         for k in 0..m {
             let (lambda, w) = (z[n + k], f[n + k]);
-            dphi[k] = match model {
-                Complementarity::Logistic { sigma } => {
+            let (kind, d) = match model {
+                Complementarity::Logistic { .. } => {
+                    let sigma = sigmas[k];
                     let (_, da, db) = NcpFunction::Logistic { sigma }.first_order(lambda, w);
-                    (da, db)
+                    (RowKind::Logistic, (da, db))
                 }
-                Complementarity::Hard => {
-                    if lambda > 0.0 {
-                        (0.0, 1.0)
-                    } else {
-                        (1.0, 0.0)
-                    }
-                }
-                Complementarity::Normal { .. } => {
-                    return Err(DynamicsError::Unsupported(
-                        "derivatives of the normal (ERM) model",
-                    ));
-                }
+                _ if lambda > 0.0 => (RowKind::Contact, (0.0, 1.0)),
+                _ => (RowKind::Fixed, (1.0, 0.0)),
             };
+            kinds.push(kind);
+            dphi[k] = d;
         }
         let build = |dphi: &[(f64, f64)]| {
-            let mut H = jac.clone();
+            let mut H = jac.to_vec();
             for k in 0..m {
                 let row = &mut H[(n + k) * dim..(n + k + 1) * dim];
                 for e in row.iter_mut() {
@@ -243,6 +598,7 @@ impl Simulator {
             match weakest {
                 Some(k) => {
                     dphi[k] = (1.0, 0.0);
+                    kinds[k] = RowKind::Fixed;
                     H = build(&dphi);
                 }
                 None => {
@@ -252,96 +608,86 @@ impl Simulator {
                 }
             }
         }
-        // Phi_x column by column. Only the q directions pass through the geometry (vector duals, DIRECTIONS
-        // at a time: one pass for the finger); v enters through M (v' - v) and r(q, v) alone, u through B.
-        let cols = 2 * n + nu;
-        let mut phi_x = vec![0.0; dim * cols];
-        for first in (0..n).step_by(DIRECTIONS) {
-            let seed = |idx: usize, v: f64| {
-                let d = DualSVec64::<DIRECTIONS>::from_re(v);
-                if idx < n && (first..first + DIRECTIONS).contains(&idx) {
-                    d.derivative(idx - first)
-                } else {
-                    d
-                }
-            };
-            let xd: Vec<_> = x.iter().enumerate().map(|(j, &v)| seed(j, v)).collect();
-            let ud: Vec<_> = u
-                .iter()
-                .map(|&v| DualSVec64::<DIRECTIONS>::from_re(v))
-                .collect();
-            let (free, w) = step_residual(scene, h, &xd, &ud, &z)?;
-            for k in 0..DIRECTIONS.min(n - first) {
-                for i in 0..n {
-                    phi_x[i * cols + first + k] = eps(&free[i], k);
-                }
-                for r in 0..m {
-                    phi_x[(n + r) * cols + first + k] = dphi[r].1 * eps(&w[r], k);
-                }
-            }
-        }
-        let (q, v) = x.split_at(n);
-        let M = &jac; // rows 0..n, columns 0..n of the step's matrix are M
-        for first in (0..n).step_by(DIRECTIONS) {
-            let qd: Vec<_> = q
-                .iter()
-                .map(|&e| DualSVec64::<DIRECTIONS>::from_re(e))
-                .collect();
-            let vd: Vec<_> = v
-                .iter()
-                .enumerate()
-                .map(|(j, &e)| {
-                    let d = DualSVec64::<DIRECTIONS>::from_re(e);
-                    if (first..first + DIRECTIONS).contains(&j) {
-                        d.derivative(j - first)
-                    } else {
-                        d
-                    }
-                })
-                .collect();
-            let r = Kinematics::new(scene, &qd).bias_forces(scene, &vd);
-            for k in 0..DIRECTIONS.min(n - first) {
-                let j = first + k;
-                for i in 0..n {
-                    // d/dv_j [M (v' - v) - h r] = -M_ij - h dr_i/dv_j.
-                    phi_x[i * cols + n + j] = -M[i * dim + j] - h * eps(&r[i], k);
-                }
-            }
-        }
-        for (j, b) in scene.bodies.iter().enumerate() {
-            if let Some(k) = b.actuator {
-                phi_x[j * cols + 2 * n + k] = -h;
-            }
-        }
-        let mut dz = vec![0.0; dim * cols];
-        let mut rhs = vec![0.0; dim];
-        for c in 0..cols {
-            for i in 0..dim {
-                rhs[i] = -phi_x[i * cols + c];
-            }
-            lu.solve(&mut rhs);
-            for i in 0..dim {
-                dz[i * cols + c] = rhs[i];
-            }
-        }
-        Ok(Linearised {
-            step,
-            z,
-            newton: H,
-            dz,
-            dphi,
-        })
+        Ok((z.to_vec(), H, kinds))
     }
 
-    /// One step and its exact derivatives (logistic and hard models; the normal model's ERM derivatives
-    /// are not implemented yet and return an error).
+    /// Normal model: `p = [v'; lambda; nu]` with `nu = -M^-1 J^T e_b` and the first-order conditions'
+    /// Jacobian; rows with `lambda_i = 0` are on their bound and held there.
+    fn normal_system(
+        &self,
+        z: &[f64],
+        f: &[f64],
+        jac: &[f64],
+        n: usize,
+    ) -> Result<Equations, DynamicsError> {
+        let dim = z.len();
+        let m = dim - n;
+        let sigmas = self.noise(&vec![0.0; m * n], m);
+        let M = |i: usize, j: usize| jac[i * dim + j];
+        let J = |k: usize, j: usize| jac[(n + k) * dim + j];
+        let jets: Vec<_> = (0..m)
+            .map(|k| normal_expected_squared(z[n + k], f[n + k], sigmas[k]))
+            .collect();
+        let kinds: Vec<RowKind> = (0..m)
+            .map(|k| {
+                if z[n + k] > 0.0 {
+                    RowKind::Stationary
+                } else {
+                    RowKind::Fixed
+                }
+            })
+            .collect();
+        // nu from M nu = -J^T e_b.
+        let mut lu = DenseLu::new(n, LinearSolver::Hand);
+        let mass: Vec<f64> = (0..n * n).map(|e| M(e / n, e % n)).collect();
+        if !lu.factor(&mass) {
+            return Err(DynamicsError::Unsupported("a singular mass matrix"));
+        }
+        let mut nu: Vec<f64> = (0..n)
+            .map(|i| -(0..m).map(|k| J(k, i) * jets[k].db).sum::<f64>())
+            .collect();
+        lu.solve(&mut nu);
+        let np = 2 * n + m;
+        let mut H = vec![0.0; np * np];
+        for i in 0..n {
+            for j in 0..n {
+                H[i * np + j] = M(i, j);
+                // K2 = J^T e_b + M nu: d/dv' = J^T diag(e_bb) J, d/dlambda = J^T diag(e_ab), d/dnu = M.
+                H[(n + i) * np + n + m + j] = M(i, j);
+                H[(n + i) * np + j] = (0..m).map(|k| J(k, i) * jets[k].dbb * J(k, j)).sum();
+            }
+            for k in 0..m {
+                H[i * np + n + k] = -J(k, i);
+                H[(n + i) * np + n + k] = J(k, i) * jets[k].dab;
+            }
+        }
+        for k in 0..m {
+            let row = n + n + k;
+            match kinds[k] {
+                RowKind::Stationary => {
+                    for j in 0..n {
+                        H[row * np + j] = jets[k].dab * J(k, j);
+                        H[row * np + n + m + j] = -J(k, j);
+                    }
+                    H[row * np + n + k] = jets[k].daa;
+                }
+                _ => H[row * np + n + k] = 1.0,
+            }
+        }
+        let mut p = z.to_vec();
+        p.extend_from_slice(&nu);
+        Ok((p, H, kinds))
+    }
+
+    /// One step and its exact derivatives, for every model: the hard model's are its active set's (module
+    /// documentation), the normal model's those of the first-order conditions of its minimisation.
     #[tracing::instrument(name = "dynamics.step_derivatives", level = "debug", skip_all)]
     pub fn step_with_derivatives(
         &mut self,
         x: &[f64],
         u: &[f64],
     ) -> Result<(Step, StepDerivatives), DynamicsError> {
-        let lin = self.linearise(x, u)?;
+        let lin = self.linearise(x, u, None)?;
         let der = self.first_derivatives(&lin);
         Ok((lin.step, der))
     }
@@ -350,7 +696,7 @@ impl Simulator {
         let scene = self.scene();
         let (n, nu, h) = (scene.n_dof(), scene.n_controls, self.settings().h);
         let cols = 2 * n + nu;
-        let dv = &lin.dz;
+        let dv = &lin.dp;
         let nx = 2 * n;
         let mut fx = vec![0.0; nx * nx];
         let mut fu = vec![0.0; nx * nu];
@@ -371,9 +717,10 @@ impl Simulator {
 
     /// One step, its first derivatives, and for a given `c` (length `2n`, the value gradient of DDP) the
     /// Hessian of `c^T f(x, u)` with respect to `y = (x, u)`, row-major `(2n + n_u)^2`: the `f_xx`, `f_xu`,
-    /// `f_uu` terms contracted with `c`. Second-order adjoint: with `Phi_z^T mu = -g`, `g = dz' c`,
-    /// `d^2 (c^T f) / dy^2 = T^T (d^2 (mu^T Phi) / d(z, y)^2) T`, `T = [dz/dy; I]`, the inner Hessian along
-    /// the columns of `T` in one pass of second-order vector duals (`num_dual::Dual2SVec64`).
+    /// `f_uu` terms contracted with `c`. Second-order adjoint: with `K_p^T mu = -g` for the step's equations
+    /// `K(p; y) = 0` and `g = (dx'/dp)^T c`, `d^2 (c^T f) / dy^2 = T^T (d^2 (mu^T K) / d(p, y)^2) T`,
+    /// `T = [dp/dy; I]`, the inner Hessian along the columns of `T` in one pass of second-order vector duals
+    /// (`num_dual::Dual2SVec64`). Scenes of at most three joints and `2n + n_u <= 8`.
     #[tracing::instrument(name = "dynamics.step_hessian", level = "debug", skip_all)]
     pub fn step_with_hessian(
         &mut self,
@@ -381,8 +728,11 @@ impl Simulator {
         u: &[f64],
         c: &[f64],
     ) -> Result<(Step, StepDerivatives, Vec<f64>), DynamicsError> {
-        let scene = self.scene().clone();
-        let (n, nu, h) = (scene.n_dof(), scene.n_controls, self.settings().h);
+        let (n, nu, h) = (
+            self.scene().n_dof(),
+            self.scene().n_controls,
+            self.settings().h,
+        );
         if c.len() != 2 * n || !c.iter().all(|e| e.is_finite()) {
             return Err(DynamicsError::Input {
                 what: "c",
@@ -390,29 +740,30 @@ impl Simulator {
             });
         }
         let cols = 2 * n + nu;
-        if cols > HESSIAN_DIRECTIONS {
+        if cols > DIRECTIONS || n > 3 {
             return Err(DynamicsError::Unsupported(
-                "Hessians of scenes with more than 8 state and control entries",
+                "Hessians of scenes with more than 3 joints or 8 state and control entries",
             ));
         }
-        let model = self.settings().model;
-        let lin = self.linearise(x, u)?;
+        check("x", x, 2 * n)?;
+        check("u", u, nu)?;
+        let ing = self.second_order_ingredients(x, u)?;
+        let lin = self.linearise(x, u, Some(&ing))?;
         let der = self.first_derivatives(&lin);
-        let dim = lin.z.len();
-        let m = dim - n;
-        // g = (dx'/dz)^T c: x' = [q + h v'; v'].
-        let mut g = vec![0.0; dim];
+        let np = lin.p.len();
+        // g = (dx'/dp)^T c: x' = [q + h v'; v'].
+        let mut g = vec![0.0; np];
         for i in 0..n {
             g[i] = h * c[i] + c[n + i];
         }
-        // mu from Phi_z^T mu = -g.
-        let mut transposed = vec![0.0; dim * dim];
-        for i in 0..dim {
-            for j in 0..dim {
-                transposed[j * dim + i] = lin.newton[i * dim + j];
+        // mu from K_p^T mu = -g.
+        let mut transposed = vec![0.0; np * np];
+        for i in 0..np {
+            for j in 0..np {
+                transposed[j * np + i] = lin.H[i * np + j];
             }
         }
-        let mut lu = DenseLu::new(dim, LinearSolver::Hand);
+        let mut lu = DenseLu::new(np, LinearSolver::Hand);
         if !lu.factor(&transposed) {
             return Err(DynamicsError::Unsupported(
                 "the step's Jacobian is singular at this state",
@@ -420,80 +771,54 @@ impl Simulator {
         }
         let mut mu: Vec<f64> = g.iter().map(|e| -e).collect();
         lu.solve(&mut mu);
-        // (z, y) = (z0 + dz s, y0 + s) with s the vector-dual variables.
-        type D2 = Dual2SVec64<HESSIAN_DIRECTIONS>;
-        let s: Vec<D2> = (0..cols).map(|k| D2::from_re(0.0).derivative(k)).collect();
-        let affine = |base: f64, coeffs: &[f64]| {
-            coeffs
-                .iter()
-                .zip(&s)
-                .fold(D2::from_re(base), |acc, (a, sk)| acc + *sk * *a)
-        };
-        let zs: Vec<D2> = (0..dim)
-            .map(|i| affine(lin.z[i], &lin.dz[i * cols..(i + 1) * cols]))
+        // (p, y) = (p0 + dp s, y0 + s) with s the vector-dual variables.
+        let ps: Vec<D2> = (0..np)
+            .map(|i| {
+                let mut grad = SMatrix::<f64, 1, DIRECTIONS>::zeros();
+                for k in 0..cols {
+                    grad[(0, k)] = lin.dp[i * cols + k];
+                }
+                D2::new(lin.p[i], Derivative::some(grad), Derivative::none())
+            })
             .collect();
-        let unit = |k: usize| {
-            (0..cols)
-                .map(|j| if j == k { 1.0 } else { 0.0 })
-                .collect::<Vec<f64>>()
-        };
-        let xs: Vec<D2> = (0..2 * n).map(|k| affine(x[k], &unit(k))).collect();
-        let us: Vec<D2> = (0..nu).map(|k| affine(u[k], &unit(2 * n + k))).collect();
-        let (free, w) = if n == 3 {
-            residual_lifted(&scene, h, x, &xs, &us, &zs)?
+        let v: Vec<D2> = (0..n)
+            .map(|j| D2::from_re(x[n + j]).derivative(n + j))
+            .collect();
+        let psi = if matches!(self.settings().model, Complementarity::Normal { .. }) {
+            let res = system(n, h, &ing.lifted(), &v, &ps, &lin.kinds, true);
+            res.iter()
+                .zip(&mu)
+                .fold(D2::from_re(0.0), |acc, (k, m)| acc + *k * *m)
         } else {
-            step_residual_at(&scene, h, &xs, &us, &zs)?
+            ing.contracted(h, x, &ps, &mu, &lin.kinds)
         };
-        let mut psi = D2::from_re(0.0);
-        for i in 0..n {
-            psi += free[i] * mu[i];
-        }
-        for k in 0..m {
-            let (lambda, wk) = (zs[n + k], w[k]);
-            // Rows the linearisation held fixed (redundant active rows) stay fixed here, so that mu and dz/dy
-            // describe the same system.
-            let phi = match (model, lin.dphi[k]) {
-                (_, (a, b)) if a == 1.0 && b == 0.0 => lambda,
-                (Complementarity::Hard, _) => wk,
-                (Complementarity::Logistic { sigma }, _) => logistic(lambda, wk, sigma),
-                (Complementarity::Normal { .. }, _) => {
-                    unreachable!("linearise rejects the normal model")
+        let mut hess = vec![0.0; cols * cols];
+        if let Some(hm) = &psi.v2.0 {
+            for i in 0..cols {
+                for j in 0..cols {
+                    hess[i * cols + j] = hm[(i, j)];
                 }
-            };
-            psi += phi * mu[n + k];
+            }
         }
-        let hess = psi.v2.0.map_or_else(
-            || vec![0.0; cols * cols],
-            |hm| {
-                let mut out = vec![0.0; cols * cols];
-                for i in 0..cols {
-                    for j in 0..cols {
-                        out[i * cols + j] = hm[(i, j)];
-                    }
-                }
-                out
-            },
-        );
         Ok((lin.step, der, hess))
     }
 }
 
-/// Directions of the second-order pass: the finger's 6 state and 2 control entries.
-const HESSIAN_DIRECTIONS: usize = 8;
-
-/// What the first-order linearisation of a step keeps.
+/// What the linearisation of a step keeps.
 struct Linearised {
     step: Step,
-    z: Vec<f64>,
-    newton: Vec<f64>,
-    /// `dz/d(x, u)`, row-major `(n + m) x (2n + n_u)`.
-    dz: Vec<f64>,
-    /// `(d phi/d lambda, d phi/d w)` per row at the solution.
-    dphi: Vec<(f64, f64)>,
+    /// The unknowns of the step's equations at the solution ([`system`]).
+    p: Vec<f64>,
+    /// `K_p`, row-major.
+    H: Vec<f64>,
+    /// `dp/d(x, u)`, row-major `len(p) x (2n + n_u)`.
+    dp: Vec<f64>,
+    /// Each complementarity row's kind.
+    kinds: Vec<RowKind>,
 }
 
 /// The logistic NCP function of paper eq. (17) in any dual type: `min(a, b) - s softplus(-|a - b| / s)`.
-fn logistic<T: Scalar>(a: T, b: T, sigma: f64) -> T {
+fn logistic<T: Scalar>(a: T, b: T, sigma: T) -> T {
     let c = (a - b) / sigma;
     if c.re() > 0.0 {
         b - (-c).exp().ln_1p() * sigma

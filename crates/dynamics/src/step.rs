@@ -11,7 +11,7 @@
 
 use crate::constraint::{Constraints, ContactFrame};
 use crate::error::DynamicsError;
-use crate::kinematics::Kinematics;
+use crate::kinematics::{Kinematics, Scalar};
 use crate::scene::Scene;
 use ncp::{
     ErmSettings, ErmSolver, Info, LemkeSettings, LinearMcp, NcpFunction, NewtonSettings,
@@ -123,19 +123,30 @@ pub struct StateCovariance {
 }
 
 /// Per-row noise from eq. (18), floored at `1e-12` of the model's constant sigma (a row the covariance does
-/// not reach stays smooth rather than hard).
-fn row_sigmas(cov: &StateCovariance, jacobian: &[f64], n: usize, h: f64, sigma: f64) -> Vec<f64> {
+/// not reach stays smooth rather than hard). Generic so that the derivatives see `sigma_i(q)` through `J(q)`.
+pub(crate) fn row_sigmas<T: Scalar>(
+    cov: &StateCovariance,
+    jacobian: &[T],
+    n: usize,
+    h: f64,
+    sigma: f64,
+) -> Vec<T> {
     let m = jacobian.len() / n;
+    let floor = 1e-12 * sigma;
     (0..m)
         .map(|k| {
             let row = &jacobian[k * n..(k + 1) * n];
-            let mut var = 0.0;
+            let mut var = T::from(0.0);
             for i in 0..n {
                 for j in 0..n {
-                    var += row[i] * (cov.q[i * n + j] / (h * h) + cov.v[i * n + j]) * row[j];
+                    var += row[i] * row[j] * (cov.q[i * n + j] / (h * h) + cov.v[i * n + j]);
                 }
             }
-            var.max(0.0).sqrt().max(1e-12 * sigma)
+            if var.re() > floor * floor {
+                var.sqrt()
+            } else {
+                T::from(floor)
+            }
         })
         .collect()
 }
@@ -200,6 +211,11 @@ impl Simulator {
     /// Whether rows take their noise from a state covariance.
     pub fn has_state_covariance(&self) -> bool {
         self.covariance.is_some()
+    }
+
+    /// The state covariance rows take their noise from, if any.
+    pub fn state_covariance(&self) -> Option<&StateCovariance> {
+        self.covariance.as_ref()
     }
 
     /// Forget the warm start (the next step starts from `[v; 0]`).
@@ -308,7 +324,7 @@ impl Simulator {
     }
 }
 
-fn check(what: &'static str, v: &[f64], len: usize) -> Result<(), DynamicsError> {
+pub(crate) fn check(what: &'static str, v: &[f64], len: usize) -> Result<(), DynamicsError> {
     if v.len() != len {
         return Err(DynamicsError::Input {
             what,

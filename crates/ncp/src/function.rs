@@ -12,7 +12,8 @@
 
 use crate::error::NcpError;
 use crate::special::{
-    Tails, logistic_k2, scaled_difference, sigmoid, sigmoid_slope, softplus, upper_tails_at,
+    Tails, logistic_k2, normal_pdf, scaled_difference, sigmoid, sigmoid_slope, softplus,
+    upper_tails_at,
 };
 use serde::{Deserialize, Serialize};
 
@@ -308,6 +309,19 @@ pub fn normal_expected_squared(a: f64, b: f64, sigma: f64) -> NcpJet {
     expected_square_jet(value, db, a, upper, cdf, t.pdf / sigma)
 }
 
+/// The third partial derivatives `(d^3/da^3, d^3/da^2 db, d^3/da db^2, d^3/db^3)` of
+/// [`normal_expected_squared`], which the second derivatives of the normal model's step need (its
+/// stationarity conditions hold first derivatives of eq. 15). With `t = (a - b) / sigma` and
+/// `p = pdf(t) / sigma`, from `e_aa = 2 P(b_N > a) - 2 a p`, `e_ab = 2 a p`, `e_bb = 2 P(b_N < a) - 2 a p` and
+/// `dp/da = -t p / sigma = -dp/db`:
+/// `(-4 p + k, 2 p - k, k, -2 p - k)` with `k = 2 a t p / sigma`. `sigma` must be positive and finite.
+pub fn normal_expected_squared_third(a: f64, b: f64, sigma: f64) -> [f64; 4] {
+    let t = (a - b) / sigma;
+    let p = normal_pdf(t) / sigma;
+    let k = 2.0 * a * t * p / sigma;
+    [-4.0 * p + k, 2.0 * p - k, k, -2.0 * p - k]
+}
+
 /// The expected squared residual under logistic noise, the second formula of the paper's footnote 3 with
 /// its sign corrected: `E[min(a, b_L)^2] = a^2 - 2 a s ln(1 + e^c) - 2 s^2 Li2(-e^c)`, `c = (a - b) / s`,
 /// for `b_L` logistic of mean `b` and scale `s` (the footnote prints `+ 2 s^2 Li2`, which is negative at
@@ -378,6 +392,37 @@ fn expected_square_jet(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn third_partials_of_eq_15_match_differences_of_its_second_partials() {
+        for &(a, b, s) in &[
+            (0.3, 0.1, 0.2),
+            (-0.5, 0.4, 0.1),
+            (1.0, 1.0, 1.0),
+            (0.0, -2.0, 0.7),
+            (2.0, 0.5, 3.0),
+        ] {
+            let [aaa, aab, abb, bbb] = normal_expected_squared_third(a, b, s);
+            let e = 1e-5;
+            let da = |f: fn(&NcpJet) -> f64| {
+                (f(&normal_expected_squared(a + e, b, s))
+                    - f(&normal_expected_squared(a - e, b, s)))
+                    / (2.0 * e)
+            };
+            let db = |f: fn(&NcpJet) -> f64| {
+                (f(&normal_expected_squared(a, b + e, s))
+                    - f(&normal_expected_squared(a, b - e, s)))
+                    / (2.0 * e)
+            };
+            let close = |x: f64, y: f64| (x - y).abs() <= 1e-7 * (1.0 + y.abs());
+            assert!(close(aaa, da(|j| j.daa)), "aaa at {a} {b} {s}");
+            assert!(close(aab, db(|j| j.daa)), "aab at {a} {b} {s}");
+            assert!(close(aab, da(|j| j.dab)), "aab' at {a} {b} {s}");
+            assert!(close(abb, db(|j| j.dab)), "abb at {a} {b} {s}");
+            assert!(close(abb, da(|j| j.dbb)), "abb' at {a} {b} {s}");
+            assert!(close(bbb, db(|j| j.dbb)), "bbb at {a} {b} {s}");
+        }
+    }
 
     #[test]
     fn hard_functions_vanish_exactly_on_complementary_pairs() {

@@ -45,7 +45,10 @@ pub mod special;
 pub use dense::{DenseLu, LinearSolver};
 pub use erm::{ErmSettings, ErmSolver};
 pub use error::NcpError;
-pub use function::{NcpFunction, NcpJet, logistic_expected_squared, normal_expected_squared};
+pub use function::{
+    NcpFunction, NcpJet, logistic_expected_squared, normal_expected_squared,
+    normal_expected_squared_third,
+};
 pub use lemke::{LemkeSettings, complementarity_residual, enumerate_solutions, lemke};
 pub use newton::{NewtonSettings, NewtonSolver};
 pub use problem::{LinearMcp, Mcp, Reduced};
