@@ -15,7 +15,7 @@
 
 #![allow(non_snake_case)]
 
-use crate::constraint::Constraints;
+use crate::constraint::{Constraints, ContactFrame};
 use crate::error::DynamicsError;
 use crate::kinematics::{Kinematics, Scalar};
 use crate::scene::Scene;
@@ -114,6 +114,7 @@ type R2 = Dual2SVec64<6>;
 
 /// The step's ingredients at `(x, u)` in some scalar type: `M`, `r + B u`, `J`, `d` and each row's noise.
 struct Ingredients<T> {
+    contacts: Vec<ContactFrame>,
     M: Vec<T>,
     r: Vec<T>,
     jac: Vec<T>,
@@ -125,6 +126,7 @@ struct Ingredients<T> {
 /// function of `(q, v)` (six); `r` holds `B u` in value only (it is linear in `u`).
 struct SecondOrder {
     n: usize,
+    contacts: Vec<ContactFrame>,
     /// `(joint, direction of its control in y)`.
     actuated: Vec<(usize, usize)>,
     M: Vec<Q2>,
@@ -143,6 +145,7 @@ impl SecondOrder {
             r[j] += D1::from_re(0.0).derivative(k);
         }
         Ingredients {
+            contacts: self.contacts.clone(),
             M: q(&self.M),
             r,
             jac: q(&self.jac),
@@ -159,6 +162,7 @@ impl SecondOrder {
             r[j] += D2::from_re(0.0).derivative(k);
         }
         Ingredients {
+            contacts: self.contacts.clone(),
             M: q(&self.M),
             r,
             jac: q(&self.jac),
@@ -223,8 +227,8 @@ fn truncate<const N: usize>(d: &Dual2SVec64<N>) -> D1 {
     D1::new(d.re, Derivative::some(grad))
 }
 
-/// The unknowns at the solution, the Jacobian of the equations in them, and each row's kind.
-type Equations = (Vec<f64>, Vec<f64>, Vec<RowKind>);
+/// The unknowns at the solution, the Jacobian of the equations in them (and its factors), each row's kind.
+type Equations = (Vec<f64>, Vec<f64>, DenseLu, Vec<RowKind>);
 
 /// What a complementarity row of the linearised step is.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -398,7 +402,7 @@ impl Simulator {
         let (xs, us) = ys.split_at(2 * n);
         let kin = Kinematics::new(scene, &xs[..n]);
         let r = kin.applied_forces(scene, &xs[n..], us);
-        let (M, jac, d) = if first == 0 && n <= 3 {
+        let (M, jac, d, contacts) = if first == 0 && n <= 3 {
             let q: Vec<Q1> = (0..n).map(|i| Q1::from_re(x[i]).derivative(i)).collect();
             let kin3 = Kinematics::new(scene, &q);
             let cons = Constraints::new(scene, &kin3, &q)?;
@@ -407,13 +411,15 @@ impl Simulator {
                 lift(&kin3.mass_matrix(scene)),
                 lift(&cons.jacobian),
                 lift(&cons.d),
+                cons.contacts,
             )
         } else {
             let cons = Constraints::new(scene, &kin, &xs[..n])?;
-            (kin.mass_matrix(scene), cons.jacobian, cons.d)
+            (kin.mass_matrix(scene), cons.jacobian, cons.d, cons.contacts)
         };
         let sigma = self.noise(&jac, d.len());
         Ok(Ingredients {
+            contacts,
             M,
             r,
             jac,
@@ -438,6 +444,7 @@ impl Simulator {
         let sigma = self.noise(&cons.jacobian, cons.d.len());
         Ok(SecondOrder {
             n,
+            contacts: cons.contacts.clone(),
             actuated: scene
                 .bodies
                 .iter()
@@ -466,15 +473,32 @@ impl Simulator {
                 "derivatives of the normal model with per-row noise from a state covariance",
             ));
         }
-        let (step, problem) = self.step_and_problem(x, u)?;
+        let (n, nu) = (self.scene().n_dof(), self.scene().n_controls);
+        check("x", x, 2 * n)?;
+        check("u", u, nu)?;
+        // The ingredients in duals first: their values make the step's problem (the geometry runs once).
+        let cols = 2 * n + nu;
+        let mut passes = Vec::with_capacity(cols.div_ceil(DIRECTIONS));
+        for first in (0..cols).step_by(DIRECTIONS) {
+            passes.push(match second {
+                Some(so) if first == 0 => so.first_order(),
+                _ => self.first_order_ingredients(x, u, first)?,
+            });
+        }
+        let values = |v: &[D1]| v.iter().map(|e| e.re).collect::<Vec<f64>>();
+        let ing = &passes[0];
+        let cons = Constraints {
+            d: values(&ing.d),
+            jacobian: values(&ing.jac),
+            contacts: ing.contacts.clone(),
+        };
+        let problem = self.assemble_problem(&x[n..], &values(&ing.M), &values(&ing.r), cons)?;
+        let (step, problem) = self.solve_step(x, problem)?;
         if step.info.status != ncp::Status::Converged {
             return Err(DynamicsError::Unsupported(
                 "derivatives of a step whose complementarity solve did not converge",
             ));
         }
-        let scene = self.scene();
-        let n = scene.n_dof();
-        let nu = scene.n_controls;
         let m = step.lambda.len();
         let h = self.settings().h;
         let mut z = step.x_next[n..].to_vec();
@@ -484,28 +508,16 @@ impl Simulator {
         let mut jac = vec![0.0; dim * dim];
         problem.evaluate(&z, &mut f, Some(&mut jac));
         let normal = matches!(model, Complementarity::Normal { .. });
-        let (p, H, kinds) = if normal {
+        let (p, H, mut lu, kinds) = if normal {
             self.normal_system(&z, &f, &jac, n)?
         } else {
             self.complementarity_system(&z, &f, &jac, n)?
         };
         let np = p.len();
-        let mut lu = DenseLu::new(np, LinearSolver::Hand);
-        if !lu.factor(&H) {
-            return Err(DynamicsError::Unsupported(
-                "the step's Jacobian is singular at this state",
-            ));
-        }
         // The equations' derivatives in y = (x, u), eight directions per pass (one pass for the finger).
-        let cols = 2 * n + nu;
         let pc: Vec<D1> = p.iter().map(|&e| D1::from_re(e)).collect();
         let mut dp = vec![0.0; np * cols];
-        let mut rhs = vec![0.0; np];
-        for first in (0..cols).step_by(DIRECTIONS) {
-            let ing = match second {
-                Some(so) if first == 0 => so.first_order(),
-                _ => self.first_order_ingredients(x, u, first)?,
-            };
+        for (ing, first) in passes.iter().zip((0..cols).step_by(DIRECTIONS)) {
             let v: Vec<D1> = (0..n)
                 .map(|j| {
                     let d = D1::from_re(x[n + j]);
@@ -516,17 +528,14 @@ impl Simulator {
                     }
                 })
                 .collect();
-            let res = system(n, h, &ing, &v, &pc, &kinds, normal);
+            let res = system(n, h, ing, &v, &pc, &kinds, normal);
             for k in 0..DIRECTIONS.min(cols - first) {
-                for (i, e) in rhs.iter_mut().enumerate() {
-                    *e = -res[i].eps.0.as_ref().map_or(0.0, |g| g[k]);
-                }
-                lu.solve(&mut rhs);
-                for i in 0..np {
-                    dp[i * cols + first + k] = rhs[i];
+                for (i, e) in res.iter().enumerate() {
+                    dp[i * cols + first + k] = -e.eps.0.as_ref().map_or(0.0, |g| g[k]);
                 }
             }
         }
+        lu.solve_many(&mut dp, cols);
         Ok(Linearised {
             step,
             p,
@@ -608,7 +617,7 @@ impl Simulator {
                 }
             }
         }
-        Ok((z.to_vec(), H, kinds))
+        Ok((z.to_vec(), H, lu, kinds))
     }
 
     /// Normal model: `p = [v'; lambda; nu]` with `nu = -M^-1 J^T e_b` and the first-order conditions'
@@ -676,7 +685,13 @@ impl Simulator {
         }
         let mut p = z.to_vec();
         p.extend_from_slice(&nu);
-        Ok((p, H, kinds))
+        let mut lu = DenseLu::new(np, LinearSolver::Hand);
+        if !lu.factor(&H) {
+            return Err(DynamicsError::Unsupported(
+                "the step's Jacobian is singular at this state",
+            ));
+        }
+        Ok((p, H, lu, kinds))
     }
 
     /// One step and its exact derivatives, for every model: the hard model's are its active set's (module

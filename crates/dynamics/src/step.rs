@@ -234,6 +234,18 @@ impl Simulator {
         let M = kin.mass_matrix(scene);
         let r = kin.applied_forces(scene, v, u);
         let cons = Constraints::new(scene, &kin, q)?;
+        self.assemble_problem(v, &M, &r, cons)
+    }
+
+    /// The mixed LCP from its ingredients at the start of the step (`r` holding `B u`).
+    pub(crate) fn assemble_problem(
+        &self,
+        v: &[f64],
+        M: &[f64],
+        r: &[f64],
+        cons: Constraints,
+    ) -> Result<(LinearMcp, Constraints), DynamicsError> {
+        let n = self.scene.n_dof();
         let m = cons.d.len();
         let h = self.settings.h;
         let dim = n + m;
@@ -260,16 +272,16 @@ impl Simulator {
     /// One step from `x` under the controls `u`.
     #[tracing::instrument(name = "dynamics.step", level = "debug", skip_all)]
     pub fn step(&mut self, x: &[f64], u: &[f64]) -> Result<Step, DynamicsError> {
-        Ok(self.step_and_problem(x, u)?.0)
+        let problem = self.problem(x, u)?;
+        Ok(self.solve_step(x, problem)?.0)
     }
 
-    /// The step and the mixed LCP it solved (whose matrix the derivatives reuse).
-    pub(crate) fn step_and_problem(
+    /// The step from its mixed LCP; also returns the problem (whose matrix the derivatives reuse).
+    pub(crate) fn solve_step(
         &mut self,
         x: &[f64],
-        u: &[f64],
+        (problem, cons): (LinearMcp, Constraints),
     ) -> Result<(Step, LinearMcp), DynamicsError> {
-        let (problem, cons) = self.problem(x, u)?;
         let n = self.scene.n_dof();
         let m = cons.d.len();
         let mut z = match &self.warm {
