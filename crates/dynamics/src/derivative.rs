@@ -171,48 +171,127 @@ impl SecondOrder {
         }
     }
 
-    /// `mu^T K(p, y)` for the logistic and hard models with the contractions done before lifting:
-    /// `(M mu_f)^T (v' - v) - h mu_f^T r - (J mu_f)^T lambda + sum_k mu_k row_k(lambda_k, w_k)`, the first
-    /// two factors of each product functions of `q` alone (the same value as [`system`], fewer operations
-    /// in eight directions).
-    fn contracted(&self, h: f64, x: &[f64], p: &[D2], mu: &[f64], kinds: &[RowKind]) -> D2 {
+    /// The Hessians in `s` of the logistic and hard models' equations `K_i(p0 + dp s, y0 + s)` with a
+    /// constant sigma, row-major `cols x cols` each, assembled in plain arrays from the structure of
+    /// [`system`] instead of in eight-direction duals: every product there is of a function of `q` alone
+    /// (gradient and Hessian over the first `n` directions, from the three-direction duals) and a function
+    /// affine in `s`, and each row is a function of two such quantities (`lambda_i`, `w_i`).
+    #[allow(clippy::too_many_arguments)]
+    fn equation_hessians(
+        &self,
+        h: f64,
+        x: &[f64],
+        p: &[f64],
+        dp: &[f64],
+        cols: usize,
+        kinds: &[RowKind],
+        sigma: f64,
+    ) -> Vec<Vec<f64>> {
         let n = self.n;
         let m = self.d.len();
-        let (mu_f, mu_c) = mu.split_at(n);
-        let zero = Q2::from_re(0.0);
-        let rho = self
-            .r
-            .iter()
-            .zip(mu_f)
-            .fold(R2::from_re(0.0), |acc, (r, w)| acc + *r * *w);
-        let mut psi = lift_second(&rho) * (-h);
-        for j in 0..n {
-            let a = (0..n).fold(zero, |acc, i| acc + self.M[i * n + j] * mu_f[i]);
-            let v = D2::from_re(x[n + j]).derivative(n + j);
-            psi += lift_second(&a) * (p[j] - v);
-        }
-        for k in 0..m {
-            let b = (0..n).fold(zero, |acc, i| acc + self.jac[k * n + i] * mu_f[i]);
-            let lambda = p[n + k];
-            psi -= lift_second(&b) * lambda;
-            let row = match kinds[k] {
-                RowKind::Fixed => lambda,
-                RowKind::Contact | RowKind::Logistic => {
-                    let mut w = lift_second(&self.d[k]) / h;
+        let cc = cols * cols;
+        let grad = |d: &Q2| -> [f64; 3] {
+            let mut g = [0.0; 3];
+            if let Some(v) = &d.v1.0 {
+                for i in 0..n {
+                    g[i] = v[(0, i)];
+                }
+            }
+            g
+        };
+        // out += scale * H_q(f) in the leading n x n block.
+        let add_q = |out: &mut [f64], f: &Q2, scale: f64| {
+            if let Some(hm) = &f.v2.0 {
+                for i in 0..n {
                     for j in 0..n {
-                        w += lift_second(&self.jac[k * n + j]) * p[j];
-                    }
-                    if kinds[k] == RowKind::Contact {
-                        w
-                    } else {
-                        logistic(lambda, w, lift_second(&self.sigma[k]))
+                        out[i * cols + j] += scale * hm[(i, j)];
                     }
                 }
-                RowKind::Stationary => unreachable!("stationary rows belong to the normal model"),
-            };
-            psi += row * mu_c[k];
+            }
+        };
+        // out += scale * (a b^T + b a^T), a over the first n directions.
+        let add_sym = |out: &mut [f64], a: &[f64; 3], b: &[f64], scale: f64| {
+            for i in 0..n {
+                let ai = scale * a[i];
+                if ai == 0.0 {
+                    continue;
+                }
+                for j in 0..cols {
+                    out[i * cols + j] += ai * b[j];
+                    out[j * cols + i] += ai * b[j];
+                }
+            }
+        };
+        let row = |i: usize| &dp[i * cols..(i + 1) * cols];
+        let mut out = vec![vec![0.0; cc]; n + m];
+        // Equations of motion: sum_j M_ij (v'_j - v_j) - h r_i - sum_k J_ki lambda_k.
+        for i in 0..n {
+            let e = &mut out[i];
+            for j in 0..n {
+                let f = &self.M[i * n + j];
+                let mut dl = row(j).to_vec();
+                dl[n + j] -= 1.0;
+                add_q(e, f, p[j] - x[n + j]);
+                add_sym(e, &grad(f), &dl, 1.0);
+            }
+            for k in 0..m {
+                let f = &self.jac[k * n + i];
+                add_q(e, f, -p[n + k]);
+                add_sym(e, &grad(f), row(n + k), -1.0);
+            }
+            if let Some(hm) = &self.r[i].v2.0 {
+                for a in 0..2 * n {
+                    for b in 0..2 * n {
+                        e[a * cols + b] -= h * hm[(a, b)];
+                    }
+                }
+            }
         }
-        psi
+        // Rows: w_k = d_k / h + sum_j J_kj v'_j, then lambda_k, w_k or phi(lambda_k, w_k).
+        for k in 0..m {
+            if kinds[k] == RowKind::Fixed {
+                continue;
+            }
+            let mut hw = vec![0.0; cc];
+            let mut gw = vec![0.0; cols];
+            let gd = grad(&self.d[k]);
+            add_q(&mut hw, &self.d[k], 1.0 / h);
+            for i in 0..n {
+                gw[i] += gd[i] / h;
+            }
+            for j in 0..n {
+                let f = &self.jac[k * n + j];
+                let gf = grad(f);
+                add_q(&mut hw, f, p[j]);
+                add_sym(&mut hw, &gf, row(j), 1.0);
+                for i in 0..n {
+                    gw[i] += p[j] * gf[i];
+                }
+                for (g, d) in gw.iter_mut().zip(row(j)) {
+                    *g += f.re * d;
+                }
+            }
+            let e = &mut out[n + k];
+            match kinds[k] {
+                RowKind::Contact => e.copy_from_slice(&hw),
+                RowKind::Logistic => {
+                    let w0 = self.d[k].re / h
+                        + (0..n).map(|j| self.jac[k * n + j].re * p[j]).sum::<f64>();
+                    let jet = NcpFunction::Logistic { sigma }.jet(p[n + k], w0);
+                    let gl = row(n + k);
+                    for a in 0..cols {
+                        for b in 0..cols {
+                            e[a * cols + b] = jet.db * hw[a * cols + b]
+                                + jet.daa * gl[a] * gl[b]
+                                + jet.dab * (gl[a] * gw[b] + gw[a] * gl[b])
+                                + jet.dbb * gw[a] * gw[b];
+                        }
+                    }
+                }
+                _ => unreachable!("logistic and hard rows are fixed, contact or logistic"),
+            }
+        }
+        out
     }
 }
 
@@ -732,10 +811,8 @@ impl Simulator {
 
     /// One step, its first derivatives, and for a given `c` (length `2n`, the value gradient of DDP) the
     /// Hessian of `c^T f(x, u)` with respect to `y = (x, u)`, row-major `(2n + n_u)^2`: the `f_xx`, `f_xu`,
-    /// `f_uu` terms contracted with `c`. Second-order adjoint: with `K_p^T mu = -g` for the step's equations
-    /// `K(p; y) = 0` and `g = (dx'/dp)^T c`, `d^2 (c^T f) / dy^2 = T^T (d^2 (mu^T K) / d(p, y)^2) T`,
-    /// `T = [dp/dy; I]`, the inner Hessian along the columns of `T` in one pass of second-order vector duals
-    /// (`num_dual::Dual2SVec64`). Scenes of at most three joints and `2n + n_u <= 8`.
+    /// `f_uu` terms contracted with `c`. [`Simulator::second_order_step`] then
+    /// [`SecondOrderStep::hessian`]; use those directly to contract one step with several `c`.
     #[tracing::instrument(name = "dynamics.step_hessian", level = "debug", skip_all)]
     pub fn step_with_hessian(
         &mut self,
@@ -743,17 +820,27 @@ impl Simulator {
         u: &[f64],
         c: &[f64],
     ) -> Result<(Step, StepDerivatives, Vec<f64>), DynamicsError> {
+        let so = self.second_order_step(x, u)?;
+        let hess = so.hessian(c)?;
+        Ok((so.step, so.derivatives, hess))
+    }
+
+    /// One step, its first derivatives, and everything its second derivatives need except the vector
+    /// they are contracted with (scenes of at most three joints and `2n + n_u <= 8`): the step's
+    /// linearisation, the factors of `K_p^T`, and the ingredients in second-order duals. About three
+    /// quarters of the work of [`Simulator::step_with_hessian`]; each [`SecondOrderStep::hessian`] is the
+    /// rest.
+    #[tracing::instrument(name = "dynamics.second_order_step", level = "debug", skip_all)]
+    pub fn second_order_step(
+        &mut self,
+        x: &[f64],
+        u: &[f64],
+    ) -> Result<SecondOrderStep, DynamicsError> {
         let (n, nu, h) = (
             self.scene().n_dof(),
             self.scene().n_controls,
             self.settings().h,
         );
-        if c.len() != 2 * n || !c.iter().all(|e| e.is_finite()) {
-            return Err(DynamicsError::Input {
-                what: "c",
-                problem: format!("needs {} finite entries", 2 * n),
-            });
-        }
         let cols = 2 * n + nu;
         if cols > DIRECTIONS || n > 3 {
             return Err(DynamicsError::Unsupported(
@@ -764,58 +851,130 @@ impl Simulator {
         check("u", u, nu)?;
         let ing = self.second_order_ingredients(x, u)?;
         let lin = self.linearise(x, u, Some(&ing))?;
-        let der = self.first_derivatives(&lin);
+        let derivatives = self.first_derivatives(&lin);
         let np = lin.p.len();
-        // g = (dx'/dp)^T c: x' = [q + h v'; v'].
-        let mut g = vec![0.0; np];
-        for i in 0..n {
-            g[i] = h * c[i] + c[n + i];
-        }
-        // mu from K_p^T mu = -g.
         let mut transposed = vec![0.0; np * np];
         for i in 0..np {
             for j in 0..np {
                 transposed[j * np + i] = lin.H[i * np + j];
             }
         }
-        let mut lu = DenseLu::new(np, LinearSolver::Hand);
-        if !lu.factor(&transposed) {
+        let mut adjoint = DenseLu::new(np, LinearSolver::Hand);
+        if !adjoint.factor(&transposed) {
             return Err(DynamicsError::Unsupported(
                 "the step's Jacobian is singular at this state",
             ));
         }
-        let mut mu: Vec<f64> = g.iter().map(|e| -e).collect();
-        lu.solve(&mut mu);
-        // (p, y) = (p0 + dp s, y0 + s) with s the vector-dual variables.
-        let ps: Vec<D2> = (0..np)
-            .map(|i| {
-                let mut grad = SMatrix::<f64, 1, DIRECTIONS>::zeros();
-                for k in 0..cols {
-                    grad[(0, k)] = lin.dp[i * cols + k];
-                }
-                D2::new(lin.p[i], Derivative::some(grad), Derivative::none())
-            })
-            .collect();
-        let v: Vec<D2> = (0..n)
-            .map(|j| D2::from_re(x[n + j]).derivative(n + j))
-            .collect();
-        let psi = if matches!(self.settings().model, Complementarity::Normal { .. }) {
-            let res = system(n, h, &ing.lifted(), &v, &ps, &lin.kinds, true);
-            res.iter()
-                .zip(&mu)
-                .fold(D2::from_re(0.0), |acc, (k, m)| acc + *k * *m)
-        } else {
-            ing.contracted(h, x, &ps, &mu, &lin.kinds)
+        let model = self.settings().model;
+        let structured = match model {
+            Complementarity::Hard => Some(0.0),
+            Complementarity::Logistic { sigma } if !self.has_state_covariance() => Some(sigma),
+            _ => None,
         };
+        let equations = match structured {
+            Some(sigma) => ing.equation_hessians(h, x, &lin.p, &lin.dp, cols, &lin.kinds, sigma),
+            None => {
+                // The general path: the equations in eight-direction second-order duals along T.
+                let ps: Vec<D2> = (0..np)
+                    .map(|i| {
+                        let mut grad = SMatrix::<f64, 1, DIRECTIONS>::zeros();
+                        for k in 0..cols {
+                            grad[(0, k)] = lin.dp[i * cols + k];
+                        }
+                        D2::new(lin.p[i], Derivative::some(grad), Derivative::none())
+                    })
+                    .collect();
+                let v: Vec<D2> = (0..n)
+                    .map(|j| D2::from_re(x[n + j]).derivative(n + j))
+                    .collect();
+                let normal = matches!(model, Complementarity::Normal { .. });
+                system(n, h, &ing.lifted(), &v, &ps, &lin.kinds, normal)
+                    .iter()
+                    .map(|k| {
+                        let mut e = vec![0.0; cols * cols];
+                        if let Some(hm) = &k.v2.0 {
+                            for i in 0..cols {
+                                for j in 0..cols {
+                                    e[i * cols + j] = hm[(i, j)];
+                                }
+                            }
+                        }
+                        e
+                    })
+                    .collect()
+            }
+        };
+        Ok(SecondOrderStep {
+            step: lin.step,
+            derivatives,
+            n,
+            cols,
+            h,
+            adjoint: std::cell::RefCell::new(adjoint),
+            equations,
+        })
+    }
+}
+
+/// A step prepared for its second derivatives ([`Simulator::second_order_step`]): the step, its first
+/// derivatives, and the Hessian of `c^T f` for any `c` by [`SecondOrderStep::hessian`]. Second-order
+/// adjoint: with `K_p^T mu = -g` for the step's equations `K(p; y) = 0` and `g = (dx'/dp)^T c`,
+/// `d^2 (c^T f) / dy^2 = T^T (d^2 (mu^T K) / d(p, y)^2) T`, `T = [dp/dy; I]`, the inner Hessian along the
+/// columns of `T` in one pass of second-order vector duals (`num_dual::Dual2SVec64`).
+pub struct SecondOrderStep {
+    /// The step.
+    pub step: Step,
+    /// Its first derivatives.
+    pub derivatives: StepDerivatives,
+    n: usize,
+    cols: usize,
+    h: f64,
+    adjoint: std::cell::RefCell<DenseLu>,
+    /// The Hessian of each of the step's equations along `T` (row-major `cols x cols`).
+    equations: Vec<Vec<f64>>,
+}
+
+impl std::fmt::Debug for SecondOrderStep {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SecondOrderStep")
+            .field("step", &self.step)
+            .field("derivatives", &self.derivatives)
+            .finish_non_exhaustive()
+    }
+}
+
+impl SecondOrderStep {
+    /// The Hessian of `c^T f(x, u)` with respect to `(x, u)`, row-major `(2n + n_u)^2`.
+    pub fn hessian(&self, c: &[f64]) -> Result<Vec<f64>, DynamicsError> {
+        let (n, cols, h) = (self.n, self.cols, self.h);
+        if c.len() != 2 * n || !c.iter().all(|e| e.is_finite()) {
+            return Err(DynamicsError::Input {
+                what: "c",
+                problem: format!("needs {} finite entries", 2 * n),
+            });
+        }
+        let np = self.equations.len();
+        // g = (dx'/dp)^T c with x' = [q + h v'; v'], and mu from K_p^T mu = -g.
+        let mut mu = vec![0.0; np];
+        for i in 0..n {
+            mu[i] = -(h * c[i] + c[n + i]);
+        }
+        self.adjoint.borrow_mut().solve(&mut mu);
         let mut hess = vec![0.0; cols * cols];
-        if let Some(hm) = &psi.v2.0 {
-            for i in 0..cols {
-                for j in 0..cols {
-                    hess[i * cols + j] = hm[(i, j)];
-                }
+        for (e, w) in self.equations.iter().zip(&mu) {
+            for (a, b) in hess.iter_mut().zip(e) {
+                *a += w * b;
             }
         }
-        Ok((lin.step, der, hess))
+        // Symmetric to rounding; make it exactly so.
+        for i in 0..cols {
+            for j in 0..i {
+                let v = 0.5 * (hess[i * cols + j] + hess[j * cols + i]);
+                hess[i * cols + j] = v;
+                hess[j * cols + i] = v;
+            }
+        }
+        Ok(hess)
     }
 }
 

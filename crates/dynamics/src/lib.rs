@@ -30,7 +30,7 @@ mod scene;
 mod step;
 
 pub use constraint::{Constraints, ContactFrame};
-pub use derivative::{StepDerivatives, step_residual};
+pub use derivative::{SecondOrderStep, StepDerivatives, step_residual};
 pub use error::{DynamicsError, SceneProblem};
 pub use kinematics::{Kinematics, Scalar};
 pub use scene::{

@@ -1,0 +1,120 @@
+//! Small dense kernels (row-major) for the backward pass: the matrices are a few entries wide (the finger:
+//! 6 states, 2 controls), where straight loops beat a general library's dispatch.
+
+/// Cholesky factor `L` (lower, row-major) of the symmetric `n x n` matrix `a`, or `None` when `a` is not
+/// positive definite (a pivot that is not positive and finite).
+pub fn cholesky(a: &[f64], n: usize) -> Option<Vec<f64>> {
+    let mut l = vec![0.0; n * n];
+    for i in 0..n {
+        for j in 0..=i {
+            let mut s = a[i * n + j];
+            for k in 0..j {
+                s -= l[i * n + k] * l[j * n + k];
+            }
+            if i == j {
+                if !(s > 0.0 && s.is_finite()) {
+                    return None;
+                }
+                l[i * n + i] = s.sqrt();
+            } else {
+                l[i * n + j] = s / l[j * n + j];
+            }
+        }
+    }
+    Some(l)
+}
+
+/// Solve `L L^T x = b` in place for the `k` columns of the row-major `n x k` block `b`.
+pub fn cholesky_solve(l: &[f64], n: usize, b: &mut [f64], k: usize) {
+    for c in 0..k {
+        for i in 0..n {
+            let mut s = b[i * k + c];
+            for j in 0..i {
+                s -= l[i * n + j] * b[j * k + c];
+            }
+            b[i * k + c] = s / l[i * n + i];
+        }
+        for i in (0..n).rev() {
+            let mut s = b[i * k + c];
+            for j in i + 1..n {
+                s -= l[j * n + i] * b[j * k + c];
+            }
+            b[i * k + c] = s / l[i * n + i];
+        }
+    }
+}
+
+/// `A^T B` for row-major `A` (`r x a`) and `B` (`r x b`): an `a x b` matrix.
+pub fn mul_tn(a: &[f64], b: &[f64], r: usize, ca: usize, cb: usize) -> Vec<f64> {
+    let mut out = vec![0.0; ca * cb];
+    for k in 0..r {
+        for i in 0..ca {
+            let aki = a[k * ca + i];
+            if aki == 0.0 {
+                continue;
+            }
+            for j in 0..cb {
+                out[i * cb + j] += aki * b[k * cb + j];
+            }
+        }
+    }
+    out
+}
+
+/// `A B` for row-major `A` (`r x k`) and `B` (`k x c`).
+pub fn mul(a: &[f64], b: &[f64], r: usize, k: usize, c: usize) -> Vec<f64> {
+    let mut out = vec![0.0; r * c];
+    for i in 0..r {
+        for l in 0..k {
+            let ail = a[i * k + l];
+            if ail == 0.0 {
+                continue;
+            }
+            for j in 0..c {
+                out[i * c + j] += ail * b[l * c + j];
+            }
+        }
+    }
+    out
+}
+
+/// `A^T v` for row-major `A` (`r x c`).
+pub fn mul_tv(a: &[f64], v: &[f64], r: usize, c: usize) -> Vec<f64> {
+    let mut out = vec![0.0; c];
+    for k in 0..r {
+        for i in 0..c {
+            out[i] += a[k * c + i] * v[k];
+        }
+    }
+    out
+}
+
+/// Replace the square `n x n` matrix by its symmetric part.
+pub fn symmetrize(a: &mut [f64], n: usize) {
+    for i in 0..n {
+        for j in 0..i {
+            let s = 0.5 * (a[i * n + j] + a[j * n + i]);
+            a[i * n + j] = s;
+            a[j * n + i] = s;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cholesky_solves_a_positive_definite_system_and_refuses_an_indefinite_one() {
+        let a = [4.0, 2.0, 0.4, 2.0, 5.0, 1.0, 0.4, 1.0, 3.0];
+        let l = cholesky(&a, 3).unwrap();
+        let mut b = [1.0, 2.0, 3.0];
+        cholesky_solve(&l, 3, &mut b, 1);
+        for i in 0..3 {
+            let r: f64 = (0..3).map(|j| a[i * 3 + j] * b[j]).sum();
+            assert!((r - [1.0, 2.0, 3.0][i]).abs() < 1e-14);
+        }
+        assert!(cholesky(&[1.0, 2.0, 2.0, 1.0], 2).is_none());
+        assert!(cholesky(&[f64::NAN], 1).is_none());
+    }
+}

@@ -1,0 +1,236 @@
+//! What the optimiser consumes: discrete dynamics with derivatives, and a cost with derivatives. Matrices
+//! are row-major slices (`fx[i * n + j] = d x'_i / d x_j`).
+
+/// Discrete dynamics `x' = f(x, u)` with derivatives.
+pub trait Dynamics {
+    /// What a failed step reports (a failed step in a line search is a rejected trial, never propagated).
+    type Error: std::error::Error + Send + Sync + 'static;
+
+    /// `n`, the state's length.
+    fn state_dim(&self) -> usize;
+
+    /// `m`, the control's length.
+    fn control_dim(&self) -> usize;
+
+    /// Write `f(x, u)` into `next` (length `n`).
+    fn step(&mut self, x: &[f64], u: &[f64], next: &mut [f64]) -> Result<(), Self::Error>;
+
+    /// Write `fx` (`n x n`) and `fu` (`n x m`) at `(x, u)`.
+    fn derivatives(
+        &mut self,
+        x: &[f64],
+        u: &[f64],
+        fx: &mut [f64],
+        fu: &mut [f64],
+    ) -> Result<(), Self::Error>;
+
+    /// Whether [`Dynamics::second_derivatives`] is provided (full second-order DDP needs it).
+    fn has_second_derivatives(&self) -> bool {
+        false
+    }
+
+    /// Write `fx`, `fu` and, for the given `c` (length `n`), the Hessian of `c^T f(x, u)` with respect to
+    /// `(x, u)` into `hess` (`(n + m) x (n + m)`): the second-order terms of DDP contracted with the value
+    /// gradient. The default writes the first derivatives and a zero Hessian (Gauss-Newton).
+    fn second_derivatives(
+        &mut self,
+        x: &[f64],
+        u: &[f64],
+        c: &[f64],
+        fx: &mut [f64],
+        fu: &mut [f64],
+        hess: &mut [f64],
+    ) -> Result<(), Self::Error> {
+        let _ = c;
+        hess.iter_mut().for_each(|e| *e = 0.0);
+        self.derivatives(x, u, fx, fu)
+    }
+}
+
+/// The derivatives of a running cost at one step.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CostDerivatives {
+    /// `dl/dx` (`n`).
+    pub lx: Vec<f64>,
+    /// `dl/du` (`m`).
+    pub lu: Vec<f64>,
+    /// `d^2 l/dx^2` (`n x n`).
+    pub lxx: Vec<f64>,
+    /// `d^2 l/du^2` (`m x m`).
+    pub luu: Vec<f64>,
+    /// `d^2 l/du dx` (`m x n`).
+    pub lux: Vec<f64>,
+}
+
+impl CostDerivatives {
+    /// Zeros for `n` states and `m` controls.
+    pub fn zeros(n: usize, m: usize) -> Self {
+        CostDerivatives {
+            lx: vec![0.0; n],
+            lu: vec![0.0; m],
+            lxx: vec![0.0; n * n],
+            luu: vec![0.0; m * m],
+            lux: vec![0.0; m * n],
+        }
+    }
+}
+
+/// A finite-horizon cost: running costs `l_i(x, u)` and a final cost `l_f(x)`.
+pub trait Cost {
+    /// `l_i(x, u)` at step `i`.
+    fn running(&self, i: usize, x: &[f64], u: &[f64]) -> f64;
+
+    /// `l_f(x)`.
+    fn terminal(&self, x: &[f64]) -> f64;
+
+    /// The derivatives of `l_i` at `(x, u)`.
+    fn running_derivatives(&self, i: usize, x: &[f64], u: &[f64], out: &mut CostDerivatives);
+
+    /// `dl_f/dx` (`n`) and `d^2 l_f/dx^2` (`n x n`).
+    fn terminal_derivatives(&self, x: &[f64], lx: &mut [f64], lxx: &mut [f64]);
+}
+
+/// `l(x, u) = 1/2 (x - x*)^T Q (x - x*) + q^T x + 1/2 u^T R u + r^T u` per step and
+/// `l_f(x) = 1/2 (x - x*)^T Q_f (x - x*) + q_f^T x`, the same at every step. With `Q = Q_f = 0` it is the
+/// linear state cost of the flicking finger (`-theta3 + c_u |u|^2`).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct QuadraticCost {
+    /// `x*` (`n`).
+    pub target: Vec<f64>,
+    /// `Q` (`n x n`, symmetric).
+    pub q: Vec<f64>,
+    /// Linear state term `q` (`n`).
+    pub q_lin: Vec<f64>,
+    /// `R` (`m x m`, symmetric).
+    pub r: Vec<f64>,
+    /// Linear control term `r` (`m`).
+    pub r_lin: Vec<f64>,
+    /// `Q_f` (`n x n`, symmetric).
+    pub qf: Vec<f64>,
+    /// Linear final term `q_f` (`n`).
+    pub qf_lin: Vec<f64>,
+}
+
+impl QuadraticCost {
+    /// `1/2 x^T Q x + 1/2 u^T R u` and `1/2 x^T Q_f x` with diagonal weights (target zero, no linear terms).
+    pub fn diagonal(q: &[f64], r: &[f64], qf: &[f64]) -> Self {
+        let diag = |d: &[f64]| {
+            let n = d.len();
+            let mut m = vec![0.0; n * n];
+            for i in 0..n {
+                m[i * n + i] = d[i];
+            }
+            m
+        };
+        let n = q.len();
+        QuadraticCost {
+            target: vec![0.0; n],
+            q: diag(q),
+            q_lin: vec![0.0; n],
+            r: diag(r),
+            r_lin: vec![0.0; r.len()],
+            qf: diag(qf),
+            qf_lin: vec![0.0; n],
+        }
+    }
+
+    /// A cost linear in the state: `c^T x + c_u |u|^2` per step and `c^T x` at the end.
+    pub fn linear_state(c: &[f64], control_weight: f64, m: usize) -> Self {
+        let n = c.len();
+        let mut r = vec![0.0; m * m];
+        for i in 0..m {
+            r[i * m + i] = 2.0 * control_weight;
+        }
+        QuadraticCost {
+            target: vec![0.0; n],
+            q: vec![0.0; n * n],
+            q_lin: c.to_vec(),
+            r,
+            r_lin: vec![0.0; m],
+            qf: vec![0.0; n * n],
+            qf_lin: c.to_vec(),
+        }
+    }
+
+    fn n(&self) -> usize {
+        self.target.len()
+    }
+
+    fn m(&self) -> usize {
+        self.r_lin.len()
+    }
+
+    /// `Err` unless every size matches `n`, `m` and every entry is finite.
+    pub fn validate(&self, n: usize, m: usize) -> Result<(), crate::DdpError> {
+        let fields: [(&'static str, &[f64], usize); 7] = [
+            ("cost target", &self.target, n),
+            ("cost Q", &self.q, n * n),
+            ("cost q", &self.q_lin, n),
+            ("cost R", &self.r, m * m),
+            ("cost r", &self.r_lin, m),
+            ("cost Q_f", &self.qf, n * n),
+            ("cost q_f", &self.qf_lin, n),
+        ];
+        for (what, v, len) in fields {
+            crate::check(what, v, len)?;
+        }
+        Ok(())
+    }
+
+    fn quad(m: &[f64], a: &[f64], b: &[f64]) -> f64 {
+        let n = a.len();
+        let mut s = 0.0;
+        for i in 0..n {
+            for j in 0..n {
+                s += a[i] * m[i * n + j] * b[j];
+            }
+        }
+        s
+    }
+
+    fn dx(&self, x: &[f64]) -> Vec<f64> {
+        x.iter().zip(&self.target).map(|(a, b)| a - b).collect()
+    }
+
+    fn dot(a: &[f64], b: &[f64]) -> f64 {
+        a.iter().zip(b).map(|(x, y)| x * y).sum()
+    }
+}
+
+impl Cost for QuadraticCost {
+    fn running(&self, _i: usize, x: &[f64], u: &[f64]) -> f64 {
+        let dx = self.dx(x);
+        0.5 * Self::quad(&self.q, &dx, &dx)
+            + Self::dot(&self.q_lin, x)
+            + 0.5 * Self::quad(&self.r, u, u)
+            + Self::dot(&self.r_lin, u)
+    }
+
+    fn terminal(&self, x: &[f64]) -> f64 {
+        let dx = self.dx(x);
+        0.5 * Self::quad(&self.qf, &dx, &dx) + Self::dot(&self.qf_lin, x)
+    }
+
+    fn running_derivatives(&self, _i: usize, x: &[f64], u: &[f64], out: &mut CostDerivatives) {
+        let (n, m) = (self.n(), self.m());
+        let dx = self.dx(x);
+        for i in 0..n {
+            out.lx[i] = self.q_lin[i] + (0..n).map(|j| self.q[i * n + j] * dx[j]).sum::<f64>();
+        }
+        for i in 0..m {
+            out.lu[i] = self.r_lin[i] + (0..m).map(|j| self.r[i * m + j] * u[j]).sum::<f64>();
+        }
+        out.lxx.copy_from_slice(&self.q);
+        out.luu.copy_from_slice(&self.r);
+        out.lux.iter_mut().for_each(|e| *e = 0.0);
+    }
+
+    fn terminal_derivatives(&self, x: &[f64], lx: &mut [f64], lxx: &mut [f64]) {
+        let n = self.n();
+        let dx = self.dx(x);
+        for i in 0..n {
+            lx[i] = self.qf_lin[i] + (0..n).map(|j| self.qf[i * n + j] * dx[j]).sum::<f64>();
+        }
+        lxx.copy_from_slice(&self.qf);
+    }
+}

@@ -1,0 +1,717 @@
+//! The optimiser: backward pass (paper eq. 11-12) with Levenberg-Marquardt regularisation of the value
+//! Hessian, forward pass with a backtracking line search on the ratio of actual to expected reduction,
+//! optional control limits (box QP), after Tassa, Erez and Todorov (IROS 2012) and Tassa, Mansard and
+//! Todorov (ICRA 2014).
+
+use crate::boxqp;
+use crate::error::DdpError;
+use crate::linalg::{cholesky, cholesky_solve, mul, mul_tn, mul_tv, symmetrize};
+use crate::model::{Cost, CostDerivatives, Dynamics};
+use serde::{Deserialize, Serialize};
+
+/// Which second-order terms the backward pass keeps.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Method {
+    /// Full second-order DDP: `Q` includes `V_x . f_xx`, `V_x . f_ux`, `V_x . f_uu` (the dynamics'
+    /// [`Dynamics::second_derivatives`]).
+    Full,
+    /// Gauss-Newton iLQR: those terms dropped.
+    GaussNewton,
+}
+
+/// Where the Levenberg-Marquardt term `mu` goes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Regularisation {
+    /// On the value Hessian: `Q_uu + mu f_u^T f_u`, `Q_ux + mu f_u^T f_x` (invariant to the controls'
+    /// scaling, and keeps the feedback gains of a state-space trust region).
+    State,
+    /// On the controls: `Q_uu + mu I`.
+    Control,
+}
+
+/// Box limits on the controls, the same at every step.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ControlLimits {
+    /// Lower bounds (`m`).
+    pub lower: Vec<f64>,
+    /// Upper bounds (`m`).
+    pub upper: Vec<f64>,
+}
+
+/// Settings of [`Ddp`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DdpSettings {
+    /// Full DDP or Gauss-Newton.
+    pub method: Method,
+    /// Passes at most.
+    pub max_iterations: usize,
+    /// Stop when an accepted pass lowers the cost by less than `tol_cost * (1 + |J|)`.
+    pub tol_cost: f64,
+    /// Stop when the feedforward step's mean relative size `mean_i max_j |k_ij| / (|u_ij| + 1)` is below
+    /// this (with the regularisation below `1e-5`).
+    pub tol_step: f64,
+    /// Where the regularisation goes.
+    pub regularisation: Regularisation,
+    /// Initial regularisation `mu`.
+    pub mu_init: f64,
+    /// Below this `mu` is set to zero.
+    pub mu_min: f64,
+    /// Above this the optimiser gives up.
+    pub mu_max: f64,
+    /// Growth factor of the regularisation schedule.
+    pub mu_factor: f64,
+    /// Accept a step when actual / expected reduction exceeds this.
+    pub accept_ratio: f64,
+    /// Step sizes tried, `10^(-3 k / (steps - 1))` for `k = 0..steps`.
+    pub line_search_steps: usize,
+    /// Optional box limits on the controls.
+    pub control_limits: Option<ControlLimits>,
+}
+
+impl Default for DdpSettings {
+    fn default() -> Self {
+        DdpSettings {
+            method: Method::Full,
+            max_iterations: 200,
+            tol_cost: 1e-9,
+            tol_step: 1e-7,
+            regularisation: Regularisation::State,
+            mu_init: 1.0,
+            mu_min: 1e-6,
+            mu_max: 1e10,
+            mu_factor: 1.6,
+            accept_ratio: 0.0,
+            line_search_steps: 11,
+            control_limits: None,
+        }
+    }
+}
+
+impl DdpSettings {
+    /// `Err` naming the first setting out of range.
+    pub fn validate(&self) -> Result<(), DdpError> {
+        let positive = |name: &'static str, value: f64| {
+            if value.is_finite() && value > 0.0 {
+                Ok(())
+            } else {
+                Err(DdpError::Setting {
+                    name,
+                    value,
+                    expected: "finite and positive",
+                })
+            }
+        };
+        positive("tol_cost", self.tol_cost)?;
+        positive("tol_step", self.tol_step)?;
+        positive("mu_min", self.mu_min)?;
+        positive("mu_max", self.mu_max)?;
+        if !(self.mu_init.is_finite() && self.mu_init >= 0.0) {
+            return Err(DdpError::Setting {
+                name: "mu_init",
+                value: self.mu_init,
+                expected: "finite and non-negative",
+            });
+        }
+        if !(self.mu_factor.is_finite() && self.mu_factor > 1.0) {
+            return Err(DdpError::Setting {
+                name: "mu_factor",
+                value: self.mu_factor,
+                expected: "finite and above 1",
+            });
+        }
+        if !(self.accept_ratio.is_finite() && (0.0..1.0).contains(&self.accept_ratio)) {
+            return Err(DdpError::Setting {
+                name: "accept_ratio",
+                value: self.accept_ratio,
+                expected: "in [0, 1)",
+            });
+        }
+        if self.max_iterations == 0 || self.line_search_steps == 0 {
+            return Err(DdpError::Setting {
+                name: "max_iterations / line_search_steps",
+                value: 0.0,
+                expected: "at least 1",
+            });
+        }
+        if let Some(l) = &self.control_limits
+            && (l.lower.len() != l.upper.len()
+                || l.lower
+                    .iter()
+                    .zip(&l.upper)
+                    .any(|(a, b)| !(a <= b) || a.is_nan()))
+        {
+            return Err(DdpError::Input {
+                what: "control_limits",
+                problem: "lower and upper must have one entry per control, lower <= upper".into(),
+            });
+        }
+        Ok(())
+    }
+}
+
+/// Why the optimiser stopped.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Status {
+    /// An accepted pass changed the cost by less than `tol_cost`.
+    CostConverged,
+    /// The feedforward step became smaller than `tol_step`.
+    StepConverged,
+    /// `max_iterations` passes ran.
+    MaxIterations,
+    /// No step size reduced the cost and the regularisation reached `mu_max`.
+    NoDescent,
+    /// `Q_uu` stayed indefinite up to `mu_max`.
+    RegularisationExceeded,
+}
+
+impl Status {
+    /// Whether the optimiser converged.
+    pub fn converged(self) -> bool {
+        matches!(self, Status::CostConverged | Status::StepConverged)
+    }
+}
+
+/// One pass of the optimiser.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Iteration {
+    /// Cost after the pass.
+    pub cost: f64,
+    /// Actual reduction (0 when rejected).
+    pub reduction: f64,
+    /// Expected reduction at the accepted step size.
+    pub expected: f64,
+    /// Regularisation used by the backward pass.
+    pub mu: f64,
+    /// Accepted step size (0 when none was).
+    pub alpha: f64,
+    /// Mean relative feedforward size.
+    pub step: f64,
+}
+
+/// The optimised trajectory and its time-varying linear policy `u = u_i + K_i (x - x_i)`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Solution {
+    /// `x_0 .. x_N`.
+    pub states: Vec<Vec<f64>>,
+    /// `u_0 .. u_{N-1}`.
+    pub controls: Vec<Vec<f64>>,
+    /// `K_i`, row-major `m x n`, from the backward pass at this trajectory.
+    pub gains: Vec<Vec<f64>>,
+    /// Total cost.
+    pub cost: f64,
+    /// One record per pass.
+    pub iterations: Vec<Iteration>,
+    /// Why it stopped.
+    pub status: Status,
+}
+
+/// What one backward pass produces.
+struct Backward {
+    k: Vec<Vec<f64>>,
+    gains: Vec<Vec<f64>>,
+    /// `[sum k^T Q_u, sum 1/2 k^T Q_uu k]`.
+    dv: [f64; 2],
+}
+
+/// The optimiser. See the module documentation.
+#[derive(Debug, Clone)]
+pub struct Ddp {
+    settings: DdpSettings,
+}
+
+/// First derivatives along a trajectory (cached for Gauss-Newton across regularisation retries).
+struct Linearisation {
+    fx: Vec<Vec<f64>>,
+    fu: Vec<Vec<f64>>,
+}
+
+impl Ddp {
+    /// An optimiser with checked settings.
+    pub fn new(settings: DdpSettings) -> Result<Self, DdpError> {
+        settings.validate()?;
+        Ok(Ddp { settings })
+    }
+
+    /// The settings.
+    pub fn settings(&self) -> &DdpSettings {
+        &self.settings
+    }
+
+    /// Minimise the cost from `x0` over `controls.len()` steps, starting from `controls`.
+    pub fn solve<D: Dynamics, C: Cost>(
+        &self,
+        dynamics: &mut D,
+        cost: &C,
+        x0: &[f64],
+        controls: &[Vec<f64>],
+    ) -> Result<Solution, DdpError> {
+        let (n, m) = (dynamics.state_dim(), dynamics.control_dim());
+        let s = &self.settings;
+        crate::check("x0", x0, n)?;
+        if controls.is_empty() {
+            return Err(DdpError::Input {
+                what: "controls",
+                problem: "the horizon must be at least one step".into(),
+            });
+        }
+        for u in controls {
+            crate::check("controls", u, m)?;
+        }
+        if let Some(l) = &s.control_limits
+            && l.lower.len() != m
+        {
+            return Err(DdpError::Input {
+                what: "control_limits",
+                problem: format!("needs {m} entries, has {}", l.lower.len()),
+            });
+        }
+        if s.method == Method::Full && !dynamics.has_second_derivatives() {
+            return Err(DdpError::NoSecondDerivatives);
+        }
+        let horizon = controls.len();
+        let mut u: Vec<Vec<f64>> = controls.to_vec();
+        if let Some(l) = &s.control_limits {
+            for ui in &mut u {
+                for j in 0..m {
+                    ui[j] = ui[j].clamp(l.lower[j], l.upper[j]);
+                }
+            }
+        }
+        let (mut x, mut total) = match rollout(dynamics, cost, x0, &u) {
+            Ok(r) => r,
+            Err((step, reason)) => return Err(DdpError::InitialRollout { step, reason }),
+        };
+        let alphas: Vec<f64> = (0..s.line_search_steps)
+            .map(|k| {
+                if s.line_search_steps == 1 {
+                    1.0
+                } else {
+                    10f64.powf(-3.0 * k as f64 / (s.line_search_steps - 1) as f64)
+                }
+            })
+            .collect();
+        let mut mu = s.mu_init;
+        let mut dmu = 1.0f64;
+        let mut iterations = Vec::new();
+        let mut gains = vec![vec![0.0; m * n]; horizon];
+        let mut k_prev = vec![vec![0.0; m]; horizon];
+        let mut lin: Option<Linearisation> = None;
+        let mut status = Status::MaxIterations;
+        let increase = |mu: &mut f64, dmu: &mut f64| {
+            *dmu = (*dmu * s.mu_factor).max(s.mu_factor);
+            *mu = (*mu * *dmu).max(s.mu_min);
+        };
+        for iteration in 0..s.max_iterations {
+            let span = tracing::info_span!("ddp.iteration", iteration);
+            let _guard = span.enter();
+            // Backward pass, raising mu until Q_uu is positive definite everywhere.
+            let bp = loop {
+                match self.backward(dynamics, cost, &x, &u, &k_prev, mu, &mut lin) {
+                    Ok(Some(bp)) => break bp,
+                    Ok(None) => {
+                        increase(&mut mu, &mut dmu);
+                        if mu > s.mu_max {
+                            status = Status::RegularisationExceeded;
+                            break Backward {
+                                k: Vec::new(),
+                                gains: Vec::new(),
+                                dv: [0.0; 2],
+                            };
+                        }
+                    }
+                    Err(e) => return Err(e),
+                }
+            };
+            if status == Status::RegularisationExceeded {
+                break;
+            }
+            gains = bp.gains;
+            k_prev = bp.k.clone();
+            let step =
+                bp.k.iter()
+                    .zip(&u)
+                    .map(|(k, u)| {
+                        k.iter()
+                            .zip(u)
+                            .map(|(a, b)| a.abs() / (b.abs() + 1.0))
+                            .fold(0.0, f64::max)
+                    })
+                    .sum::<f64>()
+                    / horizon as f64;
+            if step < s.tol_step && mu < 1e-5 {
+                status = Status::StepConverged;
+                iterations.push(Iteration {
+                    cost: total,
+                    reduction: 0.0,
+                    expected: 0.0,
+                    mu,
+                    alpha: 0.0,
+                    step,
+                });
+                break;
+            }
+            // Forward pass with a line search.
+            let mut accepted = None;
+            for &alpha in &alphas {
+                let expected = -alpha * (bp.dv[0] + alpha * bp.dv[1]);
+                if let Ok((xn, un, cn)) = self.forward(dynamics, cost, &x, &u, &bp.k, &gains, alpha)
+                {
+                    let reduction = total - cn;
+                    let ratio = if expected > 0.0 {
+                        reduction / expected
+                    } else {
+                        reduction.signum()
+                    };
+                    if ratio > s.accept_ratio && reduction.is_finite() {
+                        accepted = Some((xn, un, cn, alpha, expected, reduction));
+                        break;
+                    }
+                }
+            }
+            match accepted {
+                Some((xn, un, cn, alpha, expected, reduction)) => {
+                    tracing::debug!(cost = cn, reduction, expected, mu, alpha, step, "accepted");
+                    dmu = (dmu / s.mu_factor).min(1.0 / s.mu_factor);
+                    mu = if mu * dmu > s.mu_min { mu * dmu } else { 0.0 };
+                    x = xn;
+                    u = un;
+                    total = cn;
+                    lin = None;
+                    iterations.push(Iteration {
+                        cost: cn,
+                        reduction,
+                        expected,
+                        mu,
+                        alpha,
+                        step,
+                    });
+                    if reduction < s.tol_cost * (1.0 + total.abs()) {
+                        status = Status::CostConverged;
+                        // The gains of the final trajectory.
+                        if let Ok(Some(bp)) =
+                            self.backward(dynamics, cost, &x, &u, &k_prev, mu, &mut lin)
+                        {
+                            gains = bp.gains;
+                        }
+                        break;
+                    }
+                }
+                None => {
+                    tracing::debug!(mu, step, "no step size reduced the cost");
+                    increase(&mut mu, &mut dmu);
+                    iterations.push(Iteration {
+                        cost: total,
+                        reduction: 0.0,
+                        expected: 0.0,
+                        mu,
+                        alpha: 0.0,
+                        step,
+                    });
+                    if mu > s.mu_max {
+                        status = Status::NoDescent;
+                        break;
+                    }
+                }
+            }
+        }
+        Ok(Solution {
+            states: x,
+            controls: u,
+            gains,
+            cost: total,
+            iterations,
+            status,
+        })
+    }
+
+    /// The backward pass at regularisation `mu`; `Ok(None)` when `Q_uu` is not positive definite.
+    #[allow(clippy::too_many_arguments)]
+    fn backward<D: Dynamics, C: Cost>(
+        &self,
+        dynamics: &mut D,
+        cost: &C,
+        x: &[Vec<f64>],
+        u: &[Vec<f64>],
+        k_prev: &[Vec<f64>],
+        mu: f64,
+        lin: &mut Option<Linearisation>,
+    ) -> Result<Option<Backward>, DdpError> {
+        let (n, m) = (dynamics.state_dim(), dynamics.control_dim());
+        let horizon = u.len();
+        let full = self.settings.method == Method::Full;
+        if !full && lin.is_none() {
+            let mut fx = Vec::with_capacity(horizon);
+            let mut fu = Vec::with_capacity(horizon);
+            for i in 0..horizon {
+                let (mut a, mut b) = (vec![0.0; n * n], vec![0.0; n * m]);
+                dynamics
+                    .derivatives(&x[i], &u[i], &mut a, &mut b)
+                    .map_err(|e| DdpError::Derivatives {
+                        step: i,
+                        source: Box::new(e),
+                    })?;
+                fx.push(a);
+                fu.push(b);
+            }
+            *lin = Some(Linearisation { fx, fu });
+        }
+        let mut vx = vec![0.0; n];
+        let mut vxx = vec![0.0; n * n];
+        cost.terminal_derivatives(&x[horizon], &mut vx, &mut vxx);
+        let mut k_all = vec![Vec::new(); horizon];
+        let mut gains = vec![Vec::new(); horizon];
+        let mut dv = [0.0; 2];
+        let mut cd = CostDerivatives::zeros(n, m);
+        let nm = n + m;
+        let (mut fx_buf, mut fu_buf, mut hess) =
+            (vec![0.0; n * n], vec![0.0; n * m], vec![0.0; nm * nm]);
+        for i in (0..horizon).rev() {
+            cost.running_derivatives(i, &x[i], &u[i], &mut cd);
+            let (fx, fu): (&[f64], &[f64]) = if full {
+                dynamics
+                    .second_derivatives(&x[i], &u[i], &vx, &mut fx_buf, &mut fu_buf, &mut hess)
+                    .map_err(|e| DdpError::Derivatives {
+                        step: i,
+                        source: Box::new(e),
+                    })?;
+                (&fx_buf, &fu_buf)
+            } else {
+                let l = lin.as_ref().expect("linearised above");
+                (&l.fx[i], &l.fu[i])
+            };
+            let qx: Vec<f64> = cd
+                .lx
+                .iter()
+                .zip(mul_tv(fx, &vx, n, n))
+                .map(|(a, b)| a + b)
+                .collect();
+            let qu: Vec<f64> = cd
+                .lu
+                .iter()
+                .zip(mul_tv(fu, &vx, n, m))
+                .map(|(a, b)| a + b)
+                .collect();
+            let vxx_fx = mul(&vxx, fx, n, n, n);
+            let vxx_fu = mul(&vxx, fu, n, n, m);
+            let mut qxx = mul_tn(fx, &vxx_fx, n, n, n);
+            let mut qux = mul_tn(fu, &vxx_fx, n, m, n);
+            let mut quu = mul_tn(fu, &vxx_fu, n, m, m);
+            for a in 0..n {
+                for b in 0..n {
+                    qxx[a * n + b] += cd.lxx[a * n + b];
+                }
+            }
+            for a in 0..m {
+                for b in 0..n {
+                    qux[a * n + b] += cd.lux[a * n + b];
+                }
+                for b in 0..m {
+                    quu[a * m + b] += cd.luu[a * m + b];
+                }
+            }
+            if full {
+                for a in 0..n {
+                    for b in 0..n {
+                        qxx[a * n + b] += hess[a * nm + b];
+                    }
+                }
+                for a in 0..m {
+                    for b in 0..n {
+                        qux[a * n + b] += hess[(n + a) * nm + b];
+                    }
+                    for b in 0..m {
+                        quu[a * m + b] += hess[(n + a) * nm + n + b];
+                    }
+                }
+            }
+            symmetrize(&mut quu, m);
+            // The regularised pair (value Hessian + mu I) gives the policy; the value's update below uses
+            // the plain Q (Tassa, Erez and Todorov 2012).
+            let mut qux_reg = qux.clone();
+            let mut quu_reg = quu.clone();
+            if mu > 0.0 {
+                match self.settings.regularisation {
+                    Regularisation::State => {
+                        let futfx = mul_tn(fu, fx, n, m, n);
+                        let futfu = mul_tn(fu, fu, n, m, m);
+                        for (a, b) in qux_reg.iter_mut().zip(&futfx) {
+                            *a += mu * b;
+                        }
+                        for (a, b) in quu_reg.iter_mut().zip(&futfu) {
+                            *a += mu * b;
+                        }
+                    }
+                    Regularisation::Control => {
+                        for a in 0..m {
+                            quu_reg[a * m + a] += mu;
+                        }
+                    }
+                }
+            }
+            let (k, big_k) = match &self.settings.control_limits {
+                None => {
+                    let Some(l) = cholesky(&quu_reg, m) else {
+                        return Ok(None);
+                    };
+                    let mut k: Vec<f64> = qu.iter().map(|e| -e).collect();
+                    cholesky_solve(&l, m, &mut k, 1);
+                    let mut big_k: Vec<f64> = qux_reg.iter().map(|e| -e).collect();
+                    cholesky_solve(&l, m, &mut big_k, n);
+                    (k, big_k)
+                }
+                Some(lim) => {
+                    let lower: Vec<f64> = (0..m).map(|j| lim.lower[j] - u[i][j]).collect();
+                    let upper: Vec<f64> = (0..m).map(|j| lim.upper[j] - u[i][j]).collect();
+                    let Some(qp) = boxqp::solve(&quu_reg, &qu, &lower, &upper, &k_prev[i]) else {
+                        return Ok(None);
+                    };
+                    let mut big_k = vec![0.0; m * n];
+                    if let Some(l) = &qp.free_factor {
+                        let free: Vec<usize> = (0..m).filter(|&j| !qp.clamped[j]).collect();
+                        let nf = free.len();
+                        let mut rhs = vec![0.0; nf * n];
+                        for (a, &j) in free.iter().enumerate() {
+                            for b in 0..n {
+                                rhs[a * n + b] = -qux_reg[j * n + b];
+                            }
+                        }
+                        cholesky_solve(l, nf, &mut rhs, n);
+                        for (a, &j) in free.iter().enumerate() {
+                            big_k[j * n..(j + 1) * n].copy_from_slice(&rhs[a * n..(a + 1) * n]);
+                        }
+                    }
+                    (qp.x, big_k)
+                }
+            };
+            // dV and the value's expansion at step i.
+            let quu_k = mul(&quu, &k, m, m, 1);
+            dv[0] += k.iter().zip(&qu).map(|(a, b)| a * b).sum::<f64>();
+            dv[1] += 0.5 * k.iter().zip(&quu_k).map(|(a, b)| a * b).sum::<f64>();
+            let kt_quu_k = mul_tv(&big_k, &quu_k, m, n);
+            let kt_qu = mul_tv(&big_k, &qu, m, n);
+            let quxt_k = mul_tv(&qux, &k, m, n);
+            for a in 0..n {
+                vx[a] = qx[a] + kt_quu_k[a] + kt_qu[a] + quxt_k[a];
+            }
+            let quu_bk = mul(&quu, &big_k, m, m, n);
+            let kt_quu_bk = mul_tn(&big_k, &quu_bk, m, n, n);
+            let kt_qux = mul_tn(&big_k, &qux, m, n, n);
+            for a in 0..n {
+                for b in 0..n {
+                    vxx[a * n + b] = qxx[a * n + b]
+                        + kt_quu_bk[a * n + b]
+                        + kt_qux[a * n + b]
+                        + kt_qux[b * n + a];
+                }
+            }
+            symmetrize(&mut vxx, n);
+            if !(vx.iter().chain(&vxx).all(|e| e.is_finite())) {
+                return Ok(None);
+            }
+            k_all[i] = k;
+            gains[i] = big_k;
+        }
+        Ok(Some(Backward {
+            k: k_all,
+            gains,
+            dv,
+        }))
+    }
+
+    /// The forward pass at step size `alpha`: `u = u_i + alpha k_i + K_i (x - x_i)`, clamped to the limits.
+    #[allow(clippy::too_many_arguments, clippy::type_complexity)]
+    fn forward<D: Dynamics, C: Cost>(
+        &self,
+        dynamics: &mut D,
+        cost: &C,
+        x: &[Vec<f64>],
+        u: &[Vec<f64>],
+        k: &[Vec<f64>],
+        gains: &[Vec<f64>],
+        alpha: f64,
+    ) -> Result<(Vec<Vec<f64>>, Vec<Vec<f64>>, f64), ()> {
+        let (n, m) = (dynamics.state_dim(), dynamics.control_dim());
+        let horizon = u.len();
+        let mut xn = Vec::with_capacity(horizon + 1);
+        let mut un = Vec::with_capacity(horizon);
+        xn.push(x[0].clone());
+        let mut total = 0.0;
+        for i in 0..horizon {
+            let mut ui: Vec<f64> = (0..m)
+                .map(|a| {
+                    u[i][a]
+                        + alpha * k[i][a]
+                        + (0..n)
+                            .map(|b| gains[i][a * n + b] * (xn[i][b] - x[i][b]))
+                            .sum::<f64>()
+                })
+                .collect();
+            if let Some(l) = &self.settings.control_limits {
+                for a in 0..m {
+                    ui[a] = ui[a].clamp(l.lower[a], l.upper[a]);
+                }
+            }
+            let mut next = vec![0.0; n];
+            dynamics.step(&xn[i], &ui, &mut next).map_err(|_| ())?;
+            total += cost.running(i, &xn[i], &ui);
+            if !(total.is_finite() && next.iter().all(|e| e.is_finite())) {
+                return Err(());
+            }
+            xn.push(next);
+            un.push(ui);
+        }
+        total += cost.terminal(&xn[horizon]);
+        if !total.is_finite() {
+            return Err(());
+        }
+        Ok((xn, un, total))
+    }
+}
+
+/// A rollout's states and total cost.
+pub type Rollout = (Vec<Vec<f64>>, f64);
+
+/// Roll out `u` from `x0`: the states and the total cost, or the step and reason of the first failure.
+pub fn rollout<D: Dynamics, C: Cost>(
+    dynamics: &mut D,
+    cost: &C,
+    x0: &[f64],
+    u: &[Vec<f64>],
+) -> Result<Rollout, (usize, String)> {
+    let n = dynamics.state_dim();
+    let mut x = Vec::with_capacity(u.len() + 1);
+    x.push(x0.to_vec());
+    let mut total = 0.0;
+    for (i, ui) in u.iter().enumerate() {
+        let mut next = vec![0.0; n];
+        dynamics
+            .step(&x[i], ui, &mut next)
+            .map_err(|e| (i, e.to_string()))?;
+        if !next.iter().all(|e| e.is_finite()) {
+            return Err((i, "non-finite state".into()));
+        }
+        total += cost.running(i, &x[i], ui);
+        x.push(next);
+    }
+    total += cost.terminal(&x[u.len()]);
+    if !total.is_finite() {
+        return Err((u.len(), "non-finite cost".into()));
+    }
+    Ok((x, total))
+}
+
+/// The receding-horizon warm start of paper eq. (19): drop the first `d` controls and repeat the last one
+/// `d` times, keeping the horizon.
+pub fn shift_controls(u: &[Vec<f64>], d: usize) -> Vec<Vec<f64>> {
+    let horizon = u.len();
+    if horizon == 0 {
+        return Vec::new();
+    }
+    let d = d.min(horizon);
+    let last = u[horizon - 1].clone();
+    u[d..]
+        .iter()
+        .cloned()
+        .chain(std::iter::repeat_n(last, d))
+        .collect()
+}
