@@ -1,5 +1,6 @@
 //! Integration scenarios, one module each, through public APIs only.
 
+mod ddp_finger;
 mod ddp_solver;
 mod dynamics_hard_cases;
 mod dynamics_laws;

@@ -35,6 +35,8 @@ pub enum Section {
     Ncp,
     /// The simulator's step, derivatives and knobs.
     Dynamics,
+    /// The optimiser on the unicycle and the finger.
+    Ddp,
 }
 
 pub fn run(args: &Args) -> anyhow::Result<()> {
@@ -48,6 +50,9 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     }
     if wanted(Section::Dynamics) {
         sections.push(("dynamics", crate::bench_dynamics::section(&args.reference)?));
+    }
+    if wanted(Section::Ddp) {
+        sections.push(("ddp", crate::bench_ddp::section()?));
     }
     for (name, body) in sections {
         println!("{body}");

@@ -1,11 +1,13 @@
 //! `cargo xtask <experiment>`: the experiment driver, the only binary of the workspace.
 
+mod bench_ddp;
 mod bench_dynamics;
 mod bench_ncp;
 mod benchmarks;
 mod distance;
 mod jsonl;
 mod lcp;
+mod optimize;
 mod step;
 
 use clap::{Parser, Subcommand};
@@ -40,6 +42,9 @@ enum Command {
     Step(step::StepArgs),
     /// Roll out a control sequence from a state; writes the trajectory and impulses as JSON or CSV.
     Simulate(step::SimulateArgs),
+    /// iLQG / DDP on the finger (or the unicycle benchmark): one line per pass behind a progress bar,
+    /// then passes, final cost and time; --out writes the trajectory and its linear policy as JSON.
+    Optimize(optimize::Args),
     /// Measure speed against error and rewrite the generated tables of docs/benchmarks.md.
     Benchmarks(benchmarks::Args),
 }
@@ -50,6 +55,7 @@ fn main() -> anyhow::Result<()> {
         Command::Lcp(args) => lcp::run(&args),
         Command::Step(args) => step::run_step(&args),
         Command::Simulate(args) => step::run_simulate(&args),
+        Command::Optimize(args) => optimize::run(&args),
         Command::Benchmarks(args) => benchmarks::run(&args),
     }
 }

@@ -35,7 +35,7 @@ pub struct SimArgs {
 }
 
 impl SimArgs {
-    fn simulator(&self) -> anyhow::Result<Simulator> {
+    pub fn simulator(&self) -> anyhow::Result<Simulator> {
         let scene = match &self.scene {
             None => Scene::flicking_finger(),
             Some(path) => {

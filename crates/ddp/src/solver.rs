@@ -73,7 +73,7 @@ impl Default for DdpSettings {
         DdpSettings {
             method: Method::Full,
             max_iterations: 200,
-            tol_cost: 1e-9,
+            tol_cost: 1e-12,
             tol_step: 1e-7,
             regularisation: Regularisation::State,
             mu_init: 1.0,
@@ -245,6 +245,18 @@ impl Ddp {
         x0: &[f64],
         controls: &[Vec<f64>],
     ) -> Result<Solution, DdpError> {
+        self.solve_observed(dynamics, cost, x0, controls, |_| {})
+    }
+
+    /// As [`Ddp::solve`], calling `observe` after every pass (for progress reports).
+    pub fn solve_observed<D: Dynamics, C: Cost>(
+        &self,
+        dynamics: &mut D,
+        cost: &C,
+        x0: &[f64],
+        controls: &[Vec<f64>],
+        mut observe: impl FnMut(&Iteration),
+    ) -> Result<Solution, DdpError> {
         let (n, m) = (dynamics.state_dim(), dynamics.control_dim());
         let s = &self.settings;
         crate::check("x0", x0, n)?;
@@ -348,6 +360,7 @@ impl Ddp {
                     alpha: 0.0,
                     step,
                 });
+                observe(&iterations[iterations.len() - 1]);
                 break;
             }
             // Forward pass with a line search.
@@ -385,6 +398,7 @@ impl Ddp {
                         alpha,
                         step,
                     });
+                    observe(&iterations[iterations.len() - 1]);
                     if reduction < s.tol_cost * (1.0 + total.abs()) {
                         status = Status::CostConverged;
                         // The gains of the final trajectory.
@@ -407,6 +421,7 @@ impl Ddp {
                         alpha: 0.0,
                         step,
                     });
+                    observe(&iterations[iterations.len() - 1]);
                     if mu > s.mu_max {
                         status = Status::NoDescent;
                         break;

@@ -1,1 +1,61 @@
-fn main() {}
+//! The optimiser on the flicking finger (SCENE.md, logistic sigma = 0.1, N = 75): one pass (backward pass
+//! with the steps' derivatives, then the forward pass with its line search) from a trajectory midway
+//! through a solve, for full DDP and for iLQR; and a full-DDP solve from zero controls.
+//! `cargo bench -p library`.
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use ddp::{Ddp, DdpSettings, Method};
+use dynamics::{Scene, Simulator, StepSettings};
+use library::{FingerDynamics, finger_cost};
+use std::hint::black_box;
+
+fn finger() -> FingerDynamics {
+    FingerDynamics::new(Simulator::new(Scene::flicking_finger(), StepSettings::default()).unwrap())
+}
+
+fn optimise(c: &mut Criterion) {
+    let cost = finger_cost(3, 2, 2);
+    let x0 = dynamics::FLICKING_FINGER_X0;
+    // A trajectory midway: 30 passes of full DDP from zero controls.
+    let midway = Ddp::new(DdpSettings {
+        max_iterations: 30,
+        ..DdpSettings::default()
+    })
+    .unwrap()
+    .solve(&mut finger(), &cost, &x0, &vec![vec![0.0; 2]; 75])
+    .unwrap()
+    .controls;
+    let mut group = c.benchmark_group("finger");
+    for (name, method) in [
+        ("full_ddp_pass", Method::Full),
+        ("ilqr_pass", Method::GaussNewton),
+    ] {
+        // One pass; Ddp::solve also rolls the start out once (75 steps, about 0.25 ms of the time).
+        let ddp = Ddp::new(DdpSettings {
+            method,
+            max_iterations: 1,
+            ..DdpSettings::default()
+        })
+        .unwrap();
+        group.bench_function(name, |b| {
+            b.iter(|| {
+                let mut d = finger();
+                black_box(ddp.solve(&mut d, &cost, &x0, &midway).unwrap().cost)
+            })
+        });
+    }
+    group.sample_size(10);
+    let ddp = Ddp::new(DdpSettings::default()).unwrap();
+    group.bench_function("full_ddp_solve_from_zero", |b| {
+        b.iter(|| {
+            let mut d = finger();
+            let sol = ddp
+                .solve(&mut d, &cost, &x0, &vec![vec![0.0; 2]; 75])
+                .unwrap();
+            black_box(sol.cost)
+        })
+    });
+}
+
+criterion_group!(benches, optimise);
+criterion_main!(benches);

@@ -41,7 +41,7 @@ pub struct FingerDynamics {
 }
 
 /// Prepared steps kept at most (a few trajectories' worth).
-const PREPARED_CAPACITY: usize = 4096;
+const PREPARED_CAPACITY: usize = 512;
 
 impl FingerDynamics {
     /// Wrap a simulator.

@@ -1,0 +1,210 @@
+//! `cargo xtask optimize`: iLQG / DDP on the flicking finger or on the unicycle benchmark, one line per
+//! pass behind a progress bar, the trajectory and its linear policy as JSON.
+
+use crate::step::SimArgs;
+use anyhow::Context;
+use ddp::problems::Unicycle;
+use ddp::{ControlLimits, Ddp, DdpSettings, Iteration, Method, Regularisation, Solution};
+use indicatif::{ProgressBar, ProgressStyle};
+use library::{FingerDynamics, finger_cost};
+use serde::Serialize;
+use std::path::PathBuf;
+use std::time::Instant;
+
+/// Which problem.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Problem {
+    /// The flicking finger of SCENE.md (cost -theta3 + 0.05 |u|^2).
+    Finger,
+    /// The unicycle benchmark: x0 = [-1, -1, 1], dt = 0.1, T = 75, 50|x|^2 + 0.5|u|^2, final 50|x|^2.
+    Unicycle,
+}
+
+/// Which backward pass.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum MethodArg {
+    /// Full second-order DDP (the dynamics' Hessians of V_x . f).
+    Full,
+    /// Gauss-Newton iLQR.
+    Ilqr,
+}
+
+/// Where the regularisation goes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum RegArg {
+    /// mu on the value Hessian (Q_uu + mu f_u^T f_u).
+    State,
+    /// mu on the controls (Q_uu + mu I).
+    Control,
+}
+
+/// Options of `cargo xtask optimize`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Problem to solve.
+    #[arg(long, value_enum, default_value = "finger")]
+    problem: Problem,
+    /// Simulator options (finger only).
+    #[command(flatten)]
+    sim: SimArgs,
+    /// Horizon N (default: 75).
+    #[arg(long, default_value_t = 75)]
+    horizon: usize,
+    /// Passes at most.
+    #[arg(long, default_value_t = 300)]
+    iterations: usize,
+    /// Backward pass.
+    #[arg(long, value_enum, default_value = "full")]
+    method: MethodArg,
+    /// Regularisation.
+    #[arg(long, value_enum, default_value = "state")]
+    regularisation: RegArg,
+    /// Box every control to [-L, L].
+    #[arg(long)]
+    limit: Option<f64>,
+    /// Initial state (comma-separated; default: SCENE.md's x0 or the unicycle's [-1, -1, 1]).
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
+    x0: Option<Vec<f64>>,
+    /// Write the trajectory, its policy and the passes as JSON here.
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// No per-pass lines.
+    #[arg(long)]
+    quiet: bool,
+}
+
+#[derive(Serialize)]
+struct Report<'a> {
+    problem: String,
+    method: String,
+    passes: usize,
+    status: String,
+    cost: f64,
+    seconds: f64,
+    solution: &'a Solution,
+}
+
+/// The optimiser's settings from the command line.
+fn settings(args: &Args, m: usize) -> DdpSettings {
+    DdpSettings {
+        method: match args.method {
+            MethodArg::Full => Method::Full,
+            MethodArg::Ilqr => Method::GaussNewton,
+        },
+        regularisation: match args.regularisation {
+            RegArg::State => Regularisation::State,
+            RegArg::Control => Regularisation::Control,
+        },
+        max_iterations: args.iterations,
+        control_limits: args.limit.map(|l| ControlLimits {
+            lower: vec![-l; m],
+            upper: vec![l; m],
+        }),
+        ..DdpSettings::default()
+    }
+}
+
+/// Run `cargo xtask optimize`.
+pub fn run(args: &Args) -> anyhow::Result<()> {
+    let bar = ProgressBar::new(args.iterations as u64);
+    bar.set_style(
+        ProgressStyle::with_template("{bar:40} {pos}/{len} passes  cost {msg}")
+            .expect("a valid template"),
+    );
+    let quiet = args.quiet;
+    let mut pass = 0usize;
+    let observe = |it: &Iteration| {
+        pass += 1;
+        bar.inc(1);
+        bar.set_message(format!("{:.9}", it.cost));
+        if !quiet {
+            let line = format!(
+                "pass {pass:4}  cost {:>18.12}  reduction {:>10.3e}  expected {:>10.3e}  mu {:>9.2e}  alpha {:>6.4}  step {:>9.2e}",
+                it.cost, it.reduction, it.expected, it.mu, it.alpha, it.step
+            );
+            if bar.is_hidden() {
+                println!("{line}");
+            } else {
+                bar.println(line);
+            }
+        }
+    };
+    let start = Instant::now();
+    let (solution, problem) = match args.problem {
+        Problem::Finger => {
+            let sim = args.sim.simulator()?;
+            let scene = sim.scene().clone();
+            let (n, m) = (scene.n_dof(), scene.n_controls);
+            let x0 = args
+                .x0
+                .clone()
+                .unwrap_or_else(|| dynamics::FLICKING_FINGER_X0.to_vec());
+            // The free body: the last unactuated joint (the finger's ellipse, theta3).
+            let free = (0..n)
+                .rev()
+                .find(|&j| scene.bodies[j].actuator.is_none())
+                .context("the scene has no unactuated joint to spin")?;
+            let cost = finger_cost(n, free, m);
+            let mut dynamics = FingerDynamics::new(sim);
+            let ddp = Ddp::new(settings(args, m))?;
+            let sol = ddp.solve_observed(
+                &mut dynamics,
+                &cost,
+                &x0,
+                &vec![vec![0.0; m]; args.horizon],
+                observe,
+            )?;
+            (sol, "finger")
+        }
+        Problem::Unicycle => {
+            let x0 = args.x0.clone().unwrap_or_else(|| Unicycle::X0.to_vec());
+            let ddp = Ddp::new(settings(args, 2))?;
+            let sol = ddp.solve_observed(
+                &mut Unicycle { dt: 0.1 },
+                &Unicycle::benchmark_cost(),
+                &x0,
+                &vec![vec![0.0; 2]; args.horizon],
+                observe,
+            )?;
+            (sol, "unicycle")
+        }
+    };
+    let seconds = start.elapsed().as_secs_f64();
+    bar.finish_and_clear();
+    let method = format!("{:?}", args.method).to_lowercase();
+    println!(
+        "{problem} ({method}): {:?} after {} passes, cost {:.12e}, {:.1} ms",
+        solution.status,
+        solution.iterations.len(),
+        solution.cost,
+        seconds * 1e3
+    );
+    if args.problem == Problem::Finger {
+        let n = solution.states[0].len() / 2;
+        let turned =
+            solution.states.last().expect("N + 1 states")[n - 1] - solution.states[0][n - 1];
+        let gain = solution
+            .gains
+            .iter()
+            .flatten()
+            .fold(0.0f64, |a, k| a.max(k.abs()));
+        println!(
+            "theta3 turned {turned:.4} rad over the horizon; largest feedback gain |K| {gain:.3e}"
+        );
+    }
+    if let Some(path) = &args.out {
+        let report = Report {
+            problem: problem.into(),
+            method,
+            passes: solution.iterations.len(),
+            status: format!("{:?}", solution.status),
+            cost: solution.cost,
+            seconds,
+            solution: &solution,
+        };
+        std::fs::write(path, serde_json::to_string(&report)?)
+            .with_context(|| format!("writing {}", path.display()))?;
+        println!("wrote {}", path.display());
+    }
+    Ok(())
+}
