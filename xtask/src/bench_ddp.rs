@@ -191,6 +191,59 @@ pub fn section() -> anyhow::Result<String> {
             profile = Some((sol.iterations.len(), secs, timed));
         }
     }
+    // One pass from a trajectory midway through a solve: a one-pass solve minus its initial rollout.
+    let cost = finger_cost(3, 2, 2);
+    let x0 = dynamics::FLICKING_FINGER_X0;
+    let midway = Ddp::new(DdpSettings {
+        max_iterations: 30,
+        ..DdpSettings::default()
+    })?
+    .solve(&mut finger(0.1), &cost, &x0, &vec![vec![0.0; 2]; 75])?
+    .controls;
+    let median_ms = |f: &mut dyn FnMut()| {
+        let mut t: Vec<f64> = (0..21)
+            .map(|_| {
+                let s = Instant::now();
+                f();
+                s.elapsed().as_secs_f64() * 1e3
+            })
+            .collect();
+        t.sort_by(f64::total_cmp);
+        t[10]
+    };
+    let rollout = median_ms(&mut || {
+        ddp::rollout(&mut finger(0.1), &cost, &x0, &midway).expect("the midway controls run");
+    });
+    out.push_str(&format!(
+        "
+One pass (backward pass with the steps' derivatives, then the forward pass with its line search) from the trajectory 30 full-DDP passes into the solve at sigma = 0.1, median of 21: a one-pass solve minus its initial rollout ({rollout:.2} ms for 75 steps).
+
+| method | pass (ms) | step size accepted | line-search trials |
+|---|---:|---:|---:|
+"
+    ));
+    for (name, method) in [("full DDP", Method::Full), ("iLQR", Method::GaussNewton)] {
+        let ddp = Ddp::new(DdpSettings {
+            method,
+            max_iterations: 1,
+            ..DdpSettings::default()
+        })?;
+        let mut alpha = 0.0;
+        let pass = median_ms(&mut || {
+            let sol = ddp
+                .solve(&mut finger(0.1), &cost, &x0, &midway)
+                .expect("one pass");
+            alpha = sol.iterations[0].alpha;
+        }) - rollout;
+        // Step sizes are 10^(-3 k / 10): the accepted one tells how many were tried.
+        let trials = if alpha > 0.0 {
+            format!("{}", (-alpha.log10() * 10.0 / 3.0).round() as i64 + 1)
+        } else {
+            "11 (none accepted)".into()
+        };
+        out.push_str(&format!("| {name} | {pass:.2} | {alpha:.3} | {trials} |
+"));
+    }
     if let Some((passes, secs, t)) = profile {
         let total = secs * 1e3;
         let second = t.second.as_secs_f64() * 1e3;

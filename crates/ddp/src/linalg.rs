@@ -44,49 +44,69 @@ pub fn cholesky_solve(l: &[f64], n: usize, b: &mut [f64], k: usize) {
     }
 }
 
-/// `A^T B` for row-major `A` (`r x a`) and `B` (`r x b`): an `a x b` matrix.
-pub fn mul_tn(a: &[f64], b: &[f64], r: usize, ca: usize, cb: usize) -> Vec<f64> {
-    let mut out = vec![0.0; ca * cb];
+/// `out = A^T B` for row-major `A` (`r x a`) and `B` (`r x b`).
+pub fn mul_tn_into(out: &mut [f64], a: &[f64], b: &[f64], r: usize, ca: usize, cb: usize) {
+    out[..ca * cb].iter_mut().for_each(|e| *e = 0.0);
     for k in 0..r {
+        let brow = &b[k * cb..(k + 1) * cb];
         for i in 0..ca {
             let aki = a[k * ca + i];
             if aki == 0.0 {
                 continue;
             }
-            for j in 0..cb {
-                out[i * cb + j] += aki * b[k * cb + j];
+            for (o, bv) in out[i * cb..(i + 1) * cb].iter_mut().zip(brow) {
+                *o += aki * bv;
             }
         }
     }
-    out
 }
 
-/// `A B` for row-major `A` (`r x k`) and `B` (`k x c`).
-pub fn mul(a: &[f64], b: &[f64], r: usize, k: usize, c: usize) -> Vec<f64> {
-    let mut out = vec![0.0; r * c];
+/// `out = A B` for row-major `A` (`r x k`) and `B` (`k x c`).
+pub fn mul_into(out: &mut [f64], a: &[f64], b: &[f64], r: usize, k: usize, c: usize) {
+    out[..r * c].iter_mut().for_each(|e| *e = 0.0);
     for i in 0..r {
         for l in 0..k {
             let ail = a[i * k + l];
             if ail == 0.0 {
                 continue;
             }
-            for j in 0..c {
-                out[i * c + j] += ail * b[l * c + j];
+            for (o, bv) in out[i * c..(i + 1) * c].iter_mut().zip(&b[l * c..(l + 1) * c]) {
+                *o += ail * bv;
             }
         }
     }
-    out
 }
 
-/// `A^T v` for row-major `A` (`r x c`).
-pub fn mul_tv(a: &[f64], v: &[f64], r: usize, c: usize) -> Vec<f64> {
-    let mut out = vec![0.0; c];
+/// `out = A^T v` for row-major `A` (`r x c`).
+pub fn mul_tv_into(out: &mut [f64], a: &[f64], v: &[f64], r: usize, c: usize) {
+    out[..c].iter_mut().for_each(|e| *e = 0.0);
     for k in 0..r {
         for i in 0..c {
             out[i] += a[k * c + i] * v[k];
         }
     }
-    out
+}
+
+/// Cholesky factor of `a` into `l` (see [`cholesky`]); false when `a` is not positive definite.
+pub fn cholesky_into(l: &mut [f64], a: &[f64], n: usize) -> bool {
+    l[..n * n].iter_mut().for_each(|e| *e = 0.0);
+    for i in 0..n {
+        for j in 0..=i {
+            let mut s = a[i * n + j];
+            for k in 0..j {
+                s -= l[i * n + k] * l[j * n + k];
+            }
+            if i == j {
+                if !(s > 0.0 && s.is_finite()) {
+                    return false;
+                }
+                l[i * n + i] = s.sqrt();
+            } else {
+                l[i * n + j] = s / l[j * n + j];
+            }
+        }
+    }
+    true
 }
 
 /// Replace the square `n x n` matrix by its symmetric part.

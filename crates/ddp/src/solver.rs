@@ -5,7 +5,9 @@
 
 use crate::boxqp;
 use crate::error::DdpError;
-use crate::linalg::{cholesky, cholesky_solve, mul, mul_tn, mul_tv, symmetrize};
+use crate::linalg::{
+    cholesky_into, cholesky_solve, mul_into, mul_tn_into, mul_tv_into, symmetrize,
+};
 use crate::model::{Cost, CostDerivatives, Dynamics};
 use serde::{Deserialize, Serialize};
 
@@ -480,6 +482,23 @@ impl Ddp {
         let nm = n + m;
         let (mut fx_buf, mut fu_buf, mut hess) =
             (vec![0.0; n * n], vec![0.0; n * m], vec![0.0; nm * nm]);
+        // Workspace, reused at every step.
+        let mut qx = vec![0.0; n];
+        let mut qu = vec![0.0; m];
+        let mut vxx_fx = vec![0.0; n * n];
+        let mut vxx_fu = vec![0.0; n * m];
+        let mut qxx = vec![0.0; n * n];
+        let mut qux = vec![0.0; m * n];
+        let mut quu = vec![0.0; m * m];
+        let mut qux_reg = vec![0.0; m * n];
+        let mut quu_reg = vec![0.0; m * m];
+        let mut reg_ux = vec![0.0; m * n];
+        let mut reg_uu = vec![0.0; m * m];
+        let mut chol = vec![0.0; m * m];
+        let mut quu_k = vec![0.0; m];
+        let mut quu_bk = vec![0.0; m * n];
+        let mut tmp_n = vec![0.0; n];
+        let mut tmp_nn = vec![0.0; n * n];
         for i in (0..horizon).rev() {
             cost.running_derivatives(i, &x[i], &u[i], &mut cd);
             let (fx, fu): (&[f64], &[f64]) = if full {
@@ -494,35 +513,28 @@ impl Ddp {
                 let l = lin.as_ref().expect("linearised above");
                 (&l.fx[i], &l.fu[i])
             };
-            let qx: Vec<f64> = cd
-                .lx
-                .iter()
-                .zip(mul_tv(fx, &vx, n, n))
-                .map(|(a, b)| a + b)
-                .collect();
-            let qu: Vec<f64> = cd
-                .lu
-                .iter()
-                .zip(mul_tv(fu, &vx, n, m))
-                .map(|(a, b)| a + b)
-                .collect();
-            let vxx_fx = mul(&vxx, fx, n, n, n);
-            let vxx_fu = mul(&vxx, fu, n, n, m);
-            let mut qxx = mul_tn(fx, &vxx_fx, n, n, n);
-            let mut qux = mul_tn(fu, &vxx_fx, n, m, n);
-            let mut quu = mul_tn(fu, &vxx_fu, n, m, m);
+            // Q's expansion (eq. 11).
+            mul_tv_into(&mut qx, fx, &vx, n, n);
+            mul_tv_into(&mut qu, fu, &vx, n, m);
             for a in 0..n {
-                for b in 0..n {
-                    qxx[a * n + b] += cd.lxx[a * n + b];
-                }
+                qx[a] += cd.lx[a];
             }
             for a in 0..m {
-                for b in 0..n {
-                    qux[a * n + b] += cd.lux[a * n + b];
-                }
-                for b in 0..m {
-                    quu[a * m + b] += cd.luu[a * m + b];
-                }
+                qu[a] += cd.lu[a];
+            }
+            mul_into(&mut vxx_fx, &vxx, fx, n, n, n);
+            mul_into(&mut vxx_fu, &vxx, fu, n, n, m);
+            mul_tn_into(&mut qxx, fx, &vxx_fx, n, n, n);
+            mul_tn_into(&mut qux, fu, &vxx_fx, n, m, n);
+            mul_tn_into(&mut quu, fu, &vxx_fu, n, m, m);
+            for (a, b) in qxx.iter_mut().zip(&cd.lxx) {
+                *a += b;
+            }
+            for (a, b) in qux.iter_mut().zip(&cd.lux) {
+                *a += b;
+            }
+            for (a, b) in quu.iter_mut().zip(&cd.luu) {
+                *a += b;
             }
             if full {
                 for a in 0..n {
@@ -540,19 +552,19 @@ impl Ddp {
                 }
             }
             symmetrize(&mut quu, m);
-            // The regularised pair (value Hessian + mu I) gives the policy; the value's update below uses
-            // the plain Q (Tassa, Erez and Todorov 2012).
-            let mut qux_reg = qux.clone();
-            let mut quu_reg = quu.clone();
+            // The regularised pair gives the policy; the value's update below uses the plain Q (Tassa,
+            // Erez and Todorov 2012).
+            qux_reg.copy_from_slice(&qux);
+            quu_reg.copy_from_slice(&quu);
             if mu > 0.0 {
                 match self.settings.regularisation {
                     Regularisation::State => {
-                        let futfx = mul_tn(fu, fx, n, m, n);
-                        let futfu = mul_tn(fu, fu, n, m, m);
-                        for (a, b) in qux_reg.iter_mut().zip(&futfx) {
+                        mul_tn_into(&mut reg_ux, fu, fx, n, m, n);
+                        mul_tn_into(&mut reg_uu, fu, fu, n, m, m);
+                        for (a, b) in qux_reg.iter_mut().zip(&reg_ux) {
                             *a += mu * b;
                         }
-                        for (a, b) in quu_reg.iter_mut().zip(&futfu) {
+                        for (a, b) in quu_reg.iter_mut().zip(&reg_uu) {
                             *a += mu * b;
                         }
                     }
@@ -565,13 +577,13 @@ impl Ddp {
             }
             let (k, big_k) = match &self.settings.control_limits {
                 None => {
-                    let Some(l) = cholesky(&quu_reg, m) else {
+                    if !cholesky_into(&mut chol, &quu_reg, m) {
                         return Ok(None);
-                    };
+                    }
                     let mut k: Vec<f64> = qu.iter().map(|e| -e).collect();
-                    cholesky_solve(&l, m, &mut k, 1);
+                    cholesky_solve(&chol, m, &mut k, 1);
                     let mut big_k: Vec<f64> = qux_reg.iter().map(|e| -e).collect();
-                    cholesky_solve(&l, m, &mut big_k, n);
+                    cholesky_solve(&chol, m, &mut big_k, n);
                     (k, big_k)
                 }
                 Some(lim) => {
@@ -598,26 +610,32 @@ impl Ddp {
                     (qp.x, big_k)
                 }
             };
-            // dV and the value's expansion at step i.
-            let quu_k = mul(&quu, &k, m, m, 1);
+            // dV and the value's expansion at step i:
+            // V_x = Q_x + K^T Q_uu k + K^T Q_u + Q_ux^T k, V_xx = Q_xx + K^T Q_uu K + K^T Q_ux + Q_ux^T K.
+            mul_into(&mut quu_k, &quu, &k, m, m, 1);
             dv[0] += k.iter().zip(&qu).map(|(a, b)| a * b).sum::<f64>();
             dv[1] += 0.5 * k.iter().zip(&quu_k).map(|(a, b)| a * b).sum::<f64>();
-            let kt_quu_k = mul_tv(&big_k, &quu_k, m, n);
-            let kt_qu = mul_tv(&big_k, &qu, m, n);
-            let quxt_k = mul_tv(&qux, &k, m, n);
-            for a in 0..n {
-                vx[a] = qx[a] + kt_quu_k[a] + kt_qu[a] + quxt_k[a];
+            for a in 0..m {
+                quu_k[a] += qu[a];
             }
-            let quu_bk = mul(&quu, &big_k, m, m, n);
-            let kt_quu_bk = mul_tn(&big_k, &quu_bk, m, n, n);
-            let kt_qux = mul_tn(&big_k, &qux, m, n, n);
+            mul_tv_into(&mut tmp_n, &big_k, &quu_k, m, n);
+            vx.copy_from_slice(&qx);
             for a in 0..n {
-                for b in 0..n {
-                    vxx[a * n + b] = qxx[a * n + b]
-                        + kt_quu_bk[a * n + b]
-                        + kt_qux[a * n + b]
-                        + kt_qux[b * n + a];
-                }
+                vx[a] += tmp_n[a];
+            }
+            mul_tv_into(&mut tmp_n, &qux, &k, m, n);
+            for a in 0..n {
+                vx[a] += tmp_n[a];
+            }
+            mul_into(&mut quu_bk, &quu, &big_k, m, m, n);
+            for (a, b) in quu_bk.iter_mut().zip(&qux) {
+                *a += 2.0 * b;
+            }
+            // K^T (Q_uu K + 2 Q_ux), symmetrised: K^T Q_uu K + K^T Q_ux + Q_ux^T K.
+            mul_tn_into(&mut tmp_nn, &big_k, &quu_bk, m, n, n);
+            vxx.copy_from_slice(&qxx);
+            for (a, b) in vxx.iter_mut().zip(&tmp_nn) {
+                *a += b;
             }
             symmetrize(&mut vxx, n);
             if !(vx.iter().chain(&vxx).all(|e| e.is_finite())) {

@@ -186,7 +186,7 @@ impl SecondOrder {
         cols: usize,
         kinds: &[RowKind],
         sigma: f64,
-    ) -> Vec<Vec<f64>> {
+    ) -> Vec<f64> {
         let n = self.n;
         let m = self.d.len();
         let cc = cols * cols;
@@ -223,16 +223,19 @@ impl SecondOrder {
             }
         };
         let row = |i: usize| &dp[i * cols..(i + 1) * cols];
-        let mut out = vec![vec![0.0; cc]; n + m];
+        let mut out = vec![0.0; (n + m) * cc];
+        let mut dl = [0.0; DIRECTIONS];
+        let mut hw = vec![0.0; cc];
+        let mut gw = [0.0; DIRECTIONS];
         // Equations of motion: sum_j M_ij (v'_j - v_j) - h r_i - sum_k J_ki lambda_k.
         for i in 0..n {
-            let e = &mut out[i];
+            let e = &mut out[i * cc..(i + 1) * cc];
             for j in 0..n {
                 let f = &self.M[i * n + j];
-                let mut dl = row(j).to_vec();
+                dl[..cols].copy_from_slice(row(j));
                 dl[n + j] -= 1.0;
                 add_q(e, f, p[j] - x[n + j]);
-                add_sym(e, &grad(f), &dl, 1.0);
+                add_sym(e, &grad(f), &dl[..cols], 1.0);
             }
             for k in 0..m {
                 let f = &self.jac[k * n + i];
@@ -252,8 +255,8 @@ impl SecondOrder {
             if kinds[k] == RowKind::Fixed {
                 continue;
             }
-            let mut hw = vec![0.0; cc];
-            let mut gw = vec![0.0; cols];
+            hw.iter_mut().for_each(|e| *e = 0.0);
+            gw.iter_mut().for_each(|e| *e = 0.0);
             let gd = grad(&self.d[k]);
             add_q(&mut hw, &self.d[k], 1.0 / h);
             for i in 0..n {
@@ -271,7 +274,7 @@ impl SecondOrder {
                     *g += f.re * d;
                 }
             }
-            let e = &mut out[n + k];
+            let e = &mut out[(n + k) * cc..(n + k + 1) * cc];
             match kinds[k] {
                 RowKind::Contact => e.copy_from_slice(&hw),
                 RowKind::Logistic => {
@@ -587,7 +590,7 @@ impl Simulator {
         let mut jac = vec![0.0; dim * dim];
         problem.evaluate(&z, &mut f, Some(&mut jac));
         let normal = matches!(model, Complementarity::Normal { .. });
-        let (p, H, mut lu, kinds) = if normal {
+        let (p, _, mut lu, kinds) = if normal {
             self.normal_system(&z, &f, &jac, n)?
         } else {
             self.complementarity_system(&z, &f, &jac, n)?
@@ -618,7 +621,7 @@ impl Simulator {
         Ok(Linearised {
             step,
             p,
-            H,
+            lu,
             dp,
             kinds,
         })
@@ -853,18 +856,6 @@ impl Simulator {
         let lin = self.linearise(x, u, Some(&ing))?;
         let derivatives = self.first_derivatives(&lin);
         let np = lin.p.len();
-        let mut transposed = vec![0.0; np * np];
-        for i in 0..np {
-            for j in 0..np {
-                transposed[j * np + i] = lin.H[i * np + j];
-            }
-        }
-        let mut adjoint = DenseLu::new(np, LinearSolver::Hand);
-        if !adjoint.factor(&transposed) {
-            return Err(DynamicsError::Unsupported(
-                "the step's Jacobian is singular at this state",
-            ));
-        }
         let model = self.settings().model;
         let structured = match model {
             Complementarity::Hard => Some(0.0),
@@ -888,20 +879,20 @@ impl Simulator {
                     .map(|j| D2::from_re(x[n + j]).derivative(n + j))
                     .collect();
                 let normal = matches!(model, Complementarity::Normal { .. });
-                system(n, h, &ing.lifted(), &v, &ps, &lin.kinds, normal)
+                let mut e = vec![0.0; np * cols * cols];
+                for (k, eq) in system(n, h, &ing.lifted(), &v, &ps, &lin.kinds, normal)
                     .iter()
-                    .map(|k| {
-                        let mut e = vec![0.0; cols * cols];
-                        if let Some(hm) = &k.v2.0 {
-                            for i in 0..cols {
-                                for j in 0..cols {
-                                    e[i * cols + j] = hm[(i, j)];
-                                }
+                    .zip(e.chunks_exact_mut(cols * cols))
+                {
+                    if let Some(hm) = &k.v2.0 {
+                        for i in 0..cols {
+                            for j in 0..cols {
+                                eq[i * cols + j] = hm[(i, j)];
                             }
                         }
-                        e
-                    })
-                    .collect()
+                    }
+                }
+                e
             }
         };
         Ok(SecondOrderStep {
@@ -910,7 +901,7 @@ impl Simulator {
             n,
             cols,
             h,
-            adjoint: std::cell::RefCell::new(adjoint),
+            adjoint: std::cell::RefCell::new(lin.lu),
             equations,
         })
     }
@@ -930,8 +921,9 @@ pub struct SecondOrderStep {
     cols: usize,
     h: f64,
     adjoint: std::cell::RefCell<DenseLu>,
-    /// The Hessian of each of the step's equations along `T` (row-major `cols x cols`).
-    equations: Vec<Vec<f64>>,
+    /// The Hessian of each of the step's equations along `T` (row-major `cols x cols` each, one after
+    /// the other).
+    equations: Vec<f64>,
 }
 
 impl std::fmt::Debug for SecondOrderStep {
@@ -953,15 +945,15 @@ impl SecondOrderStep {
                 problem: format!("needs {} finite entries", 2 * n),
             });
         }
-        let np = self.equations.len();
+        let np = self.equations.len() / (cols * cols);
         // g = (dx'/dp)^T c with x' = [q + h v'; v'], and mu from K_p^T mu = -g.
         let mut mu = vec![0.0; np];
         for i in 0..n {
             mu[i] = -(h * c[i] + c[n + i]);
         }
-        self.adjoint.borrow_mut().solve(&mut mu);
+        self.adjoint.borrow_mut().solve_transposed(&mut mu);
         let mut hess = vec![0.0; cols * cols];
-        for (e, w) in self.equations.iter().zip(&mu) {
+        for (e, w) in self.equations.chunks_exact(cols * cols).zip(&mu) {
             for (a, b) in hess.iter_mut().zip(e) {
                 *a += w * b;
             }
@@ -983,8 +975,8 @@ struct Linearised {
     step: Step,
     /// The unknowns of the step's equations at the solution ([`system`]).
     p: Vec<f64>,
-    /// `K_p`, row-major.
-    H: Vec<f64>,
+    /// The factors of `K_p`.
+    lu: DenseLu,
     /// `dp/d(x, u)`, row-major `len(p) x (2n + n_u)`.
     dp: Vec<f64>,
     /// Each complementarity row's kind.

@@ -218,6 +218,18 @@ impl Simulator {
         self.covariance.as_ref()
     }
 
+    /// Start the next solve from `z = [v'; lambda]` (for instance the solution of an earlier step at the
+    /// same state, which the solve then accepts without iterating).
+    pub fn set_warm_start(&mut self, z: &[f64]) -> Result<(), DynamicsError> {
+        check(
+            "warm start",
+            z,
+            self.scene.n_dof() + self.scene.n_constraints(),
+        )?;
+        self.warm = Some(z.to_vec());
+        Ok(())
+    }
+
     /// Forget the warm start (the next step starts from `[v; 0]`).
     pub fn reset_warm_start(&mut self) {
         self.warm = None;

@@ -38,9 +38,16 @@ pub enum TaskError {
 pub struct FingerDynamics {
     sim: Simulator,
     prepared: HashMap<Vec<u64>, SecondOrderStep>,
+    /// Solutions `[v'; lambda]` of recent steps: the derivatives at a state the forward pass has stepped
+    /// from start their solve there and need no iteration.
+    solutions: HashMap<Vec<u64>, Vec<f64>>,
 }
 
-/// Prepared steps kept at most (a few trajectories' worth).
+fn key(x: &[f64], u: &[f64]) -> Vec<u64> {
+    x.iter().chain(u).map(|e| e.to_bits()).collect()
+}
+
+/// Prepared steps (and step solutions) kept at most: a few trajectories' worth.
 const PREPARED_CAPACITY: usize = 512;
 
 impl FingerDynamics {
@@ -49,6 +56,7 @@ impl FingerDynamics {
         FingerDynamics {
             sim,
             prepared: HashMap::new(),
+            solutions: HashMap::new(),
         }
     }
 
@@ -60,7 +68,17 @@ impl FingerDynamics {
     /// The simulator, mutably (to change its covariance or reset its warm start); forgets prepared steps.
     pub fn simulator_mut(&mut self) -> &mut Simulator {
         self.prepared.clear();
+        self.solutions.clear();
         &mut self.sim
+    }
+
+    /// Warm-start the simulator from the stored solution of a step from `(x, u)`, if any.
+    fn resume(&mut self, x: &[f64], u: &[f64]) {
+        if let Some(z) = self.solutions.get(&key(x, u)) {
+            self.sim
+                .set_warm_start(z)
+                .expect("a stored solution has the scene's size");
+        }
     }
 }
 
@@ -81,6 +99,13 @@ impl Dynamics for FingerDynamics {
             return Err(TaskError::NotConverged(s.info.status));
         }
         next.copy_from_slice(&s.x_next);
+        if self.solutions.len() >= PREPARED_CAPACITY {
+            self.solutions.clear();
+        }
+        let n = self.sim.scene().n_dof();
+        let mut z = s.x_next[n..].to_vec();
+        z.extend_from_slice(&s.lambda);
+        self.solutions.insert(key(x, u), z);
         Ok(())
     }
 
@@ -91,6 +116,7 @@ impl Dynamics for FingerDynamics {
         fx: &mut [f64],
         fu: &mut [f64],
     ) -> Result<(), TaskError> {
+        self.resume(x, u);
         let (_, d) = self.sim.step_with_derivatives(x, u)?;
         fx.copy_from_slice(&d.fx);
         fu.copy_from_slice(&d.fu);
@@ -111,11 +137,12 @@ impl Dynamics for FingerDynamics {
         fu: &mut [f64],
         hess: &mut [f64],
     ) -> Result<(), TaskError> {
-        let key: Vec<u64> = x.iter().chain(u).map(|e| e.to_bits()).collect();
+        let key = key(x, u);
         if !self.prepared.contains_key(&key) {
             if self.prepared.len() >= PREPARED_CAPACITY {
                 self.prepared.clear();
             }
+            self.resume(x, u);
             let so = self.sim.second_order_step(x, u)?;
             if so.step.info.status != ncp::Status::Converged {
                 return Err(TaskError::NotConverged(so.step.info.status));

@@ -65,7 +65,12 @@ impl DenseLu {
             LinearSolver::Faer => {
                 let req =
                     factor::lu_in_place_scratch::<usize, f64>(n, n, Par::Seq, Default::default())
-                        .or(solve::solve_in_place_scratch::<usize, f64>(n, 1, Par::Seq));
+                        .or(solve::solve_in_place_scratch::<usize, f64>(n, 1, Par::Seq))
+                        .or(solve::solve_transpose_in_place_scratch::<usize, f64>(
+                            n,
+                            1,
+                            Par::Seq,
+                        ));
                 Backend::Faer {
                     lu: Mat::zeros(n, n),
                     perm: vec![0; n],
@@ -159,6 +164,67 @@ impl DenseLu {
                     let u = lu[(k, k)];
                     u.is_finite() && u.abs() > tiny
                 })
+            }
+        }
+    }
+
+    /// Overwrite `rhs` with the solution of `a^T y = rhs` for the last matrix factored successfully (the
+    /// adjoint systems of the dynamics' second derivatives reuse the factors of the forward one).
+    pub fn solve_transposed(&mut self, rhs: &mut [f64]) {
+        let n = self.n;
+        debug_assert_eq!(rhs.len(), n);
+        match &mut self.backend {
+            Backend::Hand { lu, perm } => {
+                // P a = L U, so a^T y = U^T L^T (P y): solve U^T w = rhs, L^T t = w, then y = P^T t.
+                let mut t = [0.0f64; 32];
+                let mut heap = Vec::new();
+                let t: &mut [f64] = if n <= 32 {
+                    &mut t[..n]
+                } else {
+                    heap.resize(n, 0.0);
+                    &mut heap
+                };
+                for i in 0..n {
+                    let mut s = rhs[i];
+                    for j in 0..i {
+                        s -= lu[j * n + i] * t[j];
+                    }
+                    t[i] = s / lu[i * n + i];
+                }
+                for i in (0..n).rev() {
+                    let mut s = t[i];
+                    for j in i + 1..n {
+                        s -= lu[j * n + i] * t[j];
+                    }
+                    t[i] = s;
+                }
+                for i in 0..n {
+                    rhs[perm[i]] = t[i];
+                }
+            }
+            Backend::Faer {
+                lu,
+                perm,
+                perm_inv,
+                rhs: b,
+                buffer,
+            } => {
+                for i in 0..n {
+                    b[(i, 0)] = rhs[i];
+                }
+                let stack = MemStack::new(buffer);
+                let p = faer::perm::PermRef::new_checked(perm, perm_inv, n);
+                solve::solve_transpose_in_place(
+                    lu.as_ref(),
+                    lu.as_ref(),
+                    p,
+                    b.as_mut(),
+                    Par::Seq,
+                    stack,
+                );
+                for i in 0..n {
+                    rhs[i] = b[(i, 0)];
+                }
             }
         }
     }
@@ -275,6 +341,25 @@ fn substitute(lu: &[f64], perm: &[usize], b: &[f64], x: &mut [f64]) {
 mod tests {
     use super::*;
     use rand::{Rng, SeedableRng};
+
+    #[test]
+    fn the_transposed_solve_solves_the_transposed_system() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(13);
+        for n in [1usize, 2, 5, 9, 33] {
+            let a: Vec<f64> = (0..n * n).map(|_| rng.random_range(-1.0..1.0)).collect();
+            let c: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
+            for solver in [LinearSolver::Hand, LinearSolver::Faer] {
+                let mut lu = DenseLu::new(n, solver);
+                assert!(lu.factor(&a));
+                let mut y = c.clone();
+                lu.solve_transposed(&mut y);
+                for j in 0..n {
+                    let r: f64 = (0..n).map(|i| a[i * n + j] * y[i]).sum();
+                    assert!((r - c[j]).abs() < 1e-10 * (1.0 + c[j].abs()), "n = {n}: {r} vs {}", c[j]);
+                }
+            }
+        }
+    }
 
     #[test]
     fn solving_many_columns_at_once_matches_one_at_a_time() {
