@@ -241,8 +241,10 @@ One pass (backward pass with the steps' derivatives, then the forward pass with 
         } else {
             "11 (none accepted)".into()
         };
-        out.push_str(&format!("| {name} | {pass:.2} | {alpha:.3} | {trials} |
-"));
+        out.push_str(&format!(
+            "| {name} | {pass:.2} | {alpha:.3} | {trials} |
+"
+        ));
     }
     if let Some((passes, secs, t)) = profile {
         let total = secs * 1e3;

@@ -34,7 +34,11 @@ fn main() -> Result<(), ddp::DdpError> {
                 solution.iterations.len(),
                 solution.cost,
                 seconds * 1e3,
-                solution.states[Unicycle::HORIZON].iter().map(|e| e * e).sum::<f64>().sqrt()
+                solution.states[Unicycle::HORIZON]
+                    .iter()
+                    .map(|e| e * e)
+                    .sum::<f64>()
+                    .sqrt()
             );
         }
     }

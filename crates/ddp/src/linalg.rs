@@ -70,7 +70,10 @@ pub fn mul_into(out: &mut [f64], a: &[f64], b: &[f64], r: usize, k: usize, c: us
             if ail == 0.0 {
                 continue;
             }
-            for (o, bv) in out[i * c..(i + 1) * c].iter_mut().zip(&b[l * c..(l + 1) * c]) {
+            for (o, bv) in out[i * c..(i + 1) * c]
+                .iter_mut()
+                .zip(&b[l * c..(l + 1) * c])
+            {
                 *o += ail * bv;
             }
         }

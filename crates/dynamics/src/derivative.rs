@@ -17,6 +17,7 @@
 
 use crate::constraint::{Constraints, ContactFrame};
 use crate::error::DynamicsError;
+use crate::jet::Jet;
 use crate::kinematics::{Kinematics, Scalar};
 use crate::scene::Scene;
 use crate::step::{Complementarity, Simulator, Step, check, row_sigmas};
@@ -110,7 +111,8 @@ type D1 = DualSVec64<DIRECTIONS>;
 type D2 = Dual2SVec64<DIRECTIONS>;
 type Q1 = DualSVec64<3>;
 type Q2 = Dual2SVec64<3>;
-type R2 = Dual2SVec64<6>;
+/// The forces over `(q, v)` (three joints at most).
+type R2 = Jet<6>;
 
 /// The step's ingredients at `(x, u)` in some scalar type: `M`, `r + B u`, `J`, `d` and each row's noise.
 struct Ingredients<T> {
@@ -140,7 +142,7 @@ impl SecondOrder {
     /// The first-order ingredients over all of `y`.
     fn first_order(&self) -> Ingredients<D1> {
         let q = |v: &[Q2]| v.iter().map(truncate).collect::<Vec<_>>();
-        let mut r: Vec<D1> = self.r.iter().map(truncate).collect();
+        let mut r: Vec<D1> = self.r.iter().map(jet_first).collect();
         for &(j, k) in &self.actuated {
             r[j] += D1::from_re(0.0).derivative(k);
         }
@@ -157,7 +159,7 @@ impl SecondOrder {
     /// All of it lifted to second-order duals over `y`.
     fn lifted(&self) -> Ingredients<D2> {
         let q = |v: &[Q2]| v.iter().map(lift_second).collect::<Vec<_>>();
-        let mut r: Vec<D2> = self.r.iter().map(lift_second).collect();
+        let mut r: Vec<D2> = self.r.iter().map(jet_second).collect();
         for &(j, k) in &self.actuated {
             r[j] += D2::from_re(0.0).derivative(k);
         }
@@ -242,11 +244,10 @@ impl SecondOrder {
                 add_q(e, f, -p[n + k]);
                 add_sym(e, &grad(f), row(n + k), -1.0);
             }
-            if let Some(hm) = &self.r[i].v2.0 {
-                for a in 0..2 * n {
-                    for b in 0..2 * n {
-                        e[a * cols + b] -= h * hm[(a, b)];
-                    }
+            let hm = &self.r[i].h;
+            for a in 0..2 * n {
+                for b in 0..2 * n {
+                    e[a * cols + b] -= h * hm[a][b];
                 }
             }
         }
@@ -296,6 +297,28 @@ impl SecondOrder {
         }
         out
     }
+}
+
+/// The first-order part of a jet over the leading entries of `y`.
+fn jet_first<const N: usize>(d: &Jet<N>) -> D1 {
+    let mut grad = SVector::<f64, DIRECTIONS>::zeros();
+    for i in 0..N {
+        grad[i] = d.g[i];
+    }
+    D1::new(d.re, Derivative::some(grad))
+}
+
+/// A jet over the leading entries of `y` as a second-order dual over all of `y`.
+fn jet_second<const N: usize>(d: &Jet<N>) -> D2 {
+    let mut grad = SMatrix::<f64, 1, DIRECTIONS>::zeros();
+    let mut hess = SMatrix::<f64, DIRECTIONS, DIRECTIONS>::zeros();
+    for i in 0..N {
+        grad[(0, i)] = d.g[i];
+        for j in 0..N {
+            hess[(i, j)] = d.h[i][j];
+        }
+    }
+    D2::new(d.re, Derivative::some(grad), Derivative::some(hess))
 }
 
 /// The first-order part of a second-order dual over the leading entries of `y`.
@@ -518,10 +541,8 @@ impl Simulator {
         let q: Vec<Q2> = (0..n).map(|i| Q2::from_re(x[i]).derivative(i)).collect();
         let kin3 = Kinematics::new(scene, &q);
         let cons = Constraints::new(scene, &kin3, &q)?;
-        let qv: Vec<R2> = (0..2 * n)
-            .map(|i| R2::from_re(x[i]).derivative(i))
-            .collect();
-        let u6: Vec<R2> = u.iter().map(|&e| R2::from_re(e)).collect();
+        let qv: Vec<R2> = (0..2 * n).map(|i| R2::variable(x[i], i)).collect();
+        let u6: Vec<R2> = u.iter().map(|&e| R2::from(e)).collect();
         let r = Kinematics::new(scene, &qv[..n]).applied_forces(scene, &qv[n..], &u6);
         let sigma = self.noise(&cons.jacobian, cons.d.len());
         Ok(SecondOrder {

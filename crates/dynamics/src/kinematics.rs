@@ -12,26 +12,52 @@
 
 use crate::scene::Scene;
 use num_dual::DualNum;
+use std::ops::{Add, AddAssign, Mul, Neg, Sub};
 
-/// The scalars the kinematics run on: `f64` and `num-dual`'s forward-mode types over `f64`.
+/// The scalars the step's equations run on: `f64` and `num-dual`'s forward-mode types over `f64` (the
+/// contact geometry needs `DualNum`).
 pub trait Scalar: DualNum<Primitive = f64> + Copy {}
 impl<T: DualNum<Primitive = f64> + Copy> Scalar for T {}
 
+/// The arithmetic the kinematics, the mass matrix and the forces need: a ring over `f64` with sine and
+/// cosine. Every [`Scalar`] is one; so is the crate's own second-order [`Jet`](crate::jet::Jet), which
+/// the Hessians of the forces run on.
+pub trait Ring:
+    Copy
+    + From<f64>
+    + Add<Output = Self>
+    + Sub<Output = Self>
+    + Mul<Output = Self>
+    + Neg<Output = Self>
+    + Add<f64, Output = Self>
+    + Mul<f64, Output = Self>
+    + AddAssign
+{
+    /// `(sin x, cos x)`.
+    fn sin_and_cos(self) -> (Self, Self);
+}
+
+impl<T: DualNum<Primitive = f64> + Copy> Ring for T {
+    fn sin_and_cos(self) -> (Self, Self) {
+        self.sin_cos()
+    }
+}
+
 /// `(-x_y, x_x)`.
-pub fn perp<T: Scalar>(x: [T; 2]) -> [T; 2] {
+pub fn perp<T: Ring>(x: [T; 2]) -> [T; 2] {
     [-x[1], x[0]]
 }
 
-fn rotate<T: Scalar>(phi: T, x: [f64; 2]) -> [T; 2] {
-    let (s, c) = phi.sin_cos();
+fn rotate<T: Ring>(phi: T, x: [f64; 2]) -> [T; 2] {
+    let (s, c) = phi.sin_and_cos();
     [c * x[0] - s * x[1], s * x[0] + c * x[1]]
 }
 
-fn add<T: Scalar>(a: [T; 2], b: [T; 2]) -> [T; 2] {
+fn add<T: Ring>(a: [T; 2], b: [T; 2]) -> [T; 2] {
     [a[0] + b[0], a[1] + b[1]]
 }
 
-fn sub<T: Scalar>(a: [T; 2], b: [T; 2]) -> [T; 2] {
+fn sub<T: Ring>(a: [T; 2], b: [T; 2]) -> [T; 2] {
     [a[0] - b[0], a[1] - b[1]]
 }
 
@@ -46,7 +72,7 @@ pub struct Kinematics<T = f64> {
     pub centre: Vec<[T; 2]>,
 }
 
-impl<T: Scalar> Kinematics<T> {
+impl<T: Ring> Kinematics<T> {
     /// Forward kinematics (parents come before children in a scene).
     pub fn new(scene: &Scene, q: &[T]) -> Self {
         let n = scene.n_dof();

@@ -25,6 +25,7 @@
 mod constraint;
 mod derivative;
 mod error;
+mod jet;
 mod kinematics;
 mod scene;
 mod step;
@@ -32,7 +33,8 @@ mod step;
 pub use constraint::{Constraints, ContactFrame};
 pub use derivative::{SecondOrderStep, StepDerivatives, step_residual};
 pub use error::{DynamicsError, SceneProblem};
-pub use kinematics::{Kinematics, Scalar};
+pub use jet::Jet;
+pub use kinematics::{Kinematics, Ring, Scalar};
 pub use scene::{
     Body, BodySpec, ContactPair, ContactSpec, FLICKING_FINGER_X0, JointSpec, Scene, SceneSpec,
 };

@@ -355,7 +355,11 @@ mod tests {
                 lu.solve_transposed(&mut y);
                 for j in 0..n {
                     let r: f64 = (0..n).map(|i| a[i * n + j] * y[i]).sum();
-                    assert!((r - c[j]).abs() < 1e-10 * (1.0 + c[j].abs()), "n = {n}: {r} vs {}", c[j]);
+                    assert!(
+                        (r - c[j]).abs() < 1e-10 * (1.0 + c[j].abs()),
+                        "n = {n}: {r} vs {}",
+                        c[j]
+                    );
                 }
             }
         }
