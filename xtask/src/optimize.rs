@@ -59,6 +59,9 @@ pub struct Args {
     /// Regularisation.
     #[arg(long, value_enum, default_value = "state")]
     regularisation: RegArg,
+    /// Start each line search near the last accepted step size.
+    #[arg(long)]
+    adaptive_line_search: bool,
     /// Box every control to [-L, L].
     #[arg(long)]
     limit: Option<f64>,
@@ -96,6 +99,7 @@ fn settings(args: &Args, m: usize) -> DdpSettings {
             RegArg::Control => Regularisation::Control,
         },
         max_iterations: args.iterations,
+        adaptive_line_search: args.adaptive_line_search,
         control_limits: args.limit.map(|l| ControlLimits {
             lower: vec![-l; m],
             upper: vec![l; m],

@@ -66,6 +66,10 @@ pub struct DdpSettings {
     pub accept_ratio: f64,
     /// Step sizes tried, `10^(-3 k / (steps - 1))` for `k = 0..steps`.
     pub line_search_steps: usize,
+    /// Start each line search two sizes above the last accepted one instead of at 1 (fewer rejected
+    /// trials when the model keeps overshooting, as Gauss-Newton does on the finger); a search that finds
+    /// nothing falls back to the full range next time.
+    pub adaptive_line_search: bool,
     /// Optional box limits on the controls.
     pub control_limits: Option<ControlLimits>,
 }
@@ -84,6 +88,7 @@ impl Default for DdpSettings {
             mu_factor: 1.6,
             accept_ratio: 0.0,
             line_search_steps: 11,
+            adaptive_line_search: false,
             control_limits: None,
         }
     }
@@ -306,6 +311,7 @@ impl Ddp {
             .collect();
         let mut mu = s.mu_init;
         let mut dmu = 1.0f64;
+        let mut first_alpha = 0usize;
         let mut iterations = Vec::new();
         let mut gains = vec![vec![0.0; m * n]; horizon];
         let mut k_prev = vec![vec![0.0; m]; horizon];
@@ -367,7 +373,7 @@ impl Ddp {
             }
             // Forward pass with a line search.
             let mut accepted = None;
-            for &alpha in &alphas {
+            for (index, &alpha) in alphas.iter().enumerate().skip(first_alpha) {
                 let expected = -alpha * (bp.dv[0] + alpha * bp.dv[1]);
                 if let Ok((xn, un, cn)) = self.forward(dynamics, cost, &x, &u, &bp.k, &gains, alpha)
                 {
@@ -379,9 +385,15 @@ impl Ddp {
                     };
                     if ratio > s.accept_ratio && reduction.is_finite() {
                         accepted = Some((xn, un, cn, alpha, expected, reduction));
+                        if s.adaptive_line_search {
+                            first_alpha = index.saturating_sub(2);
+                        }
                         break;
                     }
                 }
+            }
+            if accepted.is_none() {
+                first_alpha = 0;
             }
             match accepted {
                 Some((xn, un, cn, alpha, expected, reduction)) => {

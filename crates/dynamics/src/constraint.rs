@@ -5,7 +5,7 @@
 //! are exact.
 
 use crate::error::DynamicsError;
-use crate::kinematics::{Kinematics, Scalar, perp};
+use crate::kinematics::{Kinematics, Ring, perp};
 use crate::scene::Scene;
 use geometry::signed_distance_dual;
 
@@ -35,7 +35,7 @@ pub struct Constraints<T = f64> {
     pub contacts: Vec<ContactFrame>,
 }
 
-impl<T: Scalar> Constraints<T> {
+impl<T: Ring> Constraints<T> {
     /// Evaluate every row at the configuration `kin` (positions `q`).
     pub fn new(scene: &Scene, kin: &Kinematics<T>, q: &[T]) -> Result<Self, DynamicsError> {
         let n = scene.n_dof();
@@ -44,7 +44,7 @@ impl<T: Scalar> Constraints<T> {
         let mut jacobian = Vec::with_capacity(scene.n_constraints() * n);
         for (j, b) in scene.bodies.iter().enumerate() {
             if let Some([lo, hi]) = b.limits {
-                d.push(q[j] - lo);
+                d.push(q[j] + (-lo));
                 jacobian.extend((0..n).map(|k| if k == j { one } else { zero }));
                 d.push(-q[j] + hi);
                 jacobian.extend((0..n).map(|k| if k == j { -one } else { zero }));
@@ -55,9 +55,9 @@ impl<T: Scalar> Constraints<T> {
             let pose = |i: usize| [kin.centre[i][0], kin.centre[i][1], kin.phi[i]];
             let (a, b) = (&scene.bodies[pair.a], &scene.bodies[pair.b]);
             let c = signed_distance_dual(&a.shape, pose(pair.a), &b.shape, pose(pair.b))?;
-            let re = |p: [T; 2]| [p[0].re(), p[1].re()];
+            let re = |p: [T; 2]| [p[0].value(), p[1].value()];
             contacts.push(ContactFrame {
-                distance: c.distance.re(),
+                distance: c.distance.value(),
                 normal: re(c.normal),
                 point_a: re(c.point_a),
                 point_b: re(c.point_b),

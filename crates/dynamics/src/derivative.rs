@@ -18,7 +18,7 @@
 use crate::constraint::{Constraints, ContactFrame};
 use crate::error::DynamicsError;
 use crate::jet::Jet;
-use crate::kinematics::{Kinematics, Scalar};
+use crate::kinematics::{Kinematics, Ring, Scalar};
 use crate::scene::Scene;
 use crate::step::{Complementarity, Simulator, Step, check, row_sigmas};
 use nalgebra::{SMatrix, SVector};
@@ -110,7 +110,8 @@ const DIRECTIONS: usize = 8;
 type D1 = DualSVec64<DIRECTIONS>;
 type D2 = Dual2SVec64<DIRECTIONS>;
 type Q1 = DualSVec64<3>;
-type Q2 = Dual2SVec64<3>;
+/// The geometry and kinematics over the joint angles (three joints at most).
+type Q2 = Jet<3>;
 /// The forces over `(q, v)` (three joints at most).
 type R2 = Jet<6>;
 
@@ -141,7 +142,7 @@ struct SecondOrder {
 impl SecondOrder {
     /// The first-order ingredients over all of `y`.
     fn first_order(&self) -> Ingredients<D1> {
-        let q = |v: &[Q2]| v.iter().map(truncate).collect::<Vec<_>>();
+        let q = |v: &[Q2]| v.iter().map(jet_first).collect::<Vec<_>>();
         let mut r: Vec<D1> = self.r.iter().map(jet_first).collect();
         for &(j, k) in &self.actuated {
             r[j] += D1::from_re(0.0).derivative(k);
@@ -158,7 +159,7 @@ impl SecondOrder {
 
     /// All of it lifted to second-order duals over `y`.
     fn lifted(&self) -> Ingredients<D2> {
-        let q = |v: &[Q2]| v.iter().map(lift_second).collect::<Vec<_>>();
+        let q = |v: &[Q2]| v.iter().map(jet_second).collect::<Vec<_>>();
         let mut r: Vec<D2> = self.r.iter().map(jet_second).collect();
         for &(j, k) in &self.actuated {
             r[j] += D2::from_re(0.0).derivative(k);
@@ -192,22 +193,12 @@ impl SecondOrder {
         let n = self.n;
         let m = self.d.len();
         let cc = cols * cols;
-        let grad = |d: &Q2| -> [f64; 3] {
-            let mut g = [0.0; 3];
-            if let Some(v) = &d.v1.0 {
-                for i in 0..n {
-                    g[i] = v[(0, i)];
-                }
-            }
-            g
-        };
+        let grad = |d: &Q2| -> [f64; 3] { d.g };
         // out += scale * H_q(f) in the leading n x n block.
         let add_q = |out: &mut [f64], f: &Q2, scale: f64| {
-            if let Some(hm) = &f.v2.0 {
-                for i in 0..n {
-                    for j in 0..n {
-                        out[i * cols + j] += scale * hm[(i, j)];
-                    }
+            for i in 0..n {
+                for j in 0..n {
+                    out[i * cols + j] += scale * f.h[i][j];
                 }
             }
         };
@@ -319,17 +310,6 @@ fn jet_second<const N: usize>(d: &Jet<N>) -> D2 {
         }
     }
     D2::new(d.re, Derivative::some(grad), Derivative::some(hess))
-}
-
-/// The first-order part of a second-order dual over the leading entries of `y`.
-fn truncate<const N: usize>(d: &Dual2SVec64<N>) -> D1 {
-    let mut grad = SVector::<f64, DIRECTIONS>::zeros();
-    if let Some(g) = &d.v1.0 {
-        for i in 0..N {
-            grad[i] = g[(0, i)];
-        }
-    }
-    D1::new(d.re, Derivative::some(grad))
 }
 
 /// The unknowns at the solution, the Jacobian of the equations in them (and its factors), each row's kind.
@@ -448,29 +428,9 @@ fn lift_first(d: &Q1) -> D1 {
     D1::new(d.re, Derivative::some(grad))
 }
 
-/// A second-order dual over the first `N` entries of `y` as one over all of `y`: `y_i = y0_i + s_i`
-/// exactly, so its gradient and Hessian fill the leading block.
-fn lift_second<const N: usize>(d: &Dual2SVec64<N>) -> D2 {
-    let mut grad = SMatrix::<f64, 1, DIRECTIONS>::zeros();
-    let mut hess = SMatrix::<f64, DIRECTIONS, DIRECTIONS>::zeros();
-    if let Some(g) = &d.v1.0 {
-        for i in 0..N {
-            grad[(0, i)] = g[(0, i)];
-        }
-    }
-    if let Some(hm) = &d.v2.0 {
-        for i in 0..N {
-            for j in 0..N {
-                hess[(i, j)] = hm[(i, j)];
-            }
-        }
-    }
-    D2::new(d.re, Derivative::some(grad), Derivative::some(hess))
-}
-
 impl Simulator {
     /// Each row's noise in the scalar type of `jac`: the model's constant, or eq. (18) through `J(q)`.
-    fn noise<T: Scalar>(&self, jac: &[T], m: usize) -> Vec<T> {
+    fn noise<T: Ring>(&self, jac: &[T], m: usize) -> Vec<T> {
         let sigma = match self.settings().model {
             Complementarity::Hard => 0.0,
             Complementarity::Logistic { sigma } | Complementarity::Normal { sigma } => sigma,
@@ -538,7 +498,7 @@ impl Simulator {
     fn second_order_ingredients(&self, x: &[f64], u: &[f64]) -> Result<SecondOrder, DynamicsError> {
         let scene = self.scene();
         let n = scene.n_dof();
-        let q: Vec<Q2> = (0..n).map(|i| Q2::from_re(x[i]).derivative(i)).collect();
+        let q: Vec<Q2> = (0..n).map(|i| Q2::variable(x[i], i)).collect();
         let kin3 = Kinematics::new(scene, &q);
         let cons = Constraints::new(scene, &kin3, &q)?;
         let qv: Vec<R2> = (0..2 * n).map(|i| R2::variable(x[i], i)).collect();

@@ -4,7 +4,7 @@
 //! for the one place where second derivatives of many operations are needed.
 
 use crate::kinematics::Ring;
-use std::ops::{Add, AddAssign, Mul, Neg, Sub};
+use std::ops::{Add, AddAssign, Div, Mul, Neg, Sub, SubAssign};
 
 /// `re + g . s + 1/2 s^T h s`, to second order in `s`.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -128,10 +128,42 @@ impl<const N: usize> Mul<f64> for Jet<N> {
     }
 }
 
+impl<const N: usize> SubAssign for Jet<N> {
+    fn sub_assign(&mut self, o: Self) {
+        *self += -o;
+    }
+}
+
+impl<const N: usize> Div for Jet<N> {
+    type Output = Self;
+    fn div(self, o: Self) -> Self {
+        let r = 1.0 / o.re;
+        self * o.chain(r, -r * r, 2.0 * r * r * r)
+    }
+}
+
+impl<const N: usize> Div<f64> for Jet<N> {
+    type Output = Self;
+    fn div(self, o: f64) -> Self {
+        self * (1.0 / o)
+    }
+}
+
 impl<const N: usize> Ring for Jet<N> {
+    const ORDER: usize = 2;
+
+    fn value(&self) -> f64 {
+        self.re
+    }
+
     fn sin_and_cos(self) -> (Self, Self) {
         let (s, c) = self.re.sin_cos();
         (self.chain(s, c, -s), self.chain(c, -s, -c))
+    }
+
+    fn square_root(self) -> Self {
+        let r = self.re.sqrt();
+        self.chain(r, 0.5 / r, -0.25 / (r * self.re))
     }
 }
 
@@ -143,7 +175,9 @@ mod tests {
     /// A polynomial-and-trigonometric expression in any ring.
     fn expr<T: Ring>(x: T, y: T) -> T {
         let (s, c) = (x * y + 0.3).sin_and_cos();
-        s * x * 2.0 + c * c * y - (x + y * x) * (-y) + T::from(1.5)
+        let mut out = s * x * 2.0 + c * c * y - (x + y * x) * (-y) + T::from(1.5);
+        out -= (x * x + 2.0).square_root() / (y + 3.0) + x / 4.0;
+        out
     }
 
     #[test]

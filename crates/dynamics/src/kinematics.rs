@@ -12,36 +12,15 @@
 
 use crate::scene::Scene;
 use num_dual::DualNum;
-use std::ops::{Add, AddAssign, Mul, Neg, Sub};
 
 /// The scalars the step's equations run on: `f64` and `num-dual`'s forward-mode types over `f64` (the
 /// contact geometry needs `DualNum`).
 pub trait Scalar: DualNum<Primitive = f64> + Copy {}
 impl<T: DualNum<Primitive = f64> + Copy> Scalar for T {}
 
-/// The arithmetic the kinematics, the mass matrix and the forces need: a ring over `f64` with sine and
-/// cosine. Every [`Scalar`] is one; so is the crate's own second-order [`Jet`](crate::jet::Jet), which
-/// the Hessians of the forces run on.
-pub trait Ring:
-    Copy
-    + From<f64>
-    + Add<Output = Self>
-    + Sub<Output = Self>
-    + Mul<Output = Self>
-    + Neg<Output = Self>
-    + Add<f64, Output = Self>
-    + Mul<f64, Output = Self>
-    + AddAssign
-{
-    /// `(sin x, cos x)`.
-    fn sin_and_cos(self) -> (Self, Self);
-}
-
-impl<T: DualNum<Primitive = f64> + Copy> Ring for T {
-    fn sin_and_cos(self) -> (Self, Self) {
-        self.sin_cos()
-    }
-}
+/// The arithmetic the kinematics, the mass matrix, the forces and the contact geometry need (geometry's
+/// [`Forward`]): every [`Scalar`], and the crate's fused second-order [`Jet`](crate::Jet).
+pub use geometry::Forward as Ring;
 
 /// `(-x_y, x_x)`.
 pub fn perp<T: Ring>(x: [T; 2]) -> [T; 2] {

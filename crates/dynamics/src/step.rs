@@ -11,7 +11,7 @@
 
 use crate::constraint::{Constraints, ContactFrame};
 use crate::error::DynamicsError;
-use crate::kinematics::{Kinematics, Scalar};
+use crate::kinematics::{Kinematics, Ring};
 use crate::scene::Scene;
 use ncp::{
     ErmSettings, ErmSolver, Info, LemkeSettings, LinearMcp, NcpFunction, NewtonSettings,
@@ -124,7 +124,7 @@ pub struct StateCovariance {
 
 /// Per-row noise from eq. (18), floored at `1e-12` of the model's constant sigma (a row the covariance does
 /// not reach stays smooth rather than hard). Generic so that the derivatives see `sigma_i(q)` through `J(q)`.
-pub(crate) fn row_sigmas<T: Scalar>(
+pub(crate) fn row_sigmas<T: Ring>(
     cov: &StateCovariance,
     jacobian: &[T],
     n: usize,
@@ -142,8 +142,8 @@ pub(crate) fn row_sigmas<T: Scalar>(
                     var += row[i] * row[j] * (cov.q[i * n + j] / (h * h) + cov.v[i * n + j]);
                 }
             }
-            if var.re() > floor * floor {
-                var.sqrt()
+            if var.value() > floor * floor {
+                var.square_root()
             } else {
                 T::from(floor)
             }

@@ -26,6 +26,7 @@ mod ellipse;
 mod error;
 mod gap;
 mod parry_shape;
+mod scalar;
 mod signed_distance;
 
 pub use ellipse::Ellipse;
@@ -33,6 +34,7 @@ pub use error::GeometryError;
 pub use parry_shape::{ParryEstimate, parry_estimate};
 pub use parry2d_f64;
 pub use parry2d_f64::math::{Pose, Vector};
+pub use scalar::Forward;
 pub use signed_distance::{
     Contact, ContactDerivatives, DualContact, POSE_COORDINATES, PoseCoords, pose_coords,
     pose_from_coords, signed_distance, signed_distance_coords, signed_distance_dual,

@@ -10,8 +10,8 @@
 //! `phi*_p = -F_phi_p / F_phi_phi` and `hess d = -(F_pp - F_phi_p F_phi_p^T / F_phi_phi)`.
 
 use crate::gap::{Gap, GapBody, GapJet, GapMinimum};
+use crate::scalar::Forward;
 use crate::{Ellipse, GeometryError};
-use num_dual::DualNum;
 use parry2d_f64::math::{Pose, Vector};
 
 /// Pose coordinates `[x, y, theta]` of a planar body.
@@ -248,15 +248,15 @@ pub struct DualContact<T> {
 /// The minimising angle is found in `f64`, then refined by Newton steps on `F'(phi, p) = 0` in the dual type:
 /// each step doubles the number of exact derivative orders (one step is exact to first order, two to third),
 /// because the real part is already converged.
-pub fn signed_distance_dual<T: DualNum<Primitive = f64> + Copy>(
+pub fn signed_distance_dual<T: Forward>(
     a: &Ellipse,
     pose_a: [T; 3],
     b: &Ellipse,
     pose_b: [T; 3],
 ) -> Result<DualContact<T>, GeometryError> {
-    let re = |p: [T; 3]| [p[0].re(), p[1].re(), p[2].re()];
+    let re = |p: [T; 3]| [p[0].value(), p[1].value(), p[2].value()];
     let base = signed_distance_coords(a, re(pose_a), b, re(pose_b))?;
-    let steps = match T::NDERIV {
+    let steps = match T::ORDER {
         0 => 0,
         1 => 1,
         2 | 3 => 2,
@@ -266,7 +266,7 @@ pub fn signed_distance_dual<T: DualNum<Primitive = f64> + Copy>(
     let mut phi = T::from(base.jet.phi);
     if base.jet.ddf > f64::EPSILON * (base.jet.a.rho + base.jet.b.rho + base.jet.f.abs()) {
         for _ in 0..steps {
-            let (s, c) = phi.sin_cos();
+            let (s, c) = phi.sin_and_cos();
             let (_, ha, dha, ddha) = dual_support(a, pose_a[2], c, s);
             let (_, hb, dhb, ddhb) = dual_support(b, pose_b[2], c, s);
             let f = c * delta[0] + s * delta[1] + ha + hb;
@@ -276,7 +276,7 @@ pub fn signed_distance_dual<T: DualNum<Primitive = f64> + Copy>(
             phi -= df / ddf;
         }
     }
-    let (s, c) = phi.sin_cos();
+    let (s, c) = phi.sin_and_cos();
     let (la, ha, _, _) = dual_support(a, pose_a[2], c, s);
     let (lb, hb, _, _) = dual_support(b, pose_b[2], -c, -s);
     let f = c * delta[0] + s * delta[1] + ha + hb;
@@ -291,19 +291,14 @@ pub fn signed_distance_dual<T: DualNum<Primitive = f64> + Copy>(
 
 /// World-frame support offset, value, and first two angle derivatives of an ellipse at orientation
 /// `theta` along the world direction `(c, s)`.
-fn dual_support<T: DualNum<Primitive = f64> + Copy>(
-    e: &Ellipse,
-    theta: T,
-    c: T,
-    s: T,
-) -> ([T; 2], T, T, T) {
-    let (st, ct) = theta.sin_cos();
+fn dual_support<T: Forward>(e: &Ellipse, theta: T, c: T, s: T) -> ([T; 2], T, T, T) {
+    let (st, ct) = theta.sin_and_cos();
     let bc = c * ct + s * st;
     let bs = s * ct - c * st;
     let (a2, b2) = (e.a() * e.a(), e.b() * e.b());
-    let h = (bc * bc * a2 + bs * bs * b2).sqrt();
+    let h = (bc * bc * a2 + bs * bs * b2).square_root();
     let dh = bc * bs * (b2 - a2) / h;
-    let rho = h.powi(3).recip() * (a2 * b2);
+    let rho = T::from(a2 * b2) / (h * h * h);
     let (lx, ly) = (bc * a2 / h, bs * b2 / h);
     ([ct * lx - st * ly, st * lx + ct * ly], h, dh, rho - h)
 }
