@@ -191,6 +191,40 @@ pub fn section() -> anyhow::Result<String> {
             profile = Some((sol.iterations.len(), secs, timed));
         }
     }
+    // The pass count is sensitive to the path (a non-convex problem: rounding-level changes pick another
+    // sequence of regularisations and sometimes another local minimum), so also over perturbed starts.
+    let mut passes = Vec::new();
+    let mut times = Vec::new();
+    let mut costs = Vec::new();
+    for k in 0..8 {
+        let mut x0 = dynamics::FLICKING_FINGER_X0.to_vec();
+        x0[0] += 0.01 * (k as f64 - 3.5);
+        x0[5] += 0.02 * (k % 3) as f64;
+        let t = Instant::now();
+        let sol = Ddp::new(settings(Method::Full, Regularisation::State))?.solve(
+            &mut finger(0.1),
+            &finger_cost(3, 2, 2),
+            &x0,
+            &vec![vec![0.0; 2]; 75],
+        )?;
+        times.push(t.elapsed().as_secs_f64() * 1e3);
+        passes.push(sol.iterations.len());
+        costs.push(sol.cost);
+    }
+    let mut sorted_passes = passes.clone();
+    sorted_passes.sort();
+    times.sort_by(f64::total_cmp);
+    costs.sort_by(f64::total_cmp);
+    out.push_str(&format!(
+        "\nFull DDP at sigma = 0.1 from 8 starts around x0 (theta1 shifted by -0.035..0.035, dtheta3 by 0, 0.02, 0.04): passes {passes:?} (median {}), solve time median {:.0} ms (min {:.0}, max {:.0}), cost from {:.3} to {:.3}.\n",
+        sorted_passes[4],
+        times[4],
+        times[0],
+        times[7],
+        costs[0],
+        costs[7]
+    ));
+
     // One pass from a trajectory midway through a solve: a one-pass solve minus its initial rollout.
     let cost = finger_cost(3, 2, 2);
     let x0 = dynamics::FLICKING_FINGER_X0;

@@ -17,7 +17,7 @@
 
 use crate::constraint::{Constraints, ContactFrame};
 use crate::error::DynamicsError;
-use crate::jet::Jet;
+use crate::jet::{Jet, Jet1};
 use crate::kinematics::{Kinematics, Ring, Scalar};
 use crate::scene::Scene;
 use crate::step::{Complementarity, Simulator, Step, check, row_sigmas};
@@ -109,7 +109,8 @@ const DIRECTIONS: usize = 8;
 
 type D1 = DualSVec64<DIRECTIONS>;
 type D2 = Dual2SVec64<DIRECTIONS>;
-type Q1 = DualSVec64<3>;
+/// The first derivatives' ingredients, all of one chunk of `y` at once.
+type F1 = Jet1<DIRECTIONS>;
 /// The geometry and kinematics over the joint angles (three joints at most).
 type Q2 = Jet<3>;
 /// The forces over `(q, v)` (three joints at most).
@@ -299,6 +300,11 @@ fn jet_first<const N: usize>(d: &Jet<N>) -> D1 {
     D1::new(d.re, Derivative::some(grad))
 }
 
+/// A first-order jet over `y` (or a chunk of it) as the vector dual of the step's equations.
+fn jet1_dual(d: &F1) -> D1 {
+    D1::new(d.re, Derivative::some(SVector::from(d.g)))
+}
+
 /// A jet over the leading entries of `y` as a second-order dual over all of `y`.
 fn jet_second<const N: usize>(d: &Jet<N>) -> D2 {
     let mut grad = SMatrix::<f64, 1, DIRECTIONS>::zeros();
@@ -417,17 +423,6 @@ fn system<T: Scalar>(
     out
 }
 
-/// A first-order dual over the joint angles as one over `y`, whose first entries are those angles.
-fn lift_first(d: &Q1) -> D1 {
-    let mut grad = SVector::<f64, DIRECTIONS>::zeros();
-    if let Some(g) = &d.eps.0 {
-        for i in 0..3 {
-            grad[i] = g[i];
-        }
-    }
-    D1::new(d.re, Derivative::some(grad))
-}
-
 impl Simulator {
     /// Each row's noise in the scalar type of `jac`: the model's constant, or eq. (18) through `J(q)`.
     fn noise<T: Ring>(&self, jac: &[T], m: usize) -> Vec<T> {
@@ -451,45 +446,31 @@ impl Simulator {
     ) -> Result<Ingredients<D1>, DynamicsError> {
         let scene = self.scene();
         let n = scene.n_dof();
-        let ys: Vec<D1> = x
+        let ys: Vec<F1> = x
             .iter()
             .chain(u)
             .enumerate()
             .map(|(j, &e)| {
-                let d = D1::from_re(e);
                 if (first..first + DIRECTIONS).contains(&j) {
-                    d.derivative(j - first)
+                    F1::variable(e, j - first)
                 } else {
-                    d
+                    F1::from(e)
                 }
             })
             .collect();
         let (xs, us) = ys.split_at(2 * n);
         let kin = Kinematics::new(scene, &xs[..n]);
         let r = kin.applied_forces(scene, &xs[n..], us);
-        let (M, jac, d, contacts) = if first == 0 && n <= 3 {
-            let q: Vec<Q1> = (0..n).map(|i| Q1::from_re(x[i]).derivative(i)).collect();
-            let kin3 = Kinematics::new(scene, &q);
-            let cons = Constraints::new(scene, &kin3, &q)?;
-            let lift = |v: &[Q1]| v.iter().map(lift_first).collect::<Vec<_>>();
-            (
-                lift(&kin3.mass_matrix(scene)),
-                lift(&cons.jacobian),
-                lift(&cons.d),
-                cons.contacts,
-            )
-        } else {
-            let cons = Constraints::new(scene, &kin, &xs[..n])?;
-            (kin.mass_matrix(scene), cons.jacobian, cons.d, cons.contacts)
-        };
-        let sigma = self.noise(&jac, d.len());
+        let cons = Constraints::new(scene, &kin, &xs[..n])?;
+        let sigma = self.noise(&cons.jacobian, cons.d.len());
+        let dual = |v: &[F1]| v.iter().map(jet1_dual).collect::<Vec<_>>();
         Ok(Ingredients {
-            contacts,
-            M,
-            r,
-            jac,
-            d,
-            sigma,
+            contacts: cons.contacts,
+            M: dual(&kin.mass_matrix(scene)),
+            r: dual(&r),
+            jac: dual(&cons.jacobian),
+            d: dual(&cons.d),
+            sigma: dual(&sigma),
         })
     }
 

@@ -200,3 +200,167 @@ mod tests {
         }
     }
 }
+
+/// `re + g . s`, to first order in `s`: the first-order counterpart of [`Jet`] (the step's first
+/// derivatives run the geometry and the forces on it).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Jet1<const N: usize> {
+    /// Value.
+    pub re: f64,
+    /// Gradient.
+    pub g: [f64; N],
+}
+
+impl<const N: usize> Jet1<N> {
+    /// The variable `s_i` at value `re`.
+    pub fn variable(re: f64, i: usize) -> Self {
+        let mut j = Jet1::from(re);
+        j.g[i] = 1.0;
+        j
+    }
+
+    fn chain(&self, f0: f64, f1: f64) -> Self {
+        let mut out = Jet1::from(f0);
+        for i in 0..N {
+            out.g[i] = f1 * self.g[i];
+        }
+        out
+    }
+}
+
+impl<const N: usize> From<f64> for Jet1<N> {
+    fn from(re: f64) -> Self {
+        Jet1 { re, g: [0.0; N] }
+    }
+}
+
+impl<const N: usize> AddAssign for Jet1<N> {
+    fn add_assign(&mut self, o: Self) {
+        self.re += o.re;
+        for i in 0..N {
+            self.g[i] += o.g[i];
+        }
+    }
+}
+
+impl<const N: usize> SubAssign for Jet1<N> {
+    fn sub_assign(&mut self, o: Self) {
+        self.re -= o.re;
+        for i in 0..N {
+            self.g[i] -= o.g[i];
+        }
+    }
+}
+
+impl<const N: usize> Add for Jet1<N> {
+    type Output = Self;
+    fn add(mut self, o: Self) -> Self {
+        self += o;
+        self
+    }
+}
+
+impl<const N: usize> Sub for Jet1<N> {
+    type Output = Self;
+    fn sub(mut self, o: Self) -> Self {
+        self -= o;
+        self
+    }
+}
+
+impl<const N: usize> Neg for Jet1<N> {
+    type Output = Self;
+    fn neg(mut self) -> Self {
+        self.re = -self.re;
+        for i in 0..N {
+            self.g[i] = -self.g[i];
+        }
+        self
+    }
+}
+
+impl<const N: usize> Mul for Jet1<N> {
+    type Output = Self;
+    fn mul(self, o: Self) -> Self {
+        let mut out = Jet1::from(self.re * o.re);
+        for i in 0..N {
+            out.g[i] = self.re * o.g[i] + o.re * self.g[i];
+        }
+        out
+    }
+}
+
+impl<const N: usize> Div for Jet1<N> {
+    type Output = Self;
+    fn div(self, o: Self) -> Self {
+        let r = 1.0 / o.re;
+        self * o.chain(r, -r * r)
+    }
+}
+
+impl<const N: usize> Add<f64> for Jet1<N> {
+    type Output = Self;
+    fn add(mut self, o: f64) -> Self {
+        self.re += o;
+        self
+    }
+}
+
+impl<const N: usize> Mul<f64> for Jet1<N> {
+    type Output = Self;
+    fn mul(mut self, o: f64) -> Self {
+        self.re *= o;
+        for i in 0..N {
+            self.g[i] *= o;
+        }
+        self
+    }
+}
+
+impl<const N: usize> Div<f64> for Jet1<N> {
+    type Output = Self;
+    fn div(self, o: f64) -> Self {
+        self * (1.0 / o)
+    }
+}
+
+impl<const N: usize> Ring for Jet1<N> {
+    const ORDER: usize = 1;
+
+    fn value(&self) -> f64 {
+        self.re
+    }
+
+    fn sin_and_cos(self) -> (Self, Self) {
+        let (s, c) = self.re.sin_cos();
+        (self.chain(s, c), self.chain(c, -s))
+    }
+
+    fn square_root(self) -> Self {
+        let r = self.re.sqrt();
+        self.chain(r, 0.5 / r)
+    }
+}
+
+#[cfg(test)]
+mod first_order_tests {
+    use super::*;
+
+    #[test]
+    fn a_first_order_jet_is_the_gradient_part_of_a_second_order_one() {
+        let f = |x: f64, y: f64| {
+            let (a, b) = (Jet1::<2>::variable(x, 0), Jet1::<2>::variable(y, 1));
+            let (c, d) = (Jet::<2>::variable(x, 0), Jet::<2>::variable(y, 1));
+            let e1 = (a * b + 0.3).sin_and_cos().0 / (a * a + 1.0).square_root() - b * 2.0;
+            let e2 = (c * d + 0.3).sin_and_cos().0 / (c * c + 1.0).square_root() - d * 2.0;
+            (e1, e2)
+        };
+        for &(x, y) in &[(0.3, -1.2), (2.0, 0.7)] {
+            let (a, b) = f(x, y);
+            assert_eq!(a.re, b.re);
+            for i in 0..2 {
+                assert!((a.g[i] - b.g[i]).abs() < 1e-15);
+            }
+        }
+    }
+}

@@ -33,7 +33,7 @@ mod step;
 pub use constraint::{Constraints, ContactFrame};
 pub use derivative::{SecondOrderStep, StepDerivatives, step_residual};
 pub use error::{DynamicsError, SceneProblem};
-pub use jet::Jet;
+pub use jet::{Jet, Jet1};
 pub use kinematics::{Kinematics, Ring, Scalar};
 pub use scene::{
     Body, BodySpec, ContactPair, ContactSpec, FLICKING_FINGER_X0, JointSpec, Scene, SceneSpec,
