@@ -7,6 +7,7 @@ mod dynamics_laws;
 mod dynamics_reference;
 mod geometry_laws;
 mod geometry_reference;
+mod library_files;
 mod ncp_functions;
 mod ncp_solvers;
 mod support;

@@ -1,7 +1,34 @@
-//! The flicking finger as an optimal control task (SCENE.md "The task"): the simulator behind
-//! [`ddp::Dynamics`], the task's cost, and (to come) the receding-horizon library and its global policy
-//! (paper sections IV-C and V).
+//! The flicking finger as an optimal control task and its controller library (paper sections IV-C and V):
+//! the simulator behind [`ddp::Dynamics`] and the task's cost ([`FingerDynamics`], [`finger_cost`]);
+//! receding-horizon library building ([`Library::build`]); the global nearest-neighbour policy of eq. (20)
+//! ([`Policy`]); library files with a versioned, checksummed header ([`Library::save`],
+//! [`Library::load`]). The only library crate that touches the disk.
 
+mod build;
+mod error;
+mod file;
+mod policy;
 mod task;
 
+pub use build::{Entry, LibrarySettings, Model, build_entries, free_joint};
+pub use error::LibraryError;
+pub use file::{Library, MAGIC, VERSION};
+pub use policy::Policy;
 pub use task::{CONTROL_WEIGHT, FingerDynamics, TaskError, finger_cost};
+
+/// `Err` unless `v` has `len` finite entries.
+pub(crate) fn check(what: &'static str, v: &[f64], len: usize) -> Result<(), LibraryError> {
+    if v.len() != len {
+        return Err(LibraryError::Input {
+            what,
+            problem: format!("has {} entries, expected {len}", v.len()),
+        });
+    }
+    if let Some(i) = v.iter().position(|e| !e.is_finite()) {
+        return Err(LibraryError::Input {
+            what,
+            problem: format!("entry {i} is {}", v[i]),
+        });
+    }
+    Ok(())
+}

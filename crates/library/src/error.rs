@@ -1,0 +1,81 @@
+//! The crate's one error type. Building, loading and using a library fail with a reason a user can act on;
+//! a file that is truncated, corrupt, foreign or built for another scene is refused whole.
+
+use thiserror::Error;
+
+/// Errors of the task, the library and its files.
+#[derive(Debug, Error)]
+pub enum LibraryError {
+    /// A setting out of its range.
+    #[error("setting {name} = {value} is out of range: {expected}")]
+    Setting {
+        /// The setting.
+        name: &'static str,
+        /// Its value.
+        value: f64,
+        /// What it must be.
+        expected: &'static str,
+    },
+    /// A state or control of the wrong size or with a non-finite entry.
+    #[error("{what}: {problem}")]
+    Input {
+        /// Which input.
+        what: &'static str,
+        /// What is wrong.
+        problem: String,
+    },
+    /// The simulator refused the scene or the settings.
+    #[error(transparent)]
+    Dynamics(#[from] dynamics::DynamicsError),
+    /// The optimiser failed where nothing can be retried.
+    #[error("trajectory {trajectory}: {source}")]
+    Optimiser {
+        /// The trajectory of the library being built.
+        trajectory: usize,
+        /// The optimiser's error.
+        #[source]
+        source: ddp::DdpError,
+    },
+    /// Reading or writing a file.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: String,
+        /// The error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The file does not start with the library's magic bytes.
+    #[error("not a controller library (no SLCPLIB header)")]
+    NotALibrary,
+    /// A library file of another format version.
+    #[error("library format version {found}, this build reads version {expected}")]
+    Version {
+        /// The file's version.
+        found: u32,
+        /// The version this build reads.
+        expected: u32,
+    },
+    /// The file ends before its payload does.
+    #[error("truncated library file: {found} bytes of payload, the header announces {expected}")]
+    Truncated {
+        /// Announced payload length.
+        expected: u64,
+        /// Bytes present.
+        found: u64,
+    },
+    /// The payload's checksum does not match the header's.
+    #[error("corrupt library file: checksum {found:08x}, the header says {expected:08x}")]
+    Corrupt {
+        /// Checksum in the header.
+        expected: u32,
+        /// Checksum of the payload.
+        found: u32,
+    },
+    /// The payload does not decode, or decodes to something inconsistent.
+    #[error("invalid library: {0}")]
+    Invalid(String),
+    /// The library was built for another scene than the one it is used with.
+    #[error("the library was built for another scene ({0})")]
+    SceneMismatch(String),
+}

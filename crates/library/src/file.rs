@@ -1,0 +1,183 @@
+//! A library and its file: a versioned header, the scene and settings it was built with, the controllers,
+//! and a checksum. The layout (little-endian):
+//!
+//! ```text
+//! b"SLCPLIB\0" | version: u32 | payload length: u64 | CRC-32 of the payload: u32 | payload
+//! ```
+//!
+//! with the payload the `bincode` (2, standard configuration) encoding of the scene (as its TOML text),
+//! the settings and the controllers. Loading checks all of it before anything is decoded, then the decoded
+//! library for consistency; a file that fails any check is refused whole.
+
+use crate::build::{Entry, LibrarySettings, build_entries, free_joint};
+use crate::error::LibraryError;
+use crate::policy::Policy;
+use dynamics::{Scene, SceneSpec};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// The file's magic bytes.
+pub const MAGIC: &[u8; 8] = b"SLCPLIB\0";
+/// The format version this build writes and reads.
+pub const VERSION: u32 = 1;
+const HEADER: usize = 8 + 4 + 8 + 4;
+
+/// A trajectory library: the scene and settings it was built with and its local controllers.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Library {
+    scene: Scene,
+    /// How it was built.
+    pub settings: LibrarySettings,
+    /// The controllers, in the order they were built.
+    pub entries: Vec<Entry>,
+}
+
+#[derive(Serialize, Deserialize)]
+struct Payload {
+    scene_toml: String,
+    settings: LibrarySettings,
+    entries: Vec<Entry>,
+}
+
+fn io(path: &Path) -> impl Fn(std::io::Error) -> LibraryError + '_ {
+    move |source| LibraryError::Io {
+        path: path.display().to_string(),
+        source,
+    }
+}
+
+impl Library {
+    /// Build a library on `scene` (paper section IV-C); `progress` sees each controller as it is added.
+    pub fn build(
+        scene: &Scene,
+        settings: &LibrarySettings,
+        progress: impl FnMut(usize, &Entry),
+    ) -> Result<Self, LibraryError> {
+        let entries = build_entries(scene, settings, progress)?;
+        Ok(Library {
+            scene: scene.clone(),
+            settings: settings.clone(),
+            entries,
+        })
+    }
+
+    /// The scene it was built for.
+    pub fn scene(&self) -> &Scene {
+        &self.scene
+    }
+
+    /// The global policy (eq. 20) over its controllers.
+    pub fn policy(&self) -> Result<Policy, LibraryError> {
+        let s = &self.scene;
+        Policy::new(&self.entries, s.n_state(), s.n_controls, free_joint(s)?)
+    }
+
+    /// `Err` unless the library was built for `scene`.
+    pub fn check_scene(&self, scene: &Scene) -> Result<(), LibraryError> {
+        if self.scene.spec() != scene.spec() {
+            return Err(LibraryError::SceneMismatch(format!(
+                "built for {} bodies and {} contact pairs, used with {} and {}, or the same counts with other values",
+                self.scene.spec().bodies.len(),
+                self.scene.spec().contacts.len(),
+                scene.spec().bodies.len(),
+                scene.spec().contacts.len()
+            )));
+        }
+        Ok(())
+    }
+
+    /// The file's bytes.
+    pub fn to_bytes(&self) -> Result<Vec<u8>, LibraryError> {
+        let payload = Payload {
+            scene_toml: toml::to_string(self.scene.spec())
+                .map_err(|e| LibraryError::Invalid(format!("the scene does not serialise: {e}")))?,
+            settings: self.settings.clone(),
+            entries: self.entries.clone(),
+        };
+        let body = bincode::serde::encode_to_vec(&payload, bincode::config::standard())
+            .map_err(|e| LibraryError::Invalid(format!("encoding: {e}")))?;
+        let mut out = Vec::with_capacity(HEADER + body.len());
+        out.extend_from_slice(MAGIC);
+        out.extend_from_slice(&VERSION.to_le_bytes());
+        out.extend_from_slice(&(body.len() as u64).to_le_bytes());
+        out.extend_from_slice(&crc32fast::hash(&body).to_le_bytes());
+        out.extend_from_slice(&body);
+        Ok(out)
+    }
+
+    /// Decode and check a library file's bytes.
+    pub fn from_bytes(bytes: &[u8]) -> Result<Self, LibraryError> {
+        if bytes.len() < MAGIC.len() || &bytes[..MAGIC.len()] != MAGIC {
+            return Err(LibraryError::NotALibrary);
+        }
+        if bytes.len() < HEADER {
+            return Err(LibraryError::Truncated {
+                expected: HEADER as u64,
+                found: bytes.len() as u64,
+            });
+        }
+        let word = |at: usize| u32::from_le_bytes(bytes[at..at + 4].try_into().expect("4 bytes"));
+        let version = word(8);
+        if version != VERSION {
+            return Err(LibraryError::Version {
+                found: version,
+                expected: VERSION,
+            });
+        }
+        let length = u64::from_le_bytes(bytes[12..20].try_into().expect("8 bytes"));
+        let body = &bytes[HEADER..];
+        if (body.len() as u64) != length {
+            return Err(if (body.len() as u64) < length {
+                LibraryError::Truncated {
+                    expected: length,
+                    found: body.len() as u64,
+                }
+            } else {
+                LibraryError::Invalid(format!(
+                    "{} bytes after the payload",
+                    body.len() as u64 - length
+                ))
+            });
+        }
+        let expected = word(20);
+        let found = crc32fast::hash(body);
+        if found != expected {
+            return Err(LibraryError::Corrupt { expected, found });
+        }
+        let (payload, used): (Payload, usize) =
+            bincode::serde::decode_from_slice(body, bincode::config::standard())
+                .map_err(|e| LibraryError::Invalid(format!("decoding: {e}")))?;
+        if used != body.len() {
+            return Err(LibraryError::Invalid(
+                "trailing bytes in the payload".into(),
+            ));
+        }
+        let spec: SceneSpec = toml::from_str(&payload.scene_toml)
+            .map_err(|e| LibraryError::Invalid(format!("its scene: {e}")))?;
+        let scene = Scene::new(spec)?;
+        payload.settings.validate(&scene)?;
+        let library = Library {
+            scene,
+            settings: payload.settings,
+            entries: payload.entries,
+        };
+        // Sizes and finiteness of every controller.
+        library.policy()?;
+        Ok(library)
+    }
+
+    /// Write the library to `path` (through a temporary file renamed into place, so that a crash never
+    /// leaves half a library under the name).
+    pub fn save(&self, path: &Path) -> Result<(), LibraryError> {
+        let bytes = self.to_bytes()?;
+        let tmp = path.with_extension("partial");
+        std::fs::write(&tmp, &bytes).map_err(io(&tmp))?;
+        std::fs::rename(&tmp, path).map_err(io(path))
+    }
+
+    /// Read and check a library file.
+    pub fn load(path: &Path) -> Result<Self, LibraryError> {
+        let bytes = std::fs::read(path).map_err(io(path))?;
+        Library::from_bytes(&bytes)
+    }
+}

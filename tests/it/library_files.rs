@@ -1,0 +1,169 @@
+//! The trajectory library: receding-horizon building is reproducible, the nearest-neighbour policy of
+//! eq. (20) respects the ellipse's symmetry and returns each stored controller's own law, and library files
+//! survive a round trip while truncated, corrupt, foreign, future or mismatched files are refused whole.
+
+use dynamics::Scene;
+use library::{Library, LibraryError, LibrarySettings, MAGIC};
+
+/// A small library (a few short trajectories) so that the tests stay fast.
+fn small(seed: u64) -> Library {
+    let settings = LibrarySettings {
+        trajectories: 8,
+        horizon: 40,
+        first_passes: 60,
+        warm_passes: 20,
+        kick_every: 8,
+        seed,
+        ..LibrarySettings::default()
+    };
+    Library::build(&Scene::flicking_finger(), &settings, |_, _| {}).unwrap()
+}
+
+#[test]
+fn building_is_reproducible_and_the_seed_matters() {
+    let (a, b, c) = (small(3), small(3), small(4));
+    assert_eq!(a, b);
+    assert_eq!(a.entries.len(), 8);
+    assert_ne!(a.entries, c.entries);
+    // The kicks changed the velocities of the later starts.
+    assert!(a.entries[7].x[3..].iter().any(|v| v.abs() > 0.1));
+    // Each stored controller has feedback.
+    assert!(
+        a.entries
+            .iter()
+            .all(|e| e.gain.iter().any(|k| k.abs() > 1e-3))
+    );
+}
+
+#[test]
+fn the_policy_returns_each_controllers_own_law_and_respects_the_ellipses_symmetry() {
+    let lib = small(3);
+    let policy = lib.policy().unwrap();
+    let mut u = [0.0; 2];
+    for (i, e) in lib.entries.iter().enumerate() {
+        // At a stored state: that controller, its own control.
+        let j = policy.control(&e.x, &mut u).unwrap();
+        assert_eq!(lib.entries[j].x, e.x, "entry {i}");
+        assert!((u[0] - e.u[0]).abs() < 1e-12 && (u[1] - e.u[1]).abs() < 1e-12);
+        // Nearby: the linear law u + K dx.
+        let dx = [1e-4, -2e-4, 3e-4, 1e-3, -1e-3, 2e-3];
+        let x: Vec<f64> = e.x.iter().zip(&dx).map(|(a, b)| a + b).collect();
+        assert_eq!(policy.control(&x, &mut u).unwrap(), j);
+        for a in 0..2 {
+            let expected = e.u[a] + (0..6).map(|b| e.gain[a * 6 + b] * dx[b]).sum::<f64>();
+            assert!((u[a] - expected).abs() < 1e-12);
+        }
+        // The ellipse turned by pi is the same ellipse: same controller, same control.
+        let mut turned = x.clone();
+        turned[2] += std::f64::consts::PI;
+        let mut v = [0.0; 2];
+        assert_eq!(policy.control(&turned, &mut v).unwrap(), j);
+        assert!((u[0] - v[0]).abs() < 1e-9 && (u[1] - v[1]).abs() < 1e-9);
+        turned[2] -= 3.0 * std::f64::consts::PI;
+        assert_eq!(policy.control(&turned, &mut v).unwrap(), j);
+    }
+    assert!(matches!(
+        policy.control(&[0.0, f64::NAN, 0.0, 0.0, 0.0, 0.0], &mut u),
+        Err(LibraryError::Input { .. })
+    ));
+    assert!(policy.control(&[0.0; 5], &mut u).is_err());
+}
+
+#[test]
+fn a_library_file_round_trips_and_bad_files_are_refused_whole() {
+    let lib = small(3);
+    let dir = std::env::temp_dir().join(format!("slcp-library-test-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("finger.lib");
+    lib.save(&path).unwrap();
+    let back = Library::load(&path).unwrap();
+    assert_eq!(back, lib);
+    back.check_scene(&Scene::flicking_finger()).unwrap();
+    let bytes = std::fs::read(&path).unwrap();
+
+    // Truncated anywhere: in the header or in the payload.
+    for cut in [3, 10, 23, bytes.len() / 2, bytes.len() - 1] {
+        let err = Library::from_bytes(&bytes[..cut]).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                LibraryError::Truncated { .. } | LibraryError::NotALibrary
+            ),
+            "cut at {cut}: {err}"
+        );
+    }
+    // One flipped bit in the payload.
+    let mut corrupt = bytes.clone();
+    let at = bytes.len() - 10;
+    corrupt[at] ^= 0x10;
+    assert!(matches!(
+        Library::from_bytes(&corrupt),
+        Err(LibraryError::Corrupt { .. })
+    ));
+    // Someone else's file, a future version, and trailing bytes.
+    assert!(matches!(
+        Library::from_bytes(b"PK\x03\x04 not a library at all"),
+        Err(LibraryError::NotALibrary)
+    ));
+    let mut future = bytes.clone();
+    future[8..12].copy_from_slice(&2u32.to_le_bytes());
+    assert!(matches!(
+        Library::from_bytes(&future),
+        Err(LibraryError::Version { found: 2, .. })
+    ));
+    let mut longer = bytes.clone();
+    longer.push(0);
+    assert!(matches!(
+        Library::from_bytes(&longer),
+        Err(LibraryError::Invalid(_))
+    ));
+    assert_eq!(&bytes[..8], MAGIC);
+    // A consistent checksum over a payload that decodes to nonsense (a NaN gain) is still refused.
+    let mut broken = lib.clone();
+    broken.entries[2].gain[5] = f64::NAN;
+    assert!(matches!(
+        Library::from_bytes(&broken.to_bytes().unwrap()),
+        Err(LibraryError::Invalid(_))
+    ));
+    // A scene the library was not built for.
+    let mut spec = Scene::flicking_finger().spec().clone();
+    spec.contacts[0].friction = 0.3;
+    let other = Scene::new(spec).unwrap();
+    assert!(matches!(
+        lib.check_scene(&other),
+        Err(LibraryError::SceneMismatch(_))
+    ));
+    // A missing file names itself.
+    let err = Library::load(&dir.join("missing.lib")).unwrap_err();
+    assert!(err.to_string().contains("missing.lib"), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn impossible_library_settings_are_typed_errors() {
+    let scene = Scene::flicking_finger();
+    for s in [
+        LibrarySettings {
+            shift: 0,
+            ..LibrarySettings::default()
+        },
+        LibrarySettings {
+            shift: 100,
+            ..LibrarySettings::default()
+        },
+        LibrarySettings {
+            kick_variance: -1.0,
+            ..LibrarySettings::default()
+        },
+        LibrarySettings {
+            x0: vec![0.0; 5],
+            ..LibrarySettings::default()
+        },
+        LibrarySettings {
+            h: f64::NAN,
+            ..LibrarySettings::default()
+        },
+    ] {
+        assert!(Library::build(&scene, &s, |_, _| {}).is_err());
+    }
+}
