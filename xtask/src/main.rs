@@ -9,6 +9,7 @@ mod jsonl;
 mod lcp;
 mod optimize;
 mod step;
+mod train;
 
 use clap::{Parser, Subcommand};
 
@@ -45,6 +46,8 @@ enum Command {
     /// iLQG / DDP on the finger (or the unicycle benchmark): one line per pass behind a progress bar,
     /// then passes, final cost and time; --out writes the trajectory and its linear policy as JSON.
     Optimize(optimize::Args),
+    /// Build the finger's controller library (receding-horizon iLQG, paper IV-C) and save it.
+    Train(train::Args),
     /// Measure speed against error and rewrite the generated tables of docs/benchmarks.md.
     Benchmarks(benchmarks::Args),
 }
@@ -56,6 +59,7 @@ fn main() -> anyhow::Result<()> {
         Command::Step(args) => step::run_step(&args),
         Command::Simulate(args) => step::run_simulate(&args),
         Command::Optimize(args) => optimize::run(&args),
+        Command::Train(args) => train::run(&args),
         Command::Benchmarks(args) => benchmarks::run(&args),
     }
 }

@@ -1,0 +1,89 @@
+//! `cargo xtask train`: build the flicking finger's controller library (paper section IV-C) behind a
+//! progress bar and save it.
+
+use anyhow::Context;
+use dynamics::Scene;
+use indicatif::{ProgressBar, ProgressStyle};
+use library::{Library, LibrarySettings, Model};
+use std::path::PathBuf;
+use std::time::Instant;
+
+/// Options of `cargo xtask train`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Where to save the library.
+    #[arg(long, default_value = "results/finger.lib")]
+    out: PathBuf,
+    /// Contact model of the optimiser's dynamics.
+    #[arg(long, value_enum, default_value = "logistic")]
+    model: crate::step::Model,
+    /// Noise scale of the smoothed models.
+    #[arg(long, default_value_t = 0.1)]
+    sigma: f64,
+    /// Time step.
+    #[arg(long, default_value_t = 0.05)]
+    h: f64,
+    /// Number of trajectories (stored controllers).
+    #[arg(long, default_value_t = 400)]
+    trajectories: usize,
+    /// Seed of the velocity kicks.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Scene file (TOML); default: the flicking finger of SCENE.md.
+    #[arg(long)]
+    scene: Option<PathBuf>,
+}
+
+/// Run `cargo xtask train`.
+pub fn run(args: &Args) -> anyhow::Result<()> {
+    let scene = match &args.scene {
+        None => Scene::flicking_finger(),
+        Some(path) => {
+            let text = std::fs::read_to_string(path)
+                .with_context(|| format!("reading {}", path.display()))?;
+            Scene::from_toml_str(&text).with_context(|| format!("scene {}", path.display()))?
+        }
+    };
+    let settings = LibrarySettings {
+        model: match args.model {
+            crate::step::Model::Hard => Model::Hard,
+            crate::step::Model::Logistic => Model::Logistic(args.sigma),
+            crate::step::Model::Normal => Model::Normal(args.sigma),
+        },
+        h: args.h,
+        trajectories: args.trajectories,
+        seed: args.seed,
+        ..LibrarySettings::default()
+    };
+    let bar = ProgressBar::new(args.trajectories as u64);
+    bar.set_style(
+        ProgressStyle::with_template(
+            "{bar:40} {pos}/{len} controllers  {elapsed_precise} (eta {eta})  {msg}",
+        )
+        .expect("a valid template"),
+    );
+    let start = Instant::now();
+    let library = Library::build(&scene, &settings, |_, e| {
+        bar.inc(1);
+        bar.set_message(format!("{} passes, theta3 {:.2}", e.passes, e.x[2]));
+    })?;
+    bar.finish_and_clear();
+    let seconds = start.elapsed().as_secs_f64();
+    let passes: u64 = library.entries.iter().map(|e| e.passes as u64).sum();
+    let converged = library.entries.iter().filter(|e| e.converged).count();
+    println!(
+        "built {} controllers in {seconds:.1} s: {passes} optimiser passes ({} for the first solve, {:.1} per warm-started re-solve), {converged} converged",
+        library.entries.len(),
+        library.entries[0].passes,
+        (passes - library.entries[0].passes as u64) as f64
+            / (library.entries.len().max(2) - 1) as f64
+    );
+    if let Some(dir) = args.out.parent()
+        && !dir.as_os_str().is_empty()
+    {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    library.save(&args.out)?;
+    println!("wrote {}", args.out.display());
+    Ok(())
+}
