@@ -5,6 +5,7 @@ mod bench_dynamics;
 mod bench_ncp;
 mod benchmarks;
 mod distance;
+mod evaluate;
 mod jsonl;
 mod lcp;
 mod optimize;
@@ -48,6 +49,8 @@ enum Command {
     Optimize(optimize::Args),
     /// Build the finger's controller library (receding-horizon iLQG, paper IV-C) and save it.
     Train(train::Args),
+    /// Run a library's global policy in closed loop on the smoothed and the hard system, with kicks.
+    Evaluate(evaluate::Args),
     /// Measure speed against error and rewrite the generated tables of docs/benchmarks.md.
     Benchmarks(benchmarks::Args),
 }
@@ -60,6 +63,7 @@ fn main() -> anyhow::Result<()> {
         Command::Simulate(args) => step::run_simulate(&args),
         Command::Optimize(args) => optimize::run(&args),
         Command::Train(args) => train::run(&args),
+        Command::Evaluate(args) => evaluate::run(&args),
         Command::Benchmarks(args) => benchmarks::run(&args),
     }
 }

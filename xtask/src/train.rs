@@ -29,6 +29,9 @@ pub struct Args {
     /// Seed of the velocity kicks.
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// Local controllers kept per trajectory (1: the paper's first controller; up to the shift of 4).
+    #[arg(long, default_value_t = 1)]
+    keep: usize,
     /// Scene file (TOML); default: the flicking finger of SCENE.md.
     #[arg(long)]
     scene: Option<PathBuf>,
@@ -53,6 +56,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         h: args.h,
         trajectories: args.trajectories,
         seed: args.seed,
+        keep: args.keep,
         ..LibrarySettings::default()
     };
     let bar = ProgressBar::new(args.trajectories as u64);
@@ -69,14 +73,15 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     })?;
     bar.finish_and_clear();
     let seconds = start.elapsed().as_secs_f64();
-    let passes: u64 = library.entries.iter().map(|e| e.passes as u64).sum();
-    let converged = library.entries.iter().filter(|e| e.converged).count();
+    let firsts: Vec<_> = library.entries.iter().step_by(args.keep).collect();
+    let passes: u64 = firsts.iter().map(|e| e.passes as u64).sum();
+    let converged = firsts.iter().filter(|e| e.converged).count();
     println!(
-        "built {} controllers in {seconds:.1} s: {passes} optimiser passes ({} for the first solve, {:.1} per warm-started re-solve), {converged} converged",
+        "built {} controllers from {} trajectories in {seconds:.1} s: {passes} optimiser passes ({} for the first solve, {:.1} per warm-started re-solve), {converged} converged",
         library.entries.len(),
+        args.trajectories,
         library.entries[0].passes,
-        (passes - library.entries[0].passes as u64) as f64
-            / (library.entries.len().max(2) - 1) as f64
+        (passes - library.entries[0].passes as u64) as f64 / (args.trajectories.max(2) - 1) as f64
     );
     if let Some(dir) = args.out.parent()
         && !dir.as_os_str().is_empty()

@@ -60,6 +60,10 @@ pub struct LibrarySettings {
     pub warm_passes: usize,
     /// The optimiser's stopping tolerance on the relative cost change (`DdpSettings::tol_cost`).
     pub tolerance: f64,
+    /// Local controllers kept per trajectory: the paper keeps the first (1); up to `shift` keeps
+    /// `u_t + K_t (x - x_t)` for `t < keep` as well, the controllers the trajectory runs before the next one
+    /// takes over.
+    pub keep: usize,
 }
 
 impl Default for LibrarySettings {
@@ -77,6 +81,7 @@ impl Default for LibrarySettings {
             first_passes: 300,
             warm_passes: 100,
             tolerance: 1e-9,
+            keep: 1,
         }
     }
 }
@@ -120,6 +125,9 @@ impl LibrarySettings {
         }
         if !(self.tolerance.is_finite() && self.tolerance > 0.0) {
             return bad("tolerance", self.tolerance, "finite and positive");
+        }
+        if self.keep == 0 || self.keep > self.shift {
+            return bad("keep", self.keep as f64, "between 1 and the shift");
         }
         if self.first_passes == 0 || self.warm_passes == 0 {
             return bad("first_passes / warm_passes", 0.0, "at least 1");
@@ -220,16 +228,20 @@ pub fn build_entries(
                 });
             }
         };
-        let entry = Entry {
-            x: sol.states[0].clone(),
-            u: sol.controls[0].clone(),
-            gain: sol.gains[0].clone(),
-            passes: sol.iterations.len() as u32,
-            converged: sol.status.converged(),
-            cost: sol.cost,
-        };
-        progress(k, &entry);
-        entries.push(entry);
+        for t in 0..settings.keep {
+            let entry = Entry {
+                x: sol.states[t].clone(),
+                u: sol.controls[t].clone(),
+                gain: sol.gains[t].clone(),
+                passes: sol.iterations.len() as u32,
+                converged: sol.status.converged(),
+                cost: sol.cost,
+            };
+            if t == 0 {
+                progress(k, &entry);
+            }
+            entries.push(entry);
+        }
         // Receding horizon (eq. 19): the next trajectory starts d steps on, warm-started by the shifted
         // controls; every `kick_every` steps its velocities are perturbed.
         x1 = sol.states[settings.shift].clone();

@@ -6,12 +6,14 @@
 
 mod build;
 mod error;
+mod evaluate;
 mod file;
 mod policy;
 mod task;
 
 pub use build::{Entry, LibrarySettings, Model, build_entries, free_joint};
 pub use error::LibraryError;
+pub use evaluate::{CONTACT_IMPULSE, Evaluation, EvaluationSettings, evaluate};
 pub use file::{Library, MAGIC, VERSION};
 pub use policy::Policy;
 pub use task::{CONTROL_WEIGHT, FingerDynamics, TaskError, finger_cost};

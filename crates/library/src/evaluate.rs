@@ -1,0 +1,197 @@
+//! Running the global policy (paper section V-C): closed loop on a world simulator that may use another
+//! contact model or time step than the library was built with, with random velocity kicks, measuring how
+//! fast the ellipse spins, how often the finger touches it, and how the spin recovers after each kick.
+
+use crate::error::LibraryError;
+use crate::file::Library;
+use crate::policy::Policy;
+use dynamics::{Simulator, StepSettings};
+use rand::SeedableRng;
+use rand_distr::{Distribution, Normal};
+use serde::{Deserialize, Serialize};
+
+/// How a policy is evaluated.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EvaluationSettings {
+    /// The world's contact model.
+    pub model: crate::Model,
+    /// The world's time step.
+    pub h: f64,
+    /// Simulated time.
+    pub seconds: f64,
+    /// A velocity kick every this many seconds (none if not positive).
+    pub kick_every: f64,
+    /// Standard deviation of each velocity's kick.
+    pub kick_std: f64,
+    /// Seed of the kicks.
+    pub seed: u64,
+    /// Initial state.
+    pub x0: Vec<f64>,
+}
+
+impl Default for EvaluationSettings {
+    fn default() -> Self {
+        EvaluationSettings {
+            model: crate::Model::Logistic(0.1),
+            h: 0.05,
+            seconds: 200.0,
+            kick_every: 10.0,
+            kick_std: 2.0,
+            seed: 7,
+            x0: dynamics::FLICKING_FINGER_X0.to_vec(),
+        }
+    }
+}
+
+/// What a closed-loop run measured.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Evaluation {
+    /// Mean spin rate of the free angle over the run, rad/s.
+    pub spin_rate: f64,
+    /// Mean spin rate over the last quarter of the run, rad/s.
+    pub final_spin_rate: f64,
+    /// Contact events (a step with a contact impulse after one without) per half-turn of the ellipse.
+    pub contacts_per_half_turn: f64,
+    /// Contact events per second.
+    pub contacts_per_second: f64,
+    /// Fraction of steps with a contact impulse.
+    pub contact_fraction: f64,
+    /// Kicks applied.
+    pub kicks: usize,
+    /// Kicks after which the spin rate over the next interval was positive.
+    pub recovered: usize,
+    /// Mean spin rate over the second half of each interval between kicks, rad/s.
+    pub spin_after_kicks: f64,
+    /// Steps whose complementarity solve did not converge (they still advance the state).
+    pub unconverged_steps: usize,
+    /// The free angle at the end.
+    pub final_angle: f64,
+}
+
+/// A contact impulse this large (in the normal direction, per step) counts as touching.
+pub const CONTACT_IMPULSE: f64 = 1e-3;
+
+/// Run the library's policy on a world described by `settings`.
+pub fn evaluate(
+    library: &Library,
+    policy: &Policy,
+    settings: &EvaluationSettings,
+) -> Result<Evaluation, LibraryError> {
+    let scene = library.scene();
+    let n = scene.n_dof();
+    let free = crate::free_joint(scene)?;
+    if !(settings.h.is_finite() && settings.h > 0.0) {
+        return Err(LibraryError::Setting {
+            name: "h",
+            value: settings.h,
+            expected: "finite and positive",
+        });
+    }
+    if !(settings.seconds.is_finite() && settings.seconds >= settings.h) {
+        return Err(LibraryError::Setting {
+            name: "seconds",
+            value: settings.seconds,
+            expected: "at least one time step",
+        });
+    }
+    if !(settings.kick_std.is_finite() && settings.kick_std >= 0.0) {
+        return Err(LibraryError::Setting {
+            name: "kick_std",
+            value: settings.kick_std,
+            expected: "finite and non-negative",
+        });
+    }
+    crate::check("x0", &settings.x0, scene.n_state())?;
+    let mut world = Simulator::new(
+        scene.clone(),
+        StepSettings {
+            model: settings.model.complementarity(),
+            h: settings.h,
+            ..StepSettings::default()
+        },
+    )?;
+    let steps = (settings.seconds / settings.h).round() as usize;
+    let kick_steps = if settings.kick_every > 0.0 {
+        ((settings.kick_every / settings.h).round() as usize).max(1)
+    } else {
+        usize::MAX
+    };
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(settings.seed);
+    let kick =
+        Normal::new(0.0, settings.kick_std).map_err(|e| LibraryError::Invalid(e.to_string()))?;
+    // The contact rows (two per pair) follow the joint-limit rows.
+    let limit_rows: usize = scene.bodies.iter().filter(|b| b.limits.is_some()).count() * 2;
+    let mut x = settings.x0.clone();
+    let mut u = vec![0.0; scene.n_controls];
+    let (mut events, mut touching_steps, mut unconverged) = (0usize, 0usize, 0usize);
+    let mut was_touching = false;
+    let (mut kicks, mut recovered) = (0usize, 0usize);
+    let (mut after_sum, mut after_time) = (0.0, 0.0);
+    let mut interval_start = x[free];
+    let quarter = steps - steps / 4;
+    let mut angle_at_quarter = x[free];
+    for k in 0..steps {
+        if k == quarter {
+            angle_at_quarter = x[free];
+        }
+        if k > 0 && k % kick_steps == 0 {
+            // The interval that ends here: did it spin forward over its second half?
+            kicks += 1;
+            for v in &mut x[n..] {
+                *v += kick.sample(&mut rng);
+            }
+        }
+        if k % kick_steps == kick_steps / 2 && k > kick_steps {
+            interval_start = x[free];
+        }
+        if k % kick_steps == kick_steps - 1 && k > kick_steps {
+            let rate = (x[free] - interval_start) / (settings.h * (kick_steps / 2) as f64);
+            after_sum += rate * (kick_steps / 2) as f64 * settings.h;
+            after_time += (kick_steps / 2) as f64 * settings.h;
+            if rate > 0.0 {
+                recovered += 1;
+            }
+        }
+        policy.control(&x, &mut u)?;
+        let s = world.step(&x, &u)?;
+        if s.info.status != ncp::Status::Converged {
+            unconverged += 1;
+        }
+        let touching = s.lambda[limit_rows..].iter().sum::<f64>() > CONTACT_IMPULSE;
+        if touching {
+            touching_steps += 1;
+            if !was_touching {
+                events += 1;
+            }
+        }
+        was_touching = touching;
+        x = s.x_next;
+        if !x.iter().all(|v| v.is_finite()) {
+            return Err(LibraryError::Invalid(format!(
+                "the closed loop produced a non-finite state at step {k}"
+            )));
+        }
+    }
+    let turned = x[free] - settings.x0[free];
+    let time = steps as f64 * settings.h;
+    Ok(Evaluation {
+        spin_rate: turned / time,
+        final_spin_rate: (x[free] - angle_at_quarter) / ((steps - quarter) as f64 * settings.h),
+        contacts_per_half_turn: if turned.abs() > 1e-9 {
+            events as f64 / (turned.abs() / std::f64::consts::PI)
+        } else {
+            f64::INFINITY
+        },
+        contacts_per_second: events as f64 / time,
+        contact_fraction: touching_steps as f64 / steps as f64,
+        kicks,
+        recovered: recovered.min(kicks),
+        spin_after_kicks: if after_time > 0.0 {
+            after_sum / after_time
+        } else {
+            f64::NAN
+        },
+        unconverged_steps: unconverged,
+        final_angle: x[free],
+    })
+}

@@ -1,0 +1,111 @@
+//! `cargo xtask evaluate`: the library's global policy in closed loop (paper section V-C) on the smoothed
+//! and on the hard system, at the library's time step and at another, with random velocity kicks.
+
+use anyhow::Context;
+use library::{Evaluation, EvaluationSettings, Library, Model, evaluate};
+use serde::Serialize;
+use std::path::PathBuf;
+
+/// Options of `cargo xtask evaluate`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// The library to run.
+    #[arg(long, default_value = "results/finger.lib")]
+    library: PathBuf,
+    /// Simulated seconds per run.
+    #[arg(long, default_value_t = 200.0)]
+    seconds: f64,
+    /// Seconds between velocity kicks (0: none).
+    #[arg(long, default_value_t = 10.0)]
+    kick_every: f64,
+    /// Standard deviation of each velocity's kick.
+    #[arg(long, default_value_t = 2.0)]
+    kick_std: f64,
+    /// Seed of the kicks.
+    #[arg(long, default_value_t = 7)]
+    seed: u64,
+    /// Write the table as JSON here.
+    #[arg(long)]
+    out: Option<PathBuf>,
+}
+
+#[derive(Serialize)]
+struct Row {
+    world: String,
+    h: f64,
+    evaluation: Evaluation,
+}
+
+/// The worlds of the paper's experiment: the library's own smoothed model and the hard one, at the
+/// library's time step and at 0.03.
+pub fn worlds(library: &Library) -> Vec<(String, Model, f64)> {
+    let own = library.settings.model;
+    let h = library.settings.h;
+    let name = |m: Model| match m {
+        Model::Hard => "hard".to_string(),
+        Model::Logistic(s) => format!("logistic {s}"),
+        Model::Normal(s) => format!("normal {s}"),
+    };
+    let mut out = Vec::new();
+    for step in [h, 0.03] {
+        for m in [own, Model::Hard] {
+            if !out.iter().any(|(_, mm, hh)| *mm == m && *hh == step) {
+                out.push((name(m), m, step));
+            }
+        }
+    }
+    out
+}
+
+/// Run `cargo xtask evaluate`.
+pub fn run(args: &Args) -> anyhow::Result<()> {
+    let library = Library::load(&args.library)
+        .with_context(|| format!("loading {}", args.library.display()))?;
+    let policy = library.policy()?;
+    println!(
+        "library {}: {} controllers, built on {:?} at h = {}",
+        args.library.display(),
+        library.entries.len(),
+        library.settings.model,
+        library.settings.h
+    );
+    println!(
+        "| world | h | spin rate (rad/s) | last quarter | after kicks | contacts per half-turn | contacts/s | in contact | kicks recovered |"
+    );
+    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|");
+    let mut rows = Vec::new();
+    for (world, model, h) in worlds(&library) {
+        let settings = EvaluationSettings {
+            model,
+            h,
+            seconds: args.seconds,
+            kick_every: args.kick_every,
+            kick_std: args.kick_std,
+            seed: args.seed,
+            ..EvaluationSettings::default()
+        };
+        let e = evaluate(&library, &policy, &settings)?;
+        println!(
+            "| {world} | {h} | {:.3} | {:.3} | {:.3} | {:.2} | {:.2} | {:.0}% | {}/{} |",
+            e.spin_rate,
+            e.final_spin_rate,
+            e.spin_after_kicks,
+            e.contacts_per_half_turn,
+            e.contacts_per_second,
+            100.0 * e.contact_fraction,
+            e.recovered,
+            e.kicks
+        );
+        rows.push(Row {
+            world,
+            h,
+            evaluation: e,
+        });
+    }
+    if let Some(path) = &args.out {
+        std::fs::write(path, serde_json::to_string_pretty(&rows)?)
+            .with_context(|| format!("writing {}", path.display()))?;
+        println!("wrote {}", path.display());
+    }
+    Ok(())
+}
