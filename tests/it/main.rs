@@ -8,6 +8,7 @@ mod dynamics_reference;
 mod geometry_laws;
 mod geometry_reference;
 mod library_files;
+mod library_policy;
 mod ncp_functions;
 mod ncp_solvers;
 mod support;

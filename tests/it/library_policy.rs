@@ -1,0 +1,100 @@
+//! The paper's experiment in closed loop (section V-C): the library's global policy spins the ellipse on
+//! the smoothed system it was built on and on the hard, non-smooth one, at the library's time step and at
+//! another, and recovers from velocity kicks. The paper's library of single first controllers is checked
+//! too: in this reproduction it gets stuck.
+
+use dynamics::Scene;
+use library::{Evaluation, EvaluationSettings, Library, LibrarySettings, Model, evaluate};
+use std::sync::OnceLock;
+
+/// The default library (400 trajectories, SCENE.md's settings) keeping the four controllers each
+/// trajectory runs before the next one takes over; built once for this module.
+fn library() -> &'static Library {
+    static LIB: OnceLock<Library> = OnceLock::new();
+    LIB.get_or_init(|| {
+        let settings = LibrarySettings {
+            keep: 4,
+            ..LibrarySettings::default()
+        };
+        Library::build(&Scene::flicking_finger(), &settings, |_, _| {}).unwrap()
+    })
+}
+
+fn run(lib: &Library, model: Model, h: f64, kick_every: f64) -> Evaluation {
+    let policy = lib.policy().unwrap();
+    let e = evaluate(
+        lib,
+        &policy,
+        &EvaluationSettings {
+            model,
+            h,
+            seconds: 100.0,
+            kick_every,
+            ..EvaluationSettings::default()
+        },
+    )
+    .unwrap();
+    println!(
+        "{model:?} h = {h}, kicks every {kick_every} s: spin {:.3} rad/s (last quarter {:.3}), {:.1} contacts/s, recovered {}/{}",
+        e.spin_rate, e.final_spin_rate, e.contacts_per_second, e.recovered, e.kicks
+    );
+    e
+}
+
+#[test]
+fn the_global_policy_spins_the_ellipse_on_smoothed_and_hard_worlds_and_survives_kicks() {
+    let lib = library();
+    assert_eq!(lib.entries.len(), 1600);
+    for (model, h) in [
+        (Model::Logistic(0.1), 0.05),
+        (Model::Hard, 0.05),
+        (Model::Logistic(0.1), 0.03),
+    ] {
+        let e = run(lib, model, h, 0.0);
+        assert!(e.spin_rate > 0.1, "{model:?} at h = {h}: {e:?}");
+        assert!(e.contacts_per_second > 0.2, "{e:?}");
+        assert_eq!(e.unconverged_steps, 0);
+    }
+    for model in [Model::Logistic(0.1), Model::Hard] {
+        let e = run(lib, model, 0.05, 10.0);
+        assert!(e.kicks >= 9);
+        assert!(e.recovered * 10 >= e.kicks * 8, "{e:?}");
+        assert!(e.spin_rate > 0.1, "{e:?}");
+    }
+}
+
+#[test]
+fn the_papers_library_of_first_controllers_alone_does_not_spin_the_ellipse_here() {
+    // The same optimisation keeping only each trajectory's first controller (the paper's library).
+    let mut paper = library().clone();
+    paper.entries = paper.entries.iter().step_by(4).cloned().collect();
+    paper.settings.keep = 1;
+    let e = run(&paper, Model::Logistic(0.1), 0.05, 0.0);
+    assert!(e.spin_rate.abs() < 0.05, "{e:?}");
+}
+
+#[test]
+fn bad_evaluation_settings_are_typed_errors() {
+    let lib = library();
+    let policy = lib.policy().unwrap();
+    for s in [
+        EvaluationSettings {
+            h: 0.0,
+            ..EvaluationSettings::default()
+        },
+        EvaluationSettings {
+            seconds: f64::NAN,
+            ..EvaluationSettings::default()
+        },
+        EvaluationSettings {
+            kick_std: -1.0,
+            ..EvaluationSettings::default()
+        },
+        EvaluationSettings {
+            x0: vec![0.0; 3],
+            ..EvaluationSettings::default()
+        },
+    ] {
+        assert!(evaluate(lib, &policy, &s).is_err());
+    }
+}
