@@ -37,6 +37,8 @@ pub enum Section {
     Dynamics,
     /// The optimiser on the unicycle and the finger.
     Ddp,
+    /// Building the library and looking up its policy.
+    Library,
 }
 
 pub fn run(args: &Args) -> anyhow::Result<()> {
@@ -53,6 +55,9 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     }
     if wanted(Section::Ddp) {
         sections.push(("ddp", crate::bench_ddp::section()?));
+    }
+    if wanted(Section::Library) {
+        sections.push(("library", crate::bench_library::section()?));
     }
     for (name, body) in sections {
         println!("{body}");

@@ -2,6 +2,7 @@
 
 mod bench_ddp;
 mod bench_dynamics;
+mod bench_library;
 mod bench_ncp;
 mod benchmarks;
 mod distance;
@@ -9,6 +10,7 @@ mod evaluate;
 mod jsonl;
 mod lcp;
 mod optimize;
+mod reproduce;
 mod step;
 mod train;
 
@@ -51,6 +53,9 @@ enum Command {
     Train(train::Args),
     /// Run a library's global policy in closed loop on the smoothed and the hard system, with kicks.
     Evaluate(evaluate::Args),
+    /// The paper's experiments end to end with default settings: summary, libraries and JSON under one
+    /// folder (default results/).
+    Reproduce(reproduce::Args),
     /// Measure speed against error and rewrite the generated tables of docs/benchmarks.md.
     Benchmarks(benchmarks::Args),
 }
@@ -64,6 +69,7 @@ fn main() -> anyhow::Result<()> {
         Command::Optimize(args) => optimize::run(&args),
         Command::Train(args) => train::run(&args),
         Command::Evaluate(args) => evaluate::run(&args),
+        Command::Reproduce(args) => reproduce::run(&args),
         Command::Benchmarks(args) => benchmarks::run(&args),
     }
 }
