@@ -29,6 +29,9 @@ pub struct Args {
     /// Seed of the velocity kicks.
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// Optimiser passes at most per warm-started re-solve.
+    #[arg(long, default_value_t = 100)]
+    warm_passes: usize,
     /// Local controllers kept per trajectory (1: the paper's first controller; up to the shift of 4).
     #[arg(long, default_value_t = 1)]
     keep: usize,
@@ -57,6 +60,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         trajectories: args.trajectories,
         seed: args.seed,
         keep: args.keep,
+        warm_passes: args.warm_passes,
         ..LibrarySettings::default()
     };
     let bar = ProgressBar::new(args.trajectories as u64);
