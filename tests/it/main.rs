@@ -7,6 +7,7 @@ mod dynamics_laws;
 mod dynamics_reference;
 mod geometry_laws;
 mod geometry_reference;
+mod library_anneal;
 mod library_files;
 mod library_policy;
 mod ncp_functions;

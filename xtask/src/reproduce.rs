@@ -48,8 +48,28 @@ struct ClosedLoop {
 }
 
 #[derive(Serialize)]
+struct Annealed {
+    sigma: f64,
+    annealed_passes: usize,
+    annealed_cost: f64,
+    annealed_turned: f64,
+    direct_passes: usize,
+    direct_cost: f64,
+    direct_turned: f64,
+}
+
+#[derive(Serialize)]
+struct Kicked {
+    kick_std: f64,
+    world: String,
+    evaluation: Evaluation,
+}
+
+#[derive(Serialize)]
 struct Summary {
     optimised: Vec<Optimised>,
+    annealing: Vec<Annealed>,
+    larger_kicks: Vec<Kicked>,
     libraries: Vec<(String, f64, usize)>,
     closed_loop: Vec<ClosedLoop>,
     /// Simulated seconds per closed-loop run.
@@ -122,6 +142,27 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         .with_context(|| format!("creating {}", args.out.display()))?;
     println!("optimising the finger from rest (full DDP, N = 75) ...");
     let optimised = vec![optimise(0.1)?, optimise(0.05)?];
+    println!("annealing sigma from 0.3 to 0.001 ...");
+    let schedule = [
+        0.3, 0.2, 0.1, 0.05, 0.03, 0.02, 0.01, 0.005, 0.003, 0.002, 0.001,
+    ];
+    let scene = Scene::flicking_finger();
+    let x0 = dynamics::FLICKING_FINGER_X0;
+    let warm = library::anneal(&scene, &x0, 0.05, 75, &schedule, 300)?;
+    let mut annealing = Vec::new();
+    for w in &warm {
+        let direct = &library::anneal(&scene, &x0, 0.05, 75, &[w.sigma], 300)?[0];
+        annealing.push(Annealed {
+            sigma: w.sigma,
+            annealed_passes: w.passes,
+            annealed_cost: w.cost,
+            annealed_turned: w.turned,
+            direct_passes: direct.passes,
+            direct_cost: direct.cost,
+            direct_turned: direct.turned,
+        });
+    }
+    let mut larger_kicks = Vec::new();
     let mut libraries = Vec::new();
     let mut closed_loop = Vec::new();
     for sigma in [0.1, 0.05] {
@@ -132,6 +173,34 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             secs,
             lib.entries.len(),
         ));
+        if sigma == 0.1 {
+            // Kicks beyond the training's (variance 4, std 2): where does the policy break?
+            let policy = lib.policy()?;
+            for kick_std in [2.0, 8.0, 16.0, 32.0] {
+                for (world, model) in [
+                    ("logistic 0.1", Model::Logistic(0.1)),
+                    ("hard", Model::Hard),
+                ] {
+                    let e = evaluate(
+                        &lib,
+                        &policy,
+                        &EvaluationSettings {
+                            model,
+                            h: 0.05,
+                            seconds: args.seconds,
+                            kick_every: 10.0,
+                            kick_std,
+                            ..EvaluationSettings::default()
+                        },
+                    )?;
+                    larger_kicks.push(Kicked {
+                        kick_std,
+                        world: world.into(),
+                        evaluation: e,
+                    });
+                }
+            }
+        }
         let paper = firsts(&lib);
         for (name, l) in [
             (format!("sigma {sigma}, first controllers (paper)"), &paper),
@@ -165,6 +234,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let seconds = start.elapsed().as_secs_f64();
     let summary = Summary {
         optimised,
+        annealing,
+        larger_kicks,
         libraries,
         closed_loop,
         run_seconds: args.seconds,
@@ -200,6 +271,34 @@ fn report(s: &Summary) -> String {
             t,
             "| {} | {} | {} | {:.4} | {:.3} | {:.1e} | {:.0} |",
             o.sigma, o.passes, o.status, o.cost, o.theta3_turned, o.max_gain, o.milliseconds
+        );
+    }
+    let _ = writeln!(
+        t,
+        "\n## Noise annealing (paper section VI's proposal; the paper could not go below sigma = 0.05)\n\nEach sigma solved warm-started from the previous one's controls, against a solve from zero controls at that sigma.\n\n| sigma | annealed: passes | cost | theta3 turned | direct: passes | cost | theta3 turned |\n|---:|---:|---:|---:|---:|---:|---:|"
+    );
+    for a in &s.annealing {
+        let _ = writeln!(
+            t,
+            "| {} | {} | {:.3} | {:.3} | {} | {:.3} | {:.3} |",
+            a.sigma,
+            a.annealed_passes,
+            a.annealed_cost,
+            a.annealed_turned,
+            a.direct_passes,
+            a.direct_cost,
+            a.direct_turned
+        );
+    }
+    let _ = writeln!(
+        t,
+        "\n## Kicks beyond training (library sigma = 0.1, 4 per trajectory, h = 0.05, a kick every 10 s; training used std 2)\n\n| kick std | world | spin (rad/s) | kicks recovered |\n|---:|---|---:|---:|"
+    );
+    for k in &s.larger_kicks {
+        let _ = writeln!(
+            t,
+            "| {} | {} | {:.3} | {}/{} |",
+            k.kick_std, k.world, k.evaluation.spin_rate, k.evaluation.recovered, k.evaluation.kicks
         );
     }
     let _ = writeln!(

@@ -4,6 +4,7 @@
 //! ([`Policy`]); library files with a versioned, checksummed header ([`Library::save`],
 //! [`Library::load`]). The only library crate that touches the disk.
 
+mod anneal;
 mod build;
 mod error;
 mod evaluate;
@@ -11,6 +12,7 @@ mod file;
 mod policy;
 mod task;
 
+pub use anneal::{AnnealStep, anneal};
 pub use build::{Entry, LibrarySettings, Model, build_entries, free_joint};
 pub use error::LibraryError;
 pub use evaluate::{CONTACT_IMPULSE, Evaluation, EvaluationSettings, evaluate};
