@@ -7,6 +7,7 @@ mod bench_ncp;
 mod benchmarks;
 mod distance;
 mod evaluate;
+mod figures;
 mod jsonl;
 mod lcp;
 mod optimize;
@@ -56,6 +57,8 @@ enum Command {
     /// The paper's experiments end to end with default settings: summary, libraries and JSON under one
     /// folder (default results/).
     Reproduce(reproduce::Args),
+    /// The paper's figures (contact surface, library states, limit cycle, frames) as PNG and SVG.
+    Figures(figures::Args),
     /// Measure speed against error and rewrite the generated tables of docs/benchmarks.md.
     Benchmarks(benchmarks::Args),
 }
@@ -70,6 +73,7 @@ fn main() -> anyhow::Result<()> {
         Command::Train(args) => train::run(&args),
         Command::Evaluate(args) => evaluate::run(&args),
         Command::Reproduce(args) => reproduce::run(&args),
+        Command::Figures(args) => figures::run(&args),
         Command::Benchmarks(args) => benchmarks::run(&args),
     }
 }

@@ -174,6 +174,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             lib.entries.len(),
         ));
         if sigma == 0.1 {
+            println!("drawing the figures ...");
+            crate::figures::write_all(&lib, &args.out.join("figures"))?;
             // Kicks beyond the training's (variance 4, std 2): where does the policy break?
             let policy = lib.policy()?;
             for kick_std in [2.0, 8.0, 16.0, 32.0] {
@@ -249,7 +251,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         serde_json::to_string_pretty(&summary)?,
     )?;
     println!(
-        "wrote {}/summary.md, summary.json and the libraries in {seconds:.1} s",
+        "wrote {}/summary.md, summary.json, figures/ and the libraries in {seconds:.1} s",
         args.out.display()
     );
     Ok(())
