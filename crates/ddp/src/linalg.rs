@@ -5,23 +5,7 @@
 /// positive definite (a pivot that is not positive and finite).
 pub fn cholesky(a: &[f64], n: usize) -> Option<Vec<f64>> {
     let mut l = vec![0.0; n * n];
-    for i in 0..n {
-        for j in 0..=i {
-            let mut s = a[i * n + j];
-            for k in 0..j {
-                s -= l[i * n + k] * l[j * n + k];
-            }
-            if i == j {
-                if !(s > 0.0 && s.is_finite()) {
-                    return None;
-                }
-                l[i * n + i] = s.sqrt();
-            } else {
-                l[i * n + j] = s / l[j * n + j];
-            }
-        }
-    }
-    Some(l)
+    cholesky_into(&mut l, a, n).then_some(l)
 }
 
 /// Solve `L L^T x = b` in place for the `k` columns of the row-major `n x k` block `b`.

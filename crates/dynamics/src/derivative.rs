@@ -141,38 +141,37 @@ struct SecondOrder {
 }
 
 impl SecondOrder {
-    /// The first-order ingredients over all of `y`.
-    fn first_order(&self) -> Ingredients<D1> {
-        let q = |v: &[Q2]| v.iter().map(jet_first).collect::<Vec<_>>();
-        let mut r: Vec<D1> = self.r.iter().map(jet_first).collect();
+    /// The ingredients as numbers over all of `y`, from the jets' conversions `q` and `r` and the
+    /// controls' directions `unit(k)` (the forces' `B u`, linear in `u`).
+    fn convert<T: Scalar>(
+        &self,
+        q: impl Fn(&Q2) -> T,
+        r: impl Fn(&R2) -> T,
+        unit: impl Fn(usize) -> T,
+    ) -> Ingredients<T> {
+        let map = |v: &[Q2]| v.iter().map(&q).collect::<Vec<_>>();
+        let mut forces: Vec<T> = self.r.iter().map(r).collect();
         for &(j, k) in &self.actuated {
-            r[j] += D1::from_re(0.0).derivative(k);
+            forces[j] += unit(k);
         }
         Ingredients {
             contacts: self.contacts.clone(),
-            M: q(&self.M),
-            r,
-            jac: q(&self.jac),
-            d: q(&self.d),
-            sigma: q(&self.sigma),
+            M: map(&self.M),
+            r: forces,
+            jac: map(&self.jac),
+            d: map(&self.d),
+            sigma: map(&self.sigma),
         }
+    }
+
+    /// The first-order ingredients over all of `y`.
+    fn first_order(&self) -> Ingredients<D1> {
+        self.convert(jet_first, jet_first, |k| D1::from_re(0.0).derivative(k))
     }
 
     /// All of it lifted to second-order duals over `y`.
     fn lifted(&self) -> Ingredients<D2> {
-        let q = |v: &[Q2]| v.iter().map(jet_second).collect::<Vec<_>>();
-        let mut r: Vec<D2> = self.r.iter().map(jet_second).collect();
-        for &(j, k) in &self.actuated {
-            r[j] += D2::from_re(0.0).derivative(k);
-        }
-        Ingredients {
-            contacts: self.contacts.clone(),
-            M: q(&self.M),
-            r,
-            jac: q(&self.jac),
-            d: q(&self.d),
-            sigma: q(&self.sigma),
-        }
+        self.convert(jet_second, jet_second, |k| D2::from_re(0.0).derivative(k))
     }
 
     /// The Hessians in `s` of the logistic and hard models' equations `K_i(p0 + dp s, y0 + s)` with a
