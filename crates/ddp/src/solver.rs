@@ -195,6 +195,20 @@ pub struct Iteration {
     pub step: f64,
 }
 
+impl Iteration {
+    /// A pass that left the trajectory as it was (rejected, or converged before its forward pass).
+    fn unchanged(cost: f64, mu: f64, step: f64) -> Self {
+        Iteration {
+            cost,
+            reduction: 0.0,
+            expected: 0.0,
+            mu,
+            alpha: 0.0,
+            step,
+        }
+    }
+}
+
 /// The optimised trajectory and its time-varying linear policy `u = u_i + K_i (x - x_i)`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Solution {
@@ -313,6 +327,10 @@ impl Ddp {
         let mut dmu = 1.0f64;
         let mut first_alpha = 0usize;
         let mut iterations = Vec::new();
+        let mut record = |iterations: &mut Vec<Iteration>, it: Iteration| {
+            observe(&it);
+            iterations.push(it);
+        };
         let mut gains = vec![vec![0.0; m * n]; horizon];
         let mut k_prev = vec![vec![0.0; m]; horizon];
         let mut lin: Option<Linearisation> = None;
@@ -360,15 +378,7 @@ impl Ddp {
                     / horizon as f64;
             if step < s.tol_step && mu < 1e-5 {
                 status = Status::StepConverged;
-                iterations.push(Iteration {
-                    cost: total,
-                    reduction: 0.0,
-                    expected: 0.0,
-                    mu,
-                    alpha: 0.0,
-                    step,
-                });
-                observe(&iterations[iterations.len() - 1]);
+                record(&mut iterations, Iteration::unchanged(total, mu, step));
                 break;
             }
             // Forward pass with a line search.
@@ -404,15 +414,17 @@ impl Ddp {
                     u = un;
                     total = cn;
                     lin = None;
-                    iterations.push(Iteration {
-                        cost: cn,
-                        reduction,
-                        expected,
-                        mu,
-                        alpha,
-                        step,
-                    });
-                    observe(&iterations[iterations.len() - 1]);
+                    record(
+                        &mut iterations,
+                        Iteration {
+                            cost: cn,
+                            reduction,
+                            expected,
+                            mu,
+                            alpha,
+                            step,
+                        },
+                    );
                     if reduction < s.tol_cost * (1.0 + total.abs()) {
                         status = Status::CostConverged;
                         // The gains of the final trajectory.
@@ -427,15 +439,7 @@ impl Ddp {
                 None => {
                     tracing::debug!(mu, step, "no step size reduced the cost");
                     increase(&mut mu, &mut dmu);
-                    iterations.push(Iteration {
-                        cost: total,
-                        reduction: 0.0,
-                        expected: 0.0,
-                        mu,
-                        alpha: 0.0,
-                        step,
-                    });
-                    observe(&iterations[iterations.len() - 1]);
+                    record(&mut iterations, Iteration::unchanged(total, mu, step));
                     if mu > s.mu_max {
                         status = Status::NoDescent;
                         break;
