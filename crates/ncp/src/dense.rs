@@ -168,6 +168,41 @@ impl DenseLu {
         }
     }
 
+    /// The faer back end's solve of `a x = rhs` or `a^T x = rhs` in place.
+    fn faer_solve(&mut self, rhs: &mut [f64], transposed: bool) {
+        let n = self.n;
+        let Backend::Faer {
+            lu,
+            perm,
+            perm_inv,
+            rhs: b,
+            buffer,
+        } = &mut self.backend
+        else {
+            unreachable!("called for the faer back end only");
+        };
+        for i in 0..n {
+            b[(i, 0)] = rhs[i];
+        }
+        let stack = MemStack::new(buffer);
+        let p = faer::perm::PermRef::new_checked(perm, perm_inv, n);
+        if transposed {
+            solve::solve_transpose_in_place(
+                lu.as_ref(),
+                lu.as_ref(),
+                p,
+                b.as_mut(),
+                Par::Seq,
+                stack,
+            );
+        } else {
+            solve::solve_in_place(lu.as_ref(), lu.as_ref(), p, b.as_mut(), Par::Seq, stack);
+        }
+        for i in 0..n {
+            rhs[i] = b[(i, 0)];
+        }
+    }
+
     /// Overwrite `rhs` with the solution of `a^T y = rhs` for the last matrix factored successfully (the
     /// adjoint systems of the dynamics' second derivatives reuse the factors of the forward one).
     pub fn solve_transposed(&mut self, rhs: &mut [f64]) {
@@ -202,30 +237,7 @@ impl DenseLu {
                     rhs[perm[i]] = t[i];
                 }
             }
-            Backend::Faer {
-                lu,
-                perm,
-                perm_inv,
-                rhs: b,
-                buffer,
-            } => {
-                for i in 0..n {
-                    b[(i, 0)] = rhs[i];
-                }
-                let stack = MemStack::new(buffer);
-                let p = faer::perm::PermRef::new_checked(perm, perm_inv, n);
-                solve::solve_transpose_in_place(
-                    lu.as_ref(),
-                    lu.as_ref(),
-                    p,
-                    b.as_mut(),
-                    Par::Seq,
-                    stack,
-                );
-                for i in 0..n {
-                    rhs[i] = b[(i, 0)];
-                }
-            }
+            Backend::Faer { .. } => self.faer_solve(rhs, true),
         }
     }
 
@@ -297,23 +309,7 @@ impl DenseLu {
                     rhs.copy_from_slice(&x);
                 }
             }
-            Backend::Faer {
-                lu,
-                perm,
-                perm_inv,
-                rhs: b,
-                buffer,
-            } => {
-                for i in 0..n {
-                    b[(i, 0)] = rhs[i];
-                }
-                let stack = MemStack::new(buffer);
-                let p = faer::perm::PermRef::new_checked(perm, perm_inv, n);
-                solve::solve_in_place(lu.as_ref(), lu.as_ref(), p, b.as_mut(), Par::Seq, stack);
-                for i in 0..n {
-                    rhs[i] = b[(i, 0)];
-                }
-            }
+            Backend::Faer { .. } => self.faer_solve(rhs, false),
         }
     }
 }
