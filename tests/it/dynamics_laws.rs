@@ -103,30 +103,42 @@ proptest! {
         prop_assume!(first.d[4] > -0.2 && first.info.status == ncp::Status::Converged);
         let (_, der) = sim.step_with_derivatives(&x, &u).unwrap();
         prop_assume!(sim.step(&x, &u).unwrap().contacts[0].witness_unique);
-        let eps = 1e-6;
+        // The normal model's ERM solve stops at its objective's rounding floor (solutions good to ~1e-10),
+        // which differences at 1e-6 amplify past the tolerance: for it, Richardson's extrapolation of central
+        // differences at 1e-4 and 5e-5, and entries where those two disagree are not a test of the
+        // derivative. The logistic model's sharp curvatures need plain central differences at 1e-6.
         let mut fresh = smoothed_simulator(which);
         let mut f = |x: &[f64], u: &[f64]| { fresh.reset_warm_start(); fresh.step(x, u).unwrap().x_next };
         let scale = der.fx.iter().fold(1.0f64, |m, v| m.max(v.abs()));
-        for j in 0..6 {
-            let mut xp = x.clone();
-            let mut xm = x.clone();
-            xp[j] += eps;
-            xm[j] -= eps;
-            let (p, m) = (f(&xp, &u), f(&xm, &u));
-            for i in 0..6 {
-                let fd = (p[i] - m[i]) / (2.0 * eps);
-                prop_assert!((fd - der.fx[i * 6 + j]).abs() < 1e-5 * scale, "model {}: fx[{}][{}]: {} vs {}", which, i, j, fd, der.fx[i * 6 + j]);
+        // Column j of [fx fu] by differences, or None where they are unreliable.
+        let mut column = |j: usize| -> Vec<Option<f64>> {
+            let mut central = |eps: f64| {
+                let (mut xp, mut xm, mut up, mut um) = (x.clone(), x.clone(), u, u);
+                if j < 6 {
+                    xp[j] += eps;
+                    xm[j] -= eps;
+                } else {
+                    up[j - 6] += eps;
+                    um[j - 6] -= eps;
+                }
+                let (p, m) = (f(&xp, &up), f(&xm, &um));
+                (0..6).map(|i| (p[i] - m[i]) / (2.0 * eps)).collect::<Vec<f64>>()
+            };
+            if which != 1 {
+                return central(1e-6).into_iter().map(Some).collect();
             }
-        }
-        for k in 0..2 {
-            let mut up = u;
-            let mut um = u;
-            up[k] += eps;
-            um[k] -= eps;
-            let (p, m) = (f(&x, &up), f(&x, &um));
-            for i in 0..6 {
-                let fd = (p[i] - m[i]) / (2.0 * eps);
-                prop_assert!((fd - der.fu[i * 2 + k]).abs() < 1e-5 * scale);
+            let (coarse, fine) = (central(1e-4), central(5e-5));
+            coarse
+                .iter()
+                .zip(&fine)
+                .map(|(c, f)| ((c - f).abs() <= 1e-5 * scale).then_some((4.0 * f - c) / 3.0))
+                .collect()
+        };
+        for j in 0..8 {
+            for (i, fd) in column(j).into_iter().enumerate() {
+                let Some(fd) = fd else { continue };
+                let exact = if j < 6 { der.fx[i * 6 + j] } else { der.fu[i * 2 + j - 6] };
+                prop_assert!((fd - exact).abs() < 1e-5 * scale, "model {}: d x'_{} / d y_{}: {} vs {}", which, i, j, fd, exact);
             }
         }
     }
