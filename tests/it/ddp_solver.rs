@@ -427,3 +427,83 @@ fn the_receding_horizon_shift_drops_d_controls_and_repeats_the_last() {
     assert_eq!(ddp::shift_controls(&u, 0), u);
     assert_eq!(ddp::shift_controls(&u, 10), vec![vec![5.0]; 6]);
 }
+
+/// The unicycle with a step that, like an iterative solve, is exact only to about 1e-13 relative: each
+/// result is perturbed by a deterministic pseudo-random amount of that size.
+struct Rounded(Unicycle);
+
+impl Dynamics for Rounded {
+    type Error = std::convert::Infallible;
+    fn state_dim(&self) -> usize {
+        3
+    }
+    fn control_dim(&self) -> usize {
+        2
+    }
+    fn step(&mut self, x: &[f64], u: &[f64], next: &mut [f64]) -> Result<(), Self::Error> {
+        self.0.step(x, u, next)?;
+        let mut bits = x.iter().chain(u).fold(0x9e37_79b9_7f4a_7c15u64, |h, e| {
+            (h ^ e.to_bits()).wrapping_mul(0x0100_0000_01b3)
+        });
+        for e in next.iter_mut() {
+            bits = bits.wrapping_mul(6364136223846793005).wrapping_add(1);
+            let unit = (bits >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
+            *e *= 1.0 + 2e-13 * unit;
+        }
+        Ok(())
+    }
+    fn derivatives(
+        &mut self,
+        x: &[f64],
+        u: &[f64],
+        fx: &mut [f64],
+        fu: &mut [f64],
+    ) -> Result<(), Self::Error> {
+        self.0.derivatives(x, u, fx, fu)
+    }
+    fn has_second_derivatives(&self) -> bool {
+        true
+    }
+    fn second_derivatives(
+        &mut self,
+        x: &[f64],
+        u: &[f64],
+        c: &[f64],
+        fx: &mut [f64],
+        fu: &mut [f64],
+        hess: &mut [f64],
+    ) -> Result<(), Self::Error> {
+        self.0.second_derivatives(x, u, c, fx, fu, hess)
+    }
+}
+
+#[test]
+fn rounding_noise_in_the_steps_ends_in_convergence_not_in_a_failed_search() {
+    // With a cost tolerance far below what noisy rollouts resolve, the line search eventually compares
+    // rounding errors; the optimiser must recognise convergence there instead of raising the
+    // regularisation to its limit and reporting no descent.
+    let settings = DdpSettings {
+        tol_cost: 1e-16,
+        tol_step: 1e-16,
+        ..DdpSettings::default()
+    };
+    let sol = Ddp::new(settings)
+        .unwrap()
+        .solve(
+            &mut Rounded(Unicycle { dt: 0.1 }),
+            &Unicycle::benchmark_cost(),
+            &Unicycle::X0,
+            &vec![vec![0.0; 2]; Unicycle::HORIZON],
+        )
+        .unwrap();
+    let exact = unicycle(Method::Full, None);
+    println!(
+        "{:?} after {} passes, cost {:.12e} (exact dynamics {:.12e})",
+        sol.status,
+        sol.iterations.len(),
+        sol.cost,
+        exact.cost
+    );
+    assert_eq!(sol.status, ddp::Status::CostConverged);
+    assert!((sol.cost - exact.cost).abs() < 1e-9 * exact.cost.abs());
+}

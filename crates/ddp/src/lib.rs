@@ -43,8 +43,8 @@ mod solver;
 pub use error::DdpError;
 pub use model::{Cost, CostDerivatives, Dynamics, QuadraticCost};
 pub use solver::{
-    ControlLimits, Ddp, DdpSettings, Iteration, Method, Regularisation, Solution, Status, rollout,
-    shift_controls,
+    ControlLimits, Ddp, DdpSettings, Iteration, Method, RESOLUTION, Regularisation, Solution,
+    Status, rollout, shift_controls,
 };
 
 /// `Err` unless `v` has `len` finite entries.

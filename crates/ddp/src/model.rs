@@ -15,6 +15,22 @@ pub trait Dynamics {
     /// Write `f(x, u)` into `next` (length `n`).
     fn step(&mut self, x: &[f64], u: &[f64], next: &mut [f64]) -> Result<(), Self::Error>;
 
+    /// Write `f(x, u)` into `next`, knowing that the step from `(near_x, near_u)` was taken before (the
+    /// forward pass steps near the previous trajectory): dynamics whose step is an iterative solve may
+    /// start it from that step's solution. The result must not depend on the hint beyond the solver's
+    /// tolerance. The default is [`Dynamics::step`].
+    fn step_near(
+        &mut self,
+        x: &[f64],
+        u: &[f64],
+        near_x: &[f64],
+        near_u: &[f64],
+        next: &mut [f64],
+    ) -> Result<(), Self::Error> {
+        let _ = (near_x, near_u);
+        self.step(x, u, next)
+    }
+
     /// Write `fx` (`n x n`) and `fu` (`n x m`) at `(x, u)`.
     fn derivatives(
         &mut self,

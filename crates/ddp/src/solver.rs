@@ -156,10 +156,18 @@ impl DdpSettings {
     }
 }
 
+/// The relative cost change below which a rollout cannot tell improvement from rounding: dynamics whose
+/// step is an iterative solve (a complementarity problem solved to about 1e-13) resolve a horizon's cost
+/// to about 1e-12 relative, so a line search that finds no decrease where the model promised less than
+/// this has converged rather than failed.
+pub const RESOLUTION: f64 = 1e-10;
+
 /// Why the optimiser stopped.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub enum Status {
-    /// An accepted pass changed the cost by less than `tol_cost`.
+    /// An accepted pass changed the cost by less than `tol_cost * (1 + |J|)`, or right after an accepted
+    /// pass no step size reduced the cost where the model expected less than [`RESOLUTION`]
+    /// `* (1 + |J|)` from its full step.
     CostConverged,
     /// The feedforward step became smaller than `tol_step`.
     StepConverged,
@@ -335,6 +343,8 @@ impl Ddp {
         let mut k_prev = vec![vec![0.0; m]; horizon];
         let mut lin: Option<Linearisation> = None;
         let mut status = Status::MaxIterations;
+        // Whether the last pass was accepted (the first pass counts: its model is the initial one).
+        let mut previous_accepted = true;
         let increase = |mu: &mut f64, dmu: &mut f64| {
             *dmu = (*dmu * s.mu_factor).max(s.mu_factor);
             *mu = (*mu * *dmu).max(s.mu_min);
@@ -381,6 +391,8 @@ impl Ddp {
                 record(&mut iterations, Iteration::unchanged(total, mu, step));
                 break;
             }
+            // An unregularised model that expects less from its full step than the cost tolerance: the
+            // trajectory is converged (a line search there would only compare rounding errors).
             // Forward pass with a line search.
             let mut accepted = None;
             for (index, &alpha) in alphas.iter().enumerate().skip(first_alpha) {
@@ -405,6 +417,7 @@ impl Ddp {
             if accepted.is_none() {
                 first_alpha = 0;
             }
+            let just_accepted = std::mem::replace(&mut previous_accepted, accepted.is_some());
             match accepted {
                 Some((xn, un, cn, alpha, expected, reduction)) => {
                     tracing::debug!(cost = cn, reduction, expected, mu, alpha, step, "accepted");
@@ -435,6 +448,15 @@ impl Ddp {
                         }
                         break;
                     }
+                }
+                None if just_accepted
+                    && -(bp.dv[0] + bp.dv[1]) < RESOLUTION * (1.0 + total.abs()) =>
+                {
+                    // The model that was just trusted expects less from its full step than a rollout
+                    // resolves: converged (the failed line search compared rounding errors).
+                    status = Status::CostConverged;
+                    record(&mut iterations, Iteration::unchanged(total, mu, step));
+                    break;
                 }
                 None => {
                     tracing::debug!(mu, step, "no step size reduced the cost");
@@ -701,7 +723,9 @@ impl Ddp {
                 }
             }
             let mut next = vec![0.0; n];
-            dynamics.step(&xn[i], &ui, &mut next).map_err(|_| ())?;
+            dynamics
+                .step_near(&xn[i], &ui, &x[i], &u[i], &mut next)
+                .map_err(|_| ())?;
             total += cost.running(i, &xn[i], &ui);
             if !(total.is_finite() && next.iter().all(|e| e.is_finite())) {
                 return Err(());
