@@ -93,3 +93,53 @@ fn the_papers_smaller_noise_still_converges_and_much_smaller_noise_loses_the_con
     assert!(turned.abs() < 0.1, "{turned}");
     assert!(small.cost > half.cost + 5.0);
 }
+
+#[test]
+fn a_step_started_from_a_nearby_steps_solution_is_the_same_step() {
+    // The forward pass hints each step with the previous trajectory's step at that time; the hint may
+    // only change where the solve starts, never (beyond its tolerance) where it ends.
+    use ddp::Dynamics;
+    let data = crate::support::reference_json("finger_steps.json");
+    let vector = |v: &serde_json::Value| -> Vec<f64> {
+        v.as_array()
+            .unwrap()
+            .iter()
+            .map(|e| e.as_f64().unwrap())
+            .collect()
+    };
+    let mut checked = 0;
+    for case in data["steps"].as_array().unwrap() {
+        if case["model"] != "logistic" {
+            continue;
+        }
+        let settings = StepSettings {
+            model: Complementarity::Logistic {
+                sigma: case["sigma"].as_f64().unwrap(),
+            },
+            h: case["h"].as_f64().unwrap(),
+            ..StepSettings::default()
+        };
+        let sim = || Simulator::new(Scene::flicking_finger(), settings).unwrap();
+        let (x, u) = (vector(&case["x"]), vector(&case["u"]));
+        for shift in [1e-6, 1e-3, 0.1] {
+            let near_x: Vec<f64> = x.iter().map(|e| e + shift).collect();
+            let near_u: Vec<f64> = u.iter().map(|e| e - shift).collect();
+            let mut hinted = FingerDynamics::new(sim());
+            let mut scratch = vec![0.0; 6];
+            hinted.step(&near_x, &near_u, &mut scratch).unwrap();
+            let mut next = vec![0.0; 6];
+            hinted
+                .step_near(&x, &u, &near_x, &near_u, &mut next)
+                .unwrap();
+            let mut plain = vec![0.0; 6];
+            FingerDynamics::new(sim()).step(&x, &u, &mut plain).unwrap();
+            let diff = next
+                .iter()
+                .zip(&plain)
+                .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+            assert!(diff < 1e-9, "case {} shift {shift}: {diff:e}", case["id"]);
+            checked += 1;
+        }
+    }
+    assert!(checked >= 30, "only {checked} hinted steps checked");
+}

@@ -2,7 +2,7 @@
 //! global policy's look-up (eq. 20) at the library's sizes.
 
 use dynamics::Scene;
-use library::{Library, LibrarySettings};
+use library::{EvaluationSettings, Library, LibrarySettings, Model, evaluate};
 use std::hint::black_box;
 use std::time::Instant;
 
@@ -49,6 +49,91 @@ pub fn section() -> anyhow::Result<String> {
             l.entries.len(),
             times[5],
             1e6 / times[5]
+        ));
+    }
+    Ok(out)
+}
+
+/// The library's optimiser tolerance against build time and closed-loop quality: libraries of four
+/// controllers per trajectory built with several kick seeds at each tolerance, each run under kicks and
+/// without on the smoothed and the hard world (h = 0.05, 200 s, three evaluation seeds).
+pub fn tolerance_section() -> anyhow::Result<String> {
+    const SEEDS: std::ops::RangeInclusive<u64> = 1..=4;
+    const EVALUATION_SEEDS: std::ops::RangeInclusive<u64> = 7..=9;
+    let scene = Scene::flicking_finger();
+    let mut out = format!(
+        "The library optimiser's stopping tolerance (relative cost change per accepted pass) against build time and closed-loop quality. Each row: libraries with keep = 4 built from kick seeds {}-{} (single thread, mean time), each run for 200 s on the smoothed (logistic 0.1) and the hard world at h = 0.05 with velocity kicks of std 2 every 10 s and without kicks, evaluation seeds {}-{}. Spin under kicks: mean rate over the second half of each interval between kicks; recovered: intervals whose second half spun forward. The spread between kick seeds at one tolerance is large (one library spins at 0.3 rad/s where another of the same settings stalls), so differences smaller than it are noise.\n\n| tolerance | build (s) | passes | spin under kicks, logistic / hard (rad/s) | kicks recovered, logistic / hard | spin without kicks, logistic / hard (rad/s) | spread of spin under kicks over seeds (rad/s) |\n|---:|---:|---:|---:|---:|---:|---:|\n",
+        SEEDS.start(),
+        SEEDS.end(),
+        EVALUATION_SEEDS.start(),
+        EVALUATION_SEEDS.end()
+    );
+    for tolerance in [1e-9, 1e-7, 1e-6, 1e-5, 1e-4] {
+        let (mut seconds, mut passes) = (0.0, 0u64);
+        let mut kicked = [0.0f64; 2];
+        let mut calm = [0.0f64; 2];
+        let mut recovered = [0usize; 2];
+        let mut kicks = [0usize; 2];
+        let mut per_seed = Vec::new();
+        for seed in SEEDS {
+            let settings = LibrarySettings {
+                keep: 4,
+                seed,
+                tolerance,
+                ..LibrarySettings::default()
+            };
+            let start = Instant::now();
+            let lib = Library::build(&scene, &settings, |_, _| {})?;
+            seconds += start.elapsed().as_secs_f64();
+            passes += lib
+                .entries
+                .iter()
+                .step_by(4)
+                .map(|e| e.passes as u64)
+                .sum::<u64>();
+            let policy = lib.policy()?;
+            let mut seed_spin = 0.0;
+            for (w, model) in [Model::Logistic(0.1), Model::Hard].into_iter().enumerate() {
+                for evaluation_seed in EVALUATION_SEEDS {
+                    let run = |kick_every| {
+                        evaluate(
+                            &lib,
+                            &policy,
+                            &EvaluationSettings {
+                                model,
+                                seed: evaluation_seed,
+                                kick_every,
+                                ..EvaluationSettings::default()
+                            },
+                        )
+                    };
+                    let e = run(EvaluationSettings::default().kick_every)?;
+                    kicked[w] += e.spin_after_kicks;
+                    seed_spin += e.spin_after_kicks;
+                    recovered[w] += e.recovered;
+                    kicks[w] += e.kicks;
+                    calm[w] += run(0.0)?.spin_rate;
+                }
+            }
+            per_seed.push(seed_spin / (2 * EVALUATION_SEEDS.count()) as f64);
+        }
+        let libraries = SEEDS.count() as f64;
+        let runs = libraries * EVALUATION_SEEDS.count() as f64;
+        per_seed.sort_by(f64::total_cmp);
+        out.push_str(&format!(
+            "| {tolerance:.0e} | {:.1} | {:.0} | {:.3} / {:.3} | {}/{} / {}/{} | {:.3} / {:.3} | {:.3} to {:.3} |\n",
+            seconds / libraries,
+            passes as f64 / libraries,
+            kicked[0] / runs,
+            kicked[1] / runs,
+            recovered[0],
+            kicks[0],
+            recovered[1],
+            kicks[1],
+            calm[0] / runs,
+            calm[1] / runs,
+            per_seed[0],
+            per_seed[per_seed.len() - 1],
         ));
     }
     Ok(out)

@@ -39,6 +39,8 @@ pub enum Section {
     Ddp,
     /// Building the library and looking up its policy.
     Library,
+    /// The library optimiser's tolerance against build time and closed-loop quality (several minutes).
+    LibraryTolerance,
 }
 
 pub fn run(args: &Args) -> anyhow::Result<()> {
@@ -58,6 +60,12 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     }
     if wanted(Section::Library) {
         sections.push(("library", crate::bench_library::section()?));
+    }
+    if wanted(Section::LibraryTolerance) {
+        sections.push((
+            "library-tolerance",
+            crate::bench_library::tolerance_section()?,
+        ));
     }
     for (name, body) in sections {
         println!("{body}");

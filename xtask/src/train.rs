@@ -32,6 +32,9 @@ pub struct Args {
     /// Optimiser passes at most per warm-started re-solve.
     #[arg(long, default_value_t = 100)]
     warm_passes: usize,
+    /// The optimiser's stopping tolerance on the relative cost change.
+    #[arg(long, default_value_t = LibrarySettings::default().tolerance)]
+    tolerance: f64,
     /// Local controllers kept per trajectory (1: the paper's first controller; up to the shift of 4).
     #[arg(long, default_value_t = 1)]
     keep: usize,
@@ -61,6 +64,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         seed: args.seed,
         keep: args.keep,
         warm_passes: args.warm_passes,
+        tolerance: args.tolerance,
         ..LibrarySettings::default()
     };
     let bar = ProgressBar::new(args.trajectories as u64);

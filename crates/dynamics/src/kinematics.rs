@@ -90,6 +90,16 @@ impl<T: Ring> Kinematics<T> {
         jac
     }
 
+    /// The generalised forces (one per joint, `J_p^T F`) of the world force `force` acting on the material
+    /// point of `body` at world position `p`.
+    pub fn point_force(&self, scene: &Scene, body: usize, p: [T; 2], force: [T; 2]) -> Vec<T> {
+        let [jx, jy] = self.point_jacobian(scene, body, p);
+        jx.iter()
+            .zip(&jy)
+            .map(|(&a, &b)| a * force[0] + b * force[1])
+            .collect()
+    }
+
     /// Velocity of the material point of `body` at `p` for joint velocities `v`.
     pub fn point_velocity(&self, scene: &Scene, body: usize, p: [T; 2], v: &[T]) -> [T; 2] {
         let mut out = [T::from(0.0); 2];

@@ -237,6 +237,16 @@ impl Simulator {
 
     /// The mixed LCP of the step from `x` under `u`, with the start-of-step quantities.
     pub fn problem(&self, x: &[f64], u: &[f64]) -> Result<(LinearMcp, Constraints), DynamicsError> {
+        self.problem_with(x, u, None)
+    }
+
+    /// [`Simulator::problem`] with optional extra generalised forces (checked by the caller).
+    fn problem_with(
+        &self,
+        x: &[f64],
+        u: &[f64],
+        forces: Option<&[f64]>,
+    ) -> Result<(LinearMcp, Constraints), DynamicsError> {
         let scene = &self.scene;
         let n = scene.n_dof();
         check("x", x, scene.n_state())?;
@@ -244,7 +254,10 @@ impl Simulator {
         let (q, v) = x.split_at(n);
         let kin = Kinematics::new(scene, q);
         let M = kin.mass_matrix(scene);
-        let r = kin.applied_forces(scene, v, u);
+        let mut r = kin.applied_forces(scene, v, u);
+        for (r, f) in r.iter_mut().zip(forces.unwrap_or_default()) {
+            *r += f;
+        }
         let cons = Constraints::new(scene, &kin, q)?;
         self.assemble_problem(v, &M, &r, cons)
     }
@@ -285,6 +298,19 @@ impl Simulator {
     #[tracing::instrument(name = "dynamics.step", level = "debug", skip_all)]
     pub fn step(&mut self, x: &[f64], u: &[f64]) -> Result<Step, DynamicsError> {
         let problem = self.problem(x, u)?;
+        Ok(self.solve_step(x, problem)?.0)
+    }
+
+    /// One step from `x` under the controls `u` with the generalised forces `forces` (one per joint,
+    /// held over the step) added to `r + B u`: a user pulling on a body ([`Kinematics::point_force`]).
+    pub fn step_with_forces(
+        &mut self,
+        x: &[f64],
+        u: &[f64],
+        forces: &[f64],
+    ) -> Result<Step, DynamicsError> {
+        check("forces", forces, self.scene.n_dof())?;
+        let problem = self.problem_with(x, u, Some(forces))?;
         Ok(self.solve_step(x, problem)?.0)
     }
 

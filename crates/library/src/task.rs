@@ -109,6 +109,18 @@ impl Dynamics for FingerDynamics {
         Ok(())
     }
 
+    fn step_near(
+        &mut self,
+        x: &[f64],
+        u: &[f64],
+        near_x: &[f64],
+        near_u: &[f64],
+        next: &mut [f64],
+    ) -> Result<(), TaskError> {
+        self.resume(near_x, near_u);
+        self.step(x, u, next)
+    }
+
     fn derivatives(
         &mut self,
         x: &[f64],
