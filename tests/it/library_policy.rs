@@ -34,8 +34,15 @@ fn run(lib: &Library, model: Model, h: f64, kick_every: f64) -> Evaluation {
     )
     .unwrap();
     println!(
-        "{model:?} h = {h}, kicks every {kick_every} s: spin {:.3} rad/s (last quarter {:.3}), {:.1} contacts/s, recovered {}/{}",
-        e.spin_rate, e.final_spin_rate, e.contacts_per_second, e.recovered, e.kicks
+        "{model:?} h = {h}, kicks every {kick_every} s: spin {:.3} rad/s (last quarter {:.3}), {:.1} contacts/s, recovered {}/{}, resumed {}/{} in {:.1} s",
+        e.spin_rate,
+        e.final_spin_rate,
+        e.contacts_per_second,
+        e.recovered,
+        e.kicks,
+        e.resumed,
+        e.kicks,
+        e.resume_time
     );
     e
 }
@@ -57,6 +64,9 @@ fn under_kicks_the_global_policy_spins_the_ellipse_on_smoothed_and_hard_worlds()
         assert!(e.contacts_per_second > 0.2, "{e:?}");
         assert!(e.kicks >= 9);
         assert!(e.recovered * 10 >= e.kicks * 7, "{e:?}");
+        // The stricter measure: a further quarter turn forward before the next kick.
+        assert!(e.resumed * 2 >= e.kicks, "{e:?}");
+        assert!(e.resume_time > 0.0 && e.resume_time < 10.0, "{e:?}");
         assert_eq!(e.unconverged_steps, 0);
     }
 }

@@ -70,9 +70,9 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         library.settings.h
     );
     println!(
-        "| world | h | spin rate (rad/s) | last quarter | after kicks | contacts per half-turn | contacts/s | in contact | kicks recovered |"
+        "| world | h | spin rate (rad/s) | last quarter | after kicks | contacts per half-turn | contacts/s | in contact | kicks recovered | quarter turn resumed (mean time) |"
     );
-    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|");
+    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
     let mut rows = Vec::new();
     for (world, model, h) in worlds(&library) {
         let settings = EvaluationSettings {
@@ -86,7 +86,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         };
         let e = evaluate(&library, &policy, &settings)?;
         println!(
-            "| {world} | {h} | {:.3} | {:.3} | {:.3} | {:.2} | {:.2} | {:.0}% | {}/{} |",
+            "| {world} | {h} | {:.3} | {:.3} | {:.3} | {:.2} | {:.2} | {:.0}% | {}/{} | {}/{} ({:.1} s) |",
             e.spin_rate,
             e.final_spin_rate,
             e.spin_after_kicks,
@@ -94,7 +94,10 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             e.contacts_per_second,
             100.0 * e.contact_fraction,
             e.recovered,
-            e.kicks
+            e.kicks,
+            e.resumed,
+            e.kicks,
+            e.resume_time
         );
         rows.push(Row {
             world,

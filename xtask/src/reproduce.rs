@@ -294,13 +294,20 @@ fn report(s: &Summary) -> String {
     }
     let _ = writeln!(
         t,
-        "\n## Kicks beyond training (library sigma = 0.1, 4 per trajectory, h = 0.05, a kick every 10 s; training used std 2)\n\n| kick std | world | spin (rad/s) | kicks recovered |\n|---:|---|---:|---:|"
+        "\n## Kicks beyond training (library sigma = 0.1, 4 per trajectory, h = 0.05, a kick every 10 s; training used std 2)\n\n| kick std | world | spin (rad/s) | kicks recovered | quarter turn resumed | mean time to it (s) |\n|---:|---|---:|---:|---:|---:|"
     );
     for k in &s.larger_kicks {
         let _ = writeln!(
             t,
-            "| {} | {} | {:.3} | {}/{} |",
-            k.kick_std, k.world, k.evaluation.spin_rate, k.evaluation.recovered, k.evaluation.kicks
+            "| {} | {} | {:.3} | {}/{} | {}/{} | {:.1} |",
+            k.kick_std,
+            k.world,
+            k.evaluation.spin_rate,
+            k.evaluation.recovered,
+            k.evaluation.kicks,
+            k.evaluation.resumed,
+            k.evaluation.kicks,
+            k.evaluation.resume_time
         );
     }
     let _ = writeln!(
@@ -312,14 +319,14 @@ fn report(s: &Summary) -> String {
     }
     let _ = writeln!(
         t,
-        "\n## The global policy in closed loop ({:.0} s per run; kicks: normal velocity kicks of std 2 every 10 s)\n\nPaper's claims: the controller spins the ellipse on the smoothed and on the hard system, survives the kicks, works at another time step, and sigma = 0.05 is less robust.\n\n| library | world | h | kicks | spin (rad/s) | last quarter (rad/s) | contacts/s | in contact | kicks recovered |\n|---|---|---:|---|---:|---:|---:|---:|---:|",
+        "\n## The global policy in closed loop ({:.0} s per run; kicks: normal velocity kicks of std 2 every 10 s)\n\nPaper's claims: the controller spins the ellipse on the smoothed and on the hard system, survives the kicks, works at another time step, and sigma = 0.05 is less robust.\n\n| library | world | h | kicks | spin (rad/s) | last quarter (rad/s) | contacts/s | in contact | kicks recovered | quarter turn resumed (mean time) |\n|---|---|---:|---|---:|---:|---:|---:|---:|---:|",
         s.run_seconds
     );
     for c in &s.closed_loop {
         let e = &c.evaluation;
         let _ = writeln!(
             t,
-            "| {} | {} | {} | {} | {:.3} | {:.3} | {:.2} | {:.0}% | {} |",
+            "| {} | {} | {} | {} | {:.3} | {:.3} | {:.2} | {:.0}% | {} | {} |",
             c.library,
             c.world,
             c.h,
@@ -330,6 +337,11 @@ fn report(s: &Summary) -> String {
             100.0 * e.contact_fraction,
             if c.kicks {
                 format!("{}/{}", e.recovered, e.kicks)
+            } else {
+                "-".into()
+            },
+            if c.kicks {
+                format!("{}/{} ({:.1} s)", e.resumed, e.kicks, e.resume_time)
             } else {
                 "-".into()
             }

@@ -50,7 +50,9 @@ pub struct Evaluation {
     pub spin_rate: f64,
     /// Mean spin rate over the last quarter of the run, rad/s.
     pub final_spin_rate: f64,
-    /// Contact events (a step with a contact impulse after one without) per half-turn of the ellipse.
+    /// Contact events (the contact impulse rising above [`CONTACT_IMPULSE`] after having fallen below a
+    /// tenth of it, so that a smoothed impulse flickering around the threshold counts once) per half-turn
+    /// of the ellipse.
     pub contacts_per_half_turn: f64,
     /// Contact events per second.
     pub contacts_per_second: f64,
@@ -58,8 +60,13 @@ pub struct Evaluation {
     pub contact_fraction: f64,
     /// Kicks applied.
     pub kicks: usize,
-    /// Kicks after which the spin rate over the next interval was positive.
+    /// Kicks after which the spin rate over the second half of the next interval was positive.
     pub recovered: usize,
+    /// Kicks after which the ellipse turned a further quarter turn forward before the next kick (the
+    /// stricter measure).
+    pub resumed: usize,
+    /// Mean time from a kick to that quarter turn, over the kicks that resumed, s.
+    pub resume_time: f64,
     /// Mean spin rate over the second half of each interval between kicks, rad/s.
     pub spin_after_kicks: f64,
     /// Steps whose complementarity solve did not converge (they still advance the state).
@@ -126,6 +133,9 @@ pub fn evaluate(
     let (mut events, mut touching_steps, mut unconverged) = (0usize, 0usize, 0usize);
     let mut was_touching = false;
     let (mut kicks, mut recovered) = (0usize, 0usize);
+    // The free angle at the last kick, until the ellipse has turned a quarter turn past it.
+    let mut since_kick: Option<(usize, f64)> = None;
+    let (mut resumed, mut resume_steps) = (0usize, 0usize);
     let (mut after_sum, mut after_time) = (0.0, 0.0);
     let mut interval_start = x[free];
     let quarter = steps - steps / 4;
@@ -137,6 +147,7 @@ pub fn evaluate(
         if k > 0 && k % kick_steps == 0 {
             // The interval that ends here: did it spin forward over its second half?
             kicks += 1;
+            since_kick = Some((k, x[free]));
             for v in &mut x[n..] {
                 *v += kick.sample(&mut rng);
             }
@@ -157,15 +168,24 @@ pub fn evaluate(
         if s.info.status != ncp::Status::Converged {
             unconverged += 1;
         }
-        let touching = s.lambda[limit_rows..].iter().sum::<f64>() > CONTACT_IMPULSE;
-        if touching {
+        let impulse = s.lambda[limit_rows..].iter().sum::<f64>();
+        if impulse > CONTACT_IMPULSE {
             touching_steps += 1;
             if !was_touching {
                 events += 1;
             }
+            was_touching = true;
+        } else if impulse < 0.1 * CONTACT_IMPULSE {
+            was_touching = false;
         }
-        was_touching = touching;
         x = s.x_next;
+        if let Some((at, angle)) = since_kick
+            && x[free] - angle >= std::f64::consts::FRAC_PI_2
+        {
+            resumed += 1;
+            resume_steps += k + 1 - at;
+            since_kick = None;
+        }
         if !x.iter().all(|v| v.is_finite()) {
             return Err(LibraryError::Invalid(format!(
                 "the closed loop produced a non-finite state at step {k}"
@@ -186,6 +206,12 @@ pub fn evaluate(
         contact_fraction: touching_steps as f64 / steps as f64,
         kicks,
         recovered: recovered.min(kicks),
+        resumed,
+        resume_time: if resumed > 0 {
+            resume_steps as f64 * settings.h / resumed as f64
+        } else {
+            f64::NAN
+        },
         spin_after_kicks: if after_time > 0.0 {
             after_sum / after_time
         } else {
