@@ -68,6 +68,52 @@ proptest! {
     }
 
     #[test]
+    fn a_point_force_does_the_virtual_work_of_its_point_and_acts_as_a_joint_torque(
+        x in state(),
+        body in 0usize..3,
+        offset in (-0.5f64..0.5, -0.2f64..0.2),
+        force in (-5.0f64..5.0, -5.0f64..5.0),
+    ) {
+        let scene = finger();
+        let q = &x[..3];
+        let kin = Kinematics::new(&scene, q);
+        let c = kin.centre[body];
+        let p = [c[0] + offset.0, c[1] + offset.1];
+        let tau = kin.point_force(&scene, body, p, [force.0, force.1]);
+        // Virtual work: tau . dq = F . dp for the material point carried along by dq.
+        let dq = [0.3, -0.7, 0.5];
+        let eps = 1e-6;
+        let moved: Vec<f64> = q.iter().zip(dq).map(|(a, b)| a + eps * b).collect();
+        let k2 = Kinematics::new(&scene, &moved);
+        // The material point in body coordinates, then where it is after the move.
+        let phi = kin.phi[body];
+        let rel = [p[0] - kin.hinge[body][0], p[1] - kin.hinge[body][1]];
+        let local = [phi.cos() * rel[0] + phi.sin() * rel[1], -phi.sin() * rel[0] + phi.cos() * rel[1]];
+        let phi2 = k2.phi[body];
+        let p2 = [
+            k2.hinge[body][0] + phi2.cos() * local[0] - phi2.sin() * local[1],
+            k2.hinge[body][1] + phi2.sin() * local[0] + phi2.cos() * local[1],
+        ];
+        let work = force.0 * (p2[0] - p[0]) / eps + force.1 * (p2[1] - p[1]) / eps;
+        let virtual_work: f64 = tau.iter().zip(dq).map(|(t, d)| t * d).sum();
+        prop_assert!((work - virtual_work).abs() < 1e-5 * (1.0 + work.abs()), "{work} vs {virtual_work}");
+        // A generalised force on the actuated joints is the same step as that control torque; none is the
+        // plain step.
+        let mut sim = Simulator::new(scene.clone(), StepSettings::default()).unwrap();
+        let by_control = sim.step(&x, &[tau[0], tau[1]]).unwrap();
+        sim.reset_warm_start();
+        let by_force = sim.step_with_forces(&x, &[0.0, 0.0], &[tau[0], tau[1], 0.0]).unwrap();
+        sim.reset_warm_start();
+        let plain = sim.step(&x, &[0.0, 0.0]).unwrap();
+        sim.reset_warm_start();
+        let no_force = sim.step_with_forces(&x, &[0.0, 0.0], &[0.0; 3]).unwrap();
+        for i in 0..6 {
+            prop_assert!((by_control.x_next[i] - by_force.x_next[i]).abs() < 1e-10);
+            prop_assert!((plain.x_next[i] - no_force.x_next[i]).abs() < 1e-12);
+        }
+    }
+
+    #[test]
     fn constraint_jacobian_rows_are_gradients_of_the_distances(x in state()) {
         let scene = finger();
         let q = &x[..3];
@@ -361,6 +407,12 @@ fn bad_states_and_settings_are_typed_errors() {
         sim.step(&[-0.5; 6], &[f64::INFINITY, 0.0]),
         Err(DynamicsError::Input { what: "u", .. })
     ));
+    for forces in [&[f64::NAN, 0.0, 0.0][..], &[0.0, 0.0]] {
+        assert!(matches!(
+            sim.step_with_forces(&[-0.5; 6], &[0.0; 2], forces),
+            Err(DynamicsError::Input { what: "forces", .. })
+        ));
+    }
     for bad in [
         StepSettings {
             h: 0.0,
