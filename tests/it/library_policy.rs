@@ -2,22 +2,8 @@
 //! spins the ellipse on the smoothed system it was built on and on the hard, non-smooth one, at the
 //! library's time step and at another. The paper's library of single first controllers is compared.
 
-use dynamics::Scene;
-use library::{Evaluation, EvaluationSettings, Library, LibrarySettings, Model, evaluate};
-use std::sync::OnceLock;
-
-/// The default library (400 trajectories, SCENE.md's settings) keeping the four controllers each
-/// trajectory runs before the next one takes over; built once for this module.
-fn library() -> &'static Library {
-    static LIB: OnceLock<Library> = OnceLock::new();
-    LIB.get_or_init(|| {
-        let settings = LibrarySettings {
-            keep: 4,
-            ..LibrarySettings::default()
-        };
-        Library::build(&Scene::flicking_finger(), &settings, |_, _| {}).unwrap()
-    })
-}
+use crate::support::finger_library as library;
+use library::{Evaluation, EvaluationSettings, Library, Model, evaluate};
 
 fn run(lib: &Library, model: Model, h: f64, kick_every: f64) -> Evaluation {
     let policy = lib.policy().unwrap();

@@ -13,3 +13,5 @@ mod library_policy;
 mod ncp_functions;
 mod ncp_solvers;
 mod support;
+mod viewer_protocol;
+mod viewer_world;

@@ -38,3 +38,16 @@ pub fn c_gradient(sim: &mut dynamics::Simulator, c: &[f64], y: &[f64]) -> Vec<f6
     }
     g
 }
+
+/// The default library (400 trajectories, SCENE.md's settings) keeping the four controllers each
+/// trajectory runs before the next one takes over; built once per test run (about 10 s) and shared.
+pub fn finger_library() -> &'static library::Library {
+    static LIB: std::sync::OnceLock<library::Library> = std::sync::OnceLock::new();
+    LIB.get_or_init(|| {
+        let settings = library::LibrarySettings {
+            keep: 4,
+            ..library::LibrarySettings::default()
+        };
+        library::Library::build(&dynamics::Scene::flicking_finger(), &settings, |_, _| {}).unwrap()
+    })
+}

@@ -14,6 +14,7 @@ mod optimize;
 mod reproduce;
 mod step;
 mod train;
+mod view;
 
 use clap::{Parser, Subcommand};
 
@@ -61,6 +62,9 @@ enum Command {
     Figures(figures::Args),
     /// Measure speed against error and rewrite the generated tables of docs/benchmarks.md.
     Benchmarks(benchmarks::Args),
+    /// The interactive viewer: a local web server with the finger simulated at real time under the
+    /// library's policy or online MPC; drag bodies with the mouse.
+    View(view::Args),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -75,5 +79,6 @@ fn main() -> anyhow::Result<()> {
         Command::Reproduce(args) => reproduce::run(&args),
         Command::Figures(args) => figures::run(&args),
         Command::Benchmarks(args) => benchmarks::run(&args),
+        Command::View(args) => view::run(&args),
     }
 }

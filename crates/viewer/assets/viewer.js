@@ -1,0 +1,275 @@
+// The viewer's page: draws the frames the server streams over the WebSocket and sends the user's input
+// back (the protocol is documented in crates/viewer/src/protocol.rs). No dependencies, no network but
+// the page's own server.
+"use strict";
+
+const canvas = document.getElementById("scene");
+const ctx = canvas.getContext("2d");
+const plot = document.getElementById("plot");
+const plotCtx = plot.getContext("2d");
+// World window: x in [-3.5, 3.5], y in [-4, 2].
+const SCALE = 100;
+const ORIGIN = [350, 200];
+const PLOT_SECONDS = 20;
+
+let socket = null;
+let shapes = [];
+let frame = null;
+let history = []; // [t, spin rate]
+let dragging = false;
+let lastError = "";
+
+const toScreen = (p) => [ORIGIN[0] + SCALE * p[0], ORIGIN[1] - SCALE * p[1]];
+const toWorld = (s) => [(s[0] - ORIGIN[0]) / SCALE, (ORIGIN[1] - s[1]) / SCALE];
+
+function send(message) {
+  if (socket && socket.readyState === WebSocket.OPEN) {
+    socket.send(JSON.stringify(message));
+  }
+}
+
+function connect() {
+  const scheme = location.protocol === "https:" ? "wss" : "ws";
+  socket = new WebSocket(`${scheme}://${location.host}/ws`);
+  socket.onopen = () => { document.getElementById("status").textContent = "connected"; };
+  socket.onclose = () => {
+    document.getElementById("status").textContent = "disconnected; retrying ...";
+    setTimeout(connect, 1000);
+  };
+  socket.onmessage = (event) => {
+    const message = JSON.parse(event.data);
+    if (message.type === "hello") {
+      shapes = message.bodies;
+      document.getElementById("status").textContent =
+        `connected; h = ${message.h} s; ` +
+        (message.library ? `library of ${message.controllers} controllers` : "no library loaded");
+      for (const input of document.querySelectorAll("input[name=policy][value=library]")) {
+        input.disabled = !message.library;
+      }
+    } else if (message.type === "frame") {
+      receive(message);
+    } else if (message.type === "error") {
+      lastError = message.message;
+      document.getElementById("warning").textContent = message.message;
+    }
+  };
+}
+
+function receive(f) {
+  if (frame && f.t < frame.t) {
+    history = []; // a reset
+  }
+  frame = f;
+  window.lastFrame = f; // for end-to-end tests
+  history.push([f.t, f.spin_rate]);
+  while (history.length && history[0][0] < f.t - PLOT_SECONDS) {
+    history.shift();
+  }
+  syncControls(f);
+  readout(f);
+}
+
+function syncControls(f) {
+  for (const input of document.querySelectorAll("input[name=policy]")) {
+    input.checked = input.value === f.policy;
+  }
+  for (const input of document.querySelectorAll("input[name=world]")) {
+    input.checked = input.value === f.world;
+  }
+  const sigma = document.getElementById("sigma");
+  if (document.activeElement !== sigma) {
+    sigma.value = f.sigma;
+  }
+  document.getElementById("pause").textContent = f.paused ? "resume" : "pause";
+}
+
+function readout(f) {
+  const fixed = (v, d) => (Number.isFinite(v) ? v.toFixed(d) : "-");
+  document.getElementById("time").textContent = `${fixed(f.t, 2)} s`;
+  document.getElementById("spin").textContent = `${fixed(f.spin_rate, 3)} rad/s`;
+  document.getElementById("control-ms").textContent =
+    `${fixed(f.control_ms, 3)} ms (max ${fixed(f.control_ms_max, 3)} ms over 2 s)`;
+  const impulse = f.contacts.reduce((m, c) => Math.max(m, Math.hypot(c.impulse[0], c.impulse[1])), 0);
+  document.getElementById("impulse").textContent = fixed(impulse, 4);
+  document.getElementById("torques").textContent = f.u.map((u) => fixed(u, 2)).join(", ");
+  document.getElementById("perturbations").textContent =
+    `${f.perturbations} (unconverged steps: ${f.unconverged})`;
+  document.getElementById("warning").textContent = f.warning || lastError;
+}
+
+function ellipse(pose, shape, fill, stroke) {
+  const [cx, cy] = toScreen(pose.centre);
+  ctx.beginPath();
+  ctx.ellipse(cx, cy, SCALE * shape.semi_axes[0], SCALE * shape.semi_axes[1], -pose.angle, 0, 2 * Math.PI);
+  ctx.fillStyle = fill;
+  ctx.fill();
+  ctx.strokeStyle = stroke;
+  ctx.lineWidth = 1.5;
+  ctx.stroke();
+}
+
+function draw() {
+  ctx.clearRect(0, 0, canvas.width, canvas.height);
+  if (frame && shapes.length === frame.bodies.length) {
+    frame.bodies.forEach((pose, i) => {
+      const shape = shapes[i];
+      ellipse(pose, shape, shape.actuated ? "#9ab7d3" : "#e3c58a", "#333");
+      // Orientation mark along the body's x axis, and the hinge.
+      const [cx, cy] = toScreen(pose.centre);
+      const a = SCALE * shape.semi_axes[0];
+      ctx.beginPath();
+      ctx.moveTo(cx, cy);
+      ctx.lineTo(cx + a * Math.cos(pose.angle), cy - a * Math.sin(pose.angle));
+      ctx.strokeStyle = "#555";
+      ctx.stroke();
+      const [hx, hy] = toScreen(pose.hinge);
+      ctx.beginPath();
+      ctx.arc(hx, hy, 4, 0, 2 * Math.PI);
+      ctx.fillStyle = "#222";
+      ctx.fill();
+    });
+    for (const c of frame.contacts) {
+      const size = Math.hypot(c.impulse[0], c.impulse[1]);
+      if (size > 1e-4) {
+        const [px, py] = toScreen(c.point);
+        ctx.beginPath();
+        ctx.arc(px, py, 3 + Math.min(12, 40 * size), 0, 2 * Math.PI);
+        ctx.fillStyle = "rgba(200, 30, 30, 0.8)";
+        ctx.fill();
+        const k = Math.min(3, 10 * size) / size;
+        ctx.beginPath();
+        ctx.moveTo(px, py);
+        ctx.lineTo(px + SCALE * k * c.impulse[0], py - SCALE * k * c.impulse[1]);
+        ctx.strokeStyle = "#c11";
+        ctx.lineWidth = 2;
+        ctx.stroke();
+      }
+    }
+    if (frame.spring) {
+      const [ax, ay] = toScreen(frame.spring.from);
+      const [bx, by] = toScreen(frame.spring.to);
+      ctx.beginPath();
+      ctx.moveTo(ax, ay);
+      ctx.lineTo(bx, by);
+      ctx.setLineDash([6, 4]);
+      ctx.strokeStyle = "#2a7";
+      ctx.lineWidth = 2;
+      ctx.stroke();
+      ctx.setLineDash([]);
+    }
+  }
+  drawPlot();
+  requestAnimationFrame(draw);
+}
+
+function drawPlot() {
+  const w = plot.width;
+  const h = plot.height;
+  plotCtx.clearRect(0, 0, w, h);
+  const limit = Math.max(0.5, ...history.map((p) => Math.abs(p[1])));
+  const y = (v) => h / 2 - (h / 2 - 10) * (v / limit);
+  plotCtx.strokeStyle = "#bbb";
+  plotCtx.beginPath();
+  plotCtx.moveTo(0, y(0));
+  plotCtx.lineTo(w, y(0));
+  plotCtx.stroke();
+  plotCtx.fillStyle = "#555";
+  plotCtx.font = "11px sans-serif";
+  plotCtx.fillText(`spin rate, last ${PLOT_SECONDS} s (+-${limit.toFixed(2)} rad/s)`, 4, 12);
+  if (history.length < 2) {
+    return;
+  }
+  const t1 = history[history.length - 1][0];
+  plotCtx.strokeStyle = "#1565c0";
+  plotCtx.lineWidth = 1.5;
+  plotCtx.beginPath();
+  history.forEach(([t, v], i) => {
+    const x = w - (w * (t1 - t)) / PLOT_SECONDS;
+    if (i === 0) {
+      plotCtx.moveTo(x, y(v));
+    } else {
+      plotCtx.lineTo(x, y(v));
+    }
+  });
+  plotCtx.stroke();
+}
+
+// The body under a screen point, topmost (last drawn) first.
+function bodyAt(point) {
+  if (!frame) {
+    return -1;
+  }
+  for (let i = frame.bodies.length - 1; i >= 0; i--) {
+    const pose = frame.bodies[i];
+    const [a, b] = shapes[i].semi_axes;
+    const dx = point[0] - pose.centre[0];
+    const dy = point[1] - pose.centre[1];
+    const c = Math.cos(pose.angle);
+    const s = Math.sin(pose.angle);
+    const lx = c * dx + s * dy;
+    const ly = -s * dx + c * dy;
+    if ((lx / a) ** 2 + (ly / b) ** 2 <= 1) {
+      return i;
+    }
+  }
+  return -1;
+}
+
+function eventPoint(event) {
+  const rect = canvas.getBoundingClientRect();
+  return toWorld([
+    ((event.clientX - rect.left) * canvas.width) / rect.width,
+    ((event.clientY - rect.top) * canvas.height) / rect.height,
+  ]);
+}
+
+canvas.addEventListener("pointerdown", (event) => {
+  const point = eventPoint(event);
+  const body = bodyAt(point);
+  if (body >= 0) {
+    dragging = true;
+    canvas.classList.add("dragging");
+    canvas.setPointerCapture(event.pointerId);
+    send({ type: "grab", body, point });
+  }
+});
+canvas.addEventListener("pointermove", (event) => {
+  if (dragging) {
+    send({ type: "drag", target: eventPoint(event) });
+  }
+});
+function release() {
+  if (dragging) {
+    dragging = false;
+    canvas.classList.remove("dragging");
+    send({ type: "release" });
+  }
+}
+canvas.addEventListener("pointerup", release);
+canvas.addEventListener("pointercancel", release);
+
+for (const input of document.querySelectorAll("input[name=policy]")) {
+  input.addEventListener("change", () => { lastError = ""; send({ type: "policy", policy: input.value }); });
+}
+for (const input of document.querySelectorAll("input[name=world]")) {
+  input.addEventListener("change", () => send({ type: "world", world: input.value }));
+}
+document.getElementById("sigma").addEventListener("change", (event) => {
+  lastError = "";
+  send({ type: "sigma", sigma: Number(event.target.value) });
+});
+document.getElementById("speed").addEventListener("input", (event) => {
+  const speed = 2 ** Number(event.target.value);
+  document.getElementById("speed-value").textContent = `${speed}x`;
+  send({ type: "speed", speed });
+});
+document.getElementById("pause").addEventListener("click", () => {
+  send({ type: "pause", paused: !(frame && frame.paused) });
+});
+document.getElementById("reset").addEventListener("click", () => { lastError = ""; send({ type: "reset" }); });
+document.getElementById("kick").addEventListener("click", () => {
+  send({ type: "kick", std: Number(document.getElementById("kick-std").value) });
+});
+
+connect();
+requestAnimationFrame(draw);

@@ -1,0 +1,192 @@
+//! Online model-predictive control: every control step re-solves the task's iLQG problem from the current
+//! state, warm-started from the previous plan shifted by one step (eq. 19 with `d = 1`), with a fixed
+//! budget of passes, and applies the first control. The plan improves over successive steps (a
+//! real-time iteration scheme), so one pass per step is enough once it has caught on.
+
+use crate::error::ViewerError;
+use ddp::{Ddp, DdpError, DdpSettings, QuadraticCost};
+use dynamics::{Complementarity, Scene, Simulator, StepSettings};
+use library::{FingerDynamics, Policy, finger_cost, free_joint};
+use std::time::Instant;
+
+/// The largest regularisation carried from one control step to the next (a solve that gave up at a
+/// huge `mu` should not freeze the next ones).
+const MU_CARRIED_MAX: f64 = 1e3;
+
+/// How the online optimiser runs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MpcSettings {
+    /// Noise scale of its smoothed model.
+    pub sigma: f64,
+    /// Time step.
+    pub h: f64,
+    /// Horizon in steps.
+    pub horizon: usize,
+    /// Optimiser passes per control step.
+    pub passes: usize,
+}
+
+impl Default for MpcSettings {
+    fn default() -> Self {
+        MpcSettings {
+            sigma: 0.1,
+            h: 0.05,
+            horizon: 75,
+            passes: 1,
+        }
+    }
+}
+
+/// The online optimiser (see the module documentation).
+#[derive(Debug)]
+pub struct OnlineMpc {
+    settings: MpcSettings,
+    dynamics: FingerDynamics,
+    cost: QuadraticCost,
+    ddp: Ddp,
+    plan: Vec<Vec<f64>>,
+    /// The regularisation the last solve ended with: the next starts there, so that a few passes per
+    /// step add up to one optimisation rather than restarting its trust region every step.
+    mu: f64,
+    /// How far the last plan turns the free body over the horizon.
+    planned_turn: f64,
+    free: usize,
+    last_ms: f64,
+}
+
+impl OnlineMpc {
+    /// An optimiser for the task on `scene`, with an empty (all zero) plan.
+    pub fn new(scene: &Scene, settings: MpcSettings) -> Result<Self, ViewerError> {
+        if !(settings.sigma.is_finite() && settings.sigma > 0.0) {
+            return Err(ViewerError::Setting {
+                name: "sigma",
+                value: settings.sigma,
+                expected: "finite and positive",
+            });
+        }
+        if settings.horizon == 0 || settings.passes == 0 {
+            return Err(ViewerError::Setting {
+                name: "horizon / passes",
+                value: 0.0,
+                expected: "at least 1",
+            });
+        }
+        let sim = Simulator::new(
+            scene.clone(),
+            StepSettings {
+                model: Complementarity::Logistic {
+                    sigma: settings.sigma,
+                },
+                h: settings.h,
+                ..StepSettings::default()
+            },
+        )?;
+        let ddp = Ddp::new(DdpSettings {
+            max_iterations: settings.passes,
+            // Step sizes 1, 0.1, 0.01, 0.001: a control step's worst case stays a few rollouts.
+            line_search_steps: 4,
+            ..DdpSettings::default()
+        })?;
+        Ok(OnlineMpc {
+            cost: finger_cost(scene.n_dof(), free_joint(scene)?, scene.n_controls),
+            plan: vec![vec![0.0; scene.n_controls]; settings.horizon],
+            dynamics: FingerDynamics::new(sim),
+            settings,
+            ddp,
+            mu: DdpSettings::default().mu_init,
+            planned_turn: 0.0,
+            free: free_joint(scene)?,
+            last_ms: 0.0,
+        })
+    }
+
+    /// The settings.
+    pub fn settings(&self) -> &MpcSettings {
+        &self.settings
+    }
+
+    /// Time the last [`OnlineMpc::control`] took, ms.
+    pub fn last_ms(&self) -> f64 {
+        self.last_ms
+    }
+
+    /// How far the last plan turns the free body over its horizon, rad (near zero: the optimiser sees
+    /// no way to spin it from here, a local minimum).
+    pub fn planned_turn(&self) -> f64 {
+        self.planned_turn
+    }
+
+    /// The current plan (controls over the horizon).
+    pub fn plan(&self) -> &[Vec<f64>] {
+        &self.plan
+    }
+
+    /// Forget the plan (all zero controls).
+    pub fn clear(&mut self) {
+        for u in &mut self.plan {
+            u.iter_mut().for_each(|e| *e = 0.0);
+        }
+    }
+
+    /// Seed the plan with `policy` rolled out from `x` on the optimiser's own model (a library gives the
+    /// online optimiser a flick to start from).
+    pub fn seed_from_policy(&mut self, policy: &Policy, x: &[f64]) -> Result<(), ViewerError> {
+        let mut x = x.to_vec();
+        let mut next = vec![0.0; x.len()];
+        for u in &mut self.plan {
+            policy.control(&x, u)?;
+            ddp::Dynamics::step(&mut self.dynamics, &x, u, &mut next)
+                .map_err(|e| ViewerError::Message(format!("seeding the plan: {e}")))?;
+            std::mem::swap(&mut x, &mut next);
+        }
+        Ok(())
+    }
+
+    /// Optimise the plan from `x` to convergence (at most `max_passes`; the first solve from rest takes
+    /// about 100 passes, some 150 ms), so that the per-step re-solves start from a flick rather than from
+    /// rest. Returns the passes taken.
+    pub fn converge(&mut self, x: &[f64], max_passes: usize) -> Result<usize, ViewerError> {
+        let ddp = Ddp::new(DdpSettings {
+            max_iterations: max_passes.max(1),
+            ..DdpSettings::default()
+        })?;
+        let sol = match ddp.solve(&mut self.dynamics, &self.cost, x, &self.plan) {
+            Ok(sol) => sol,
+            Err(DdpError::InitialRollout { .. }) => {
+                self.clear();
+                ddp.solve(&mut self.dynamics, &self.cost, x, &self.plan)?
+            }
+            Err(e) => return Err(e.into()),
+        };
+        self.plan = sol.controls;
+        Ok(sol.iterations.len())
+    }
+
+    /// Re-solve from `x` and return the first control; the plan moves on by one step.
+    pub fn control(&mut self, x: &[f64]) -> Result<Vec<f64>, ViewerError> {
+        let start = Instant::now();
+        let ddp = Ddp::new(DdpSettings {
+            mu_init: self.mu,
+            ..self.ddp.settings().clone()
+        })?;
+        let sol = match ddp.solve(&mut self.dynamics, &self.cost, x, &self.plan) {
+            Ok(sol) => sol,
+            // The plan cannot even be rolled out from here (a violent drag, say): start over from rest.
+            Err(DdpError::InitialRollout { .. }) => {
+                self.clear();
+                ddp.solve(&mut self.dynamics, &self.cost, x, &self.plan)?
+            }
+            Err(e) => return Err(e.into()),
+        };
+        self.mu = sol
+            .iterations
+            .last()
+            .map_or(self.mu, |it| it.mu)
+            .clamp(0.0, MU_CARRIED_MAX);
+        let u = sol.controls[0].clone();
+        self.planned_turn = sol.states[sol.states.len() - 1][self.free] - x[self.free];
+        self.plan = ddp::shift_controls(&sol.controls, 1);
+        self.last_ms = start.elapsed().as_secs_f64() * 1e3;
+        Ok(u)
+    }
+}

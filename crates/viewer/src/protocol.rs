@@ -1,0 +1,214 @@
+//! The WebSocket protocol, JSON text messages both ways.
+//!
+//! The server sends `{"type":"hello",...}` once (the scene's shapes and the options), then a `frame` after
+//! every simulated step (at most one per step; a slow client skips frames rather than falling behind),
+//! and `error` in reply to a message it refused. The page sends:
+//!
+//! | message | effect |
+//! |---|---|
+//! | `{"type":"grab","body":i,"point":[x,y]}` | start pulling body `i` at the world point `[x, y]` (its material point there) |
+//! | `{"type":"drag","target":[x,y]}` | move the cursor end of the spring |
+//! | `{"type":"release"}` | let go |
+//! | `{"type":"policy","policy":"library"\|"mpc"\|"off"}` | who chooses the torques |
+//! | `{"type":"world","world":"smoothed"\|"hard"}` | the contact model the world runs on |
+//! | `{"type":"sigma","sigma":s}` | the smoothed world's and the online optimiser's noise scale |
+//! | `{"type":"speed","speed":r}` | simulated seconds per real second (0.05 to 10) |
+//! | `{"type":"pause","paused":bool}` | stop or resume time |
+//! | `{"type":"reset"}` | back to the scene's initial state |
+//! | `{"type":"kick","std":s}` | add normal noise of standard deviation `s` to every velocity |
+
+use serde::{Deserialize, Serialize};
+
+/// Who chooses the torques.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PolicyKind {
+    /// The library's nearest-neighbour policy (paper eq. 20).
+    Library,
+    /// iLQG re-solved every control step from the shifted previous plan.
+    Mpc,
+    /// No torques.
+    Off,
+}
+
+/// The contact model the world runs on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum WorldKind {
+    /// Logistic smoothing (eq. 17) at the current sigma.
+    Smoothed,
+    /// Hard contact (the exact LCP).
+    Hard,
+}
+
+/// A message from the page.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "type", rename_all = "snake_case", deny_unknown_fields)]
+pub enum ClientMessage {
+    /// Start pulling `body` at the world point `point`.
+    Grab {
+        /// Body index (scene order).
+        body: usize,
+        /// World coordinates of the grabbed point.
+        point: [f64; 2],
+    },
+    /// Move the cursor end of the spring.
+    Drag {
+        /// World coordinates.
+        target: [f64; 2],
+    },
+    /// Let go.
+    Release,
+    /// Choose the policy.
+    Policy {
+        /// Which.
+        policy: PolicyKind,
+    },
+    /// Choose the world's contact model.
+    World {
+        /// Which.
+        world: WorldKind,
+    },
+    /// Set sigma.
+    Sigma {
+        /// Noise scale, positive.
+        sigma: f64,
+    },
+    /// Set the speed.
+    Speed {
+        /// Simulated seconds per real second.
+        speed: f64,
+    },
+    /// Pause or resume.
+    Pause {
+        /// Whether time stands still.
+        paused: bool,
+    },
+    /// Back to the initial state.
+    Reset,
+    /// Random velocity kick.
+    Kick {
+        /// Standard deviation of each velocity's kick.
+        std: f64,
+    },
+}
+
+impl ClientMessage {
+    /// Parse one text message.
+    pub fn parse(text: &str) -> Result<Self, crate::ViewerError> {
+        serde_json::from_str(text).map_err(|e| crate::ViewerError::Message(e.to_string()))
+    }
+}
+
+/// One body's pose.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct BodyPose {
+    /// Centre of the ellipse.
+    pub centre: [f64; 2],
+    /// Angle of the body's x axis (the ellipse's first semi-axis).
+    pub angle: f64,
+    /// Hinge position.
+    pub hinge: [f64; 2],
+}
+
+/// One contact pair's state over the last step.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ContactView {
+    /// Witness point on body B (where the impulse is drawn).
+    pub point: [f64; 2],
+    /// Unit normal from A to B.
+    pub normal: [f64; 2],
+    /// Signed distance at the start of the step.
+    pub distance: f64,
+    /// Impulse on B, world coordinates.
+    pub impulse: [f64; 2],
+}
+
+/// The spring of a drag, for drawing.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SpringView {
+    /// The grabbed body.
+    pub body: usize,
+    /// The grabbed material point, world coordinates.
+    pub from: [f64; 2],
+    /// The cursor.
+    pub to: [f64; 2],
+}
+
+/// The state after a step.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Frame {
+    /// Simulated time, s.
+    pub t: f64,
+    /// Step count since the last reset.
+    pub step: u64,
+    /// The state `[q; v]`.
+    pub x: Vec<f64>,
+    /// The torques applied over the last step.
+    pub u: Vec<f64>,
+    /// Every body's pose.
+    pub bodies: Vec<BodyPose>,
+    /// Every contact pair.
+    pub contacts: Vec<ContactView>,
+    /// The spring, while a body is held.
+    pub spring: Option<SpringView>,
+    /// Spin rate of the free body over the last 2 s, rad/s.
+    pub spin_rate: f64,
+    /// Current policy.
+    pub policy: PolicyKind,
+    /// Current world.
+    pub world: WorldKind,
+    /// Current sigma.
+    pub sigma: f64,
+    /// Current speed.
+    pub speed: f64,
+    /// Whether paused.
+    pub paused: bool,
+    /// Time the controller took for the last control step, ms (the online optimiser's whole re-solve).
+    pub control_ms: f64,
+    /// The largest control-step time over the last 2 s, ms.
+    pub control_ms_max: f64,
+    /// Velocity kicks and drags applied since the last reset.
+    pub perturbations: u64,
+    /// Steps whose complementarity solve did not converge since the last reset.
+    pub unconverged: u64,
+    /// Why the last step ran without its controller, if it did.
+    pub warning: Option<String>,
+    /// Times the online optimiser's stalled plan was re-seeded from the library's policy.
+    pub mpc_reseeds: u64,
+}
+
+/// One body's shape, sent once.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct BodyShape {
+    /// Name.
+    pub name: String,
+    /// Semi-axes `[a, b]`.
+    pub semi_axes: [f64; 2],
+    /// Whether a joint torque drives it.
+    pub actuated: bool,
+}
+
+/// A message from the server.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "type", rename_all = "snake_case")]
+pub enum ServerMessage {
+    /// Sent once on connection.
+    Hello {
+        /// The bodies' shapes.
+        bodies: Vec<BodyShape>,
+        /// The time step, s.
+        h: f64,
+        /// Whether a library is loaded (else the library policy is unavailable).
+        library: bool,
+        /// Its number of controllers.
+        controllers: usize,
+    },
+    /// The state after a step.
+    Frame(Box<Frame>),
+    /// A refused message.
+    Error {
+        /// Why.
+        message: String,
+    },
+}

@@ -1,0 +1,601 @@
+//! The simulated world behind the page: the scene's state stepped in real time under a policy, the user's
+//! drag spring and kicks, and the frames the page draws. No networking here: the server drives a
+//! [`World`] and the tests can too.
+
+use crate::error::ViewerError;
+use crate::mpc::{MpcSettings, OnlineMpc};
+use crate::protocol::{
+    BodyPose, BodyShape, ClientMessage, ContactView, Frame, PolicyKind, ServerMessage, SpringView,
+    WorldKind,
+};
+use dynamics::{Complementarity, Kinematics, Scene, Simulator, StepSettings};
+use library::{Library, Policy, free_joint};
+use rand::SeedableRng;
+use rand_distr::{Distribution, Normal};
+use std::collections::VecDeque;
+
+/// Spring stiffness of a drag, force per unit length.
+pub const SPRING_STIFFNESS: f64 = 10.0;
+/// Damping of a drag, force per unit velocity of the grabbed point.
+pub const SPRING_DAMPING: f64 = 1.0;
+/// The largest force a drag applies.
+pub const SPRING_MAX_FORCE: f64 = 30.0;
+/// Passes at most of the online optimiser's first solve.
+const MPC_FIRST_PASSES: usize = 300;
+/// A plan turning the free body less than this over its horizon counts as stalled, rad.
+const STALL_TURN: f64 = 0.1;
+/// Control steps of stalled plans before the online optimiser is re-seeded from the library's policy.
+const STALL_STEPS: u64 = 20;
+/// Window of the spin rate and of the largest control time, s.
+const WINDOW: f64 = 2.0;
+
+/// How the world starts.
+#[derive(Debug, Clone, PartialEq)]
+pub struct WorldSettings {
+    /// Time step.
+    pub h: f64,
+    /// The smoothed world's and the online optimiser's sigma.
+    pub sigma: f64,
+    /// Initial policy.
+    pub policy: PolicyKind,
+    /// Initial world.
+    pub world: WorldKind,
+    /// Simulated seconds per real second.
+    pub speed: f64,
+    /// Initial state (and the state of a reset).
+    pub x0: Vec<f64>,
+    /// The online optimiser's horizon, steps (60: a control step well inside 2.5 ms; the task's 75 spins
+    /// about as well at 1.3 times the time, docs/benchmarks.md).
+    pub mpc_horizon: usize,
+    /// Optimiser passes per control step.
+    pub mpc_passes: usize,
+    /// Seed of the kicks.
+    pub seed: u64,
+}
+
+impl Default for WorldSettings {
+    fn default() -> Self {
+        WorldSettings {
+            h: 0.05,
+            sigma: 0.1,
+            policy: PolicyKind::Library,
+            world: WorldKind::Smoothed,
+            speed: 1.0,
+            x0: dynamics::FLICKING_FINGER_X0.to_vec(),
+            mpc_horizon: 60,
+            mpc_passes: 1,
+            seed: 1,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Drag {
+    body: usize,
+    /// The grabbed material point in the body's frame (relative to its hinge).
+    local: [f64; 2],
+    target: [f64; 2],
+}
+
+/// The world (see the module documentation).
+#[derive(Debug)]
+pub struct World {
+    scene: Scene,
+    settings: WorldSettings,
+    library: Option<(Library, Policy)>,
+    mpc: Option<OnlineMpc>,
+    sim: Simulator,
+    x: Vec<f64>,
+    u: Vec<f64>,
+    t: f64,
+    steps: u64,
+    policy: PolicyKind,
+    world: WorldKind,
+    sigma: f64,
+    speed: f64,
+    paused: bool,
+    drag: Option<Drag>,
+    contacts: Vec<ContactView>,
+    /// `(t, free angle, control ms)` over the last [`WINDOW`] seconds.
+    history: VecDeque<(f64, f64, f64)>,
+    control_ms: f64,
+    perturbations: u64,
+    unconverged: u64,
+    free: usize,
+    rng: rand_chacha::ChaCha8Rng,
+    warning: Option<String>,
+    stalled: u64,
+    reseeds: u64,
+}
+
+fn check_positive(name: &'static str, value: f64) -> Result<(), ViewerError> {
+    if value.is_finite() && value > 0.0 {
+        Ok(())
+    } else {
+        Err(ViewerError::Setting {
+            name,
+            value,
+            expected: "finite and positive",
+        })
+    }
+}
+
+fn check_speed(speed: f64) -> Result<(), ViewerError> {
+    if (0.05..=10.0).contains(&speed) {
+        Ok(())
+    } else {
+        Err(ViewerError::Setting {
+            name: "speed",
+            value: speed,
+            expected: "between 0.05 and 10",
+        })
+    }
+}
+
+fn check_point(p: [f64; 2]) -> Result<(), ViewerError> {
+    if p.iter().all(|e| e.is_finite() && e.abs() < 1e3) {
+        Ok(())
+    } else {
+        Err(ViewerError::Message(format!(
+            "point {p:?} is not finite or is far outside the scene"
+        )))
+    }
+}
+
+impl World {
+    /// A world on `scene`, with an optional library (checked against the scene).
+    pub fn new(
+        scene: Scene,
+        library: Option<Library>,
+        settings: WorldSettings,
+    ) -> Result<Self, ViewerError> {
+        check_positive("h", settings.h)?;
+        check_positive("sigma", settings.sigma)?;
+        check_speed(settings.speed)?;
+        if settings.mpc_horizon == 0 || settings.mpc_passes == 0 {
+            return Err(ViewerError::Setting {
+                name: "mpc_horizon / mpc_passes",
+                value: 0.0,
+                expected: "at least 1",
+            });
+        }
+        if settings.x0.len() != scene.n_state() || !settings.x0.iter().all(|e| e.is_finite()) {
+            return Err(ViewerError::Message(format!(
+                "x0 must have {} finite entries",
+                scene.n_state()
+            )));
+        }
+        let library = match library {
+            Some(lib) => {
+                lib.check_scene(&scene)?;
+                let policy = lib.policy()?;
+                Some((lib, policy))
+            }
+            None => None,
+        };
+        if settings.policy == PolicyKind::Library && library.is_none() {
+            return Err(ViewerError::Message(
+                "the library policy needs a library".into(),
+            ));
+        }
+        let free = free_joint(&scene)?;
+        let sim = Self::simulator(&scene, settings.world, settings.sigma, settings.h)?;
+        let m = scene.n_controls;
+        let mut world = World {
+            x: settings.x0.clone(),
+            u: vec![0.0; m],
+            t: 0.0,
+            steps: 0,
+            policy: settings.policy,
+            world: settings.world,
+            sigma: settings.sigma,
+            speed: settings.speed,
+            paused: false,
+            drag: None,
+            contacts: Vec::new(),
+            history: VecDeque::new(),
+            control_ms: 0.0,
+            perturbations: 0,
+            unconverged: 0,
+            free,
+            rng: rand_chacha::ChaCha8Rng::seed_from_u64(settings.seed),
+            warning: None,
+            stalled: 0,
+            reseeds: 0,
+            mpc: None,
+            library,
+            sim,
+            scene,
+            settings,
+        };
+        if world.policy == PolicyKind::Mpc {
+            world.start_mpc()?;
+        }
+        Ok(world)
+    }
+
+    fn simulator(
+        scene: &Scene,
+        world: WorldKind,
+        sigma: f64,
+        h: f64,
+    ) -> Result<Simulator, ViewerError> {
+        Ok(Simulator::new(
+            scene.clone(),
+            StepSettings {
+                model: match world {
+                    WorldKind::Smoothed => Complementarity::Logistic { sigma },
+                    WorldKind::Hard => Complementarity::Hard,
+                },
+                h,
+                ..StepSettings::default()
+            },
+        )?)
+    }
+
+    /// (Re)start the online optimiser at the current sigma, seeded by the library's policy if any.
+    fn start_mpc(&mut self) -> Result<(), ViewerError> {
+        let mut mpc = OnlineMpc::new(
+            &self.scene,
+            MpcSettings {
+                sigma: self.sigma,
+                h: self.settings.h,
+                horizon: self.settings.mpc_horizon,
+                passes: self.settings.mpc_passes,
+            },
+        )?;
+        if let Some((_, policy)) = &self.library {
+            // A policy that cannot be rolled out from here leaves the plan at rest.
+            if mpc.seed_from_policy(policy, &self.x).is_err() {
+                mpc.clear();
+            }
+        }
+        // One converged solve (a brief pause, once), then one pass per control step.
+        mpc.converge(&self.x, MPC_FIRST_PASSES)?;
+        self.mpc = Some(mpc);
+        Ok(())
+    }
+
+    /// The first message a client gets.
+    pub fn hello(&self) -> ServerMessage {
+        ServerMessage::Hello {
+            bodies: self
+                .scene
+                .bodies
+                .iter()
+                .map(|b| BodyShape {
+                    name: b.name.clone(),
+                    semi_axes: [b.shape.a(), b.shape.b()],
+                    actuated: b.actuator.is_some(),
+                })
+                .collect(),
+            h: self.settings.h,
+            library: self.library.is_some(),
+            controllers: self.library.as_ref().map_or(0, |(l, _)| l.entries.len()),
+        }
+    }
+
+    /// The scene.
+    pub fn scene(&self) -> &Scene {
+        &self.scene
+    }
+
+    /// The state.
+    pub fn state(&self) -> &[f64] {
+        &self.x
+    }
+
+    /// Whether time stands still.
+    pub fn paused(&self) -> bool {
+        self.paused
+    }
+
+    /// Simulated seconds per real second.
+    pub fn speed(&self) -> f64 {
+        self.speed
+    }
+
+    /// The time step.
+    pub fn h(&self) -> f64 {
+        self.settings.h
+    }
+
+    /// Apply a message from the page; `Err` (and nothing changed) for a value out of range.
+    pub fn apply(&mut self, message: ClientMessage) -> Result<(), ViewerError> {
+        match message {
+            ClientMessage::Grab { body, point } => {
+                check_point(point)?;
+                if body >= self.scene.n_dof() {
+                    return Err(ViewerError::Message(format!(
+                        "there is no body {body} (the scene has {})",
+                        self.scene.n_dof()
+                    )));
+                }
+                let kin = Kinematics::new(&self.scene, &self.x[..self.scene.n_dof()]);
+                let (phi, hinge) = (kin.phi[body], kin.hinge[body]);
+                let rel = [point[0] - hinge[0], point[1] - hinge[1]];
+                let (s, c) = phi.sin_cos();
+                self.drag = Some(Drag {
+                    body,
+                    local: [c * rel[0] + s * rel[1], -s * rel[0] + c * rel[1]],
+                    target: point,
+                });
+                self.perturbations += 1;
+            }
+            ClientMessage::Drag { target } => {
+                check_point(target)?;
+                if let Some(d) = &mut self.drag {
+                    d.target = target;
+                }
+            }
+            ClientMessage::Release => self.drag = None,
+            ClientMessage::Policy { policy } => {
+                if policy == PolicyKind::Library && self.library.is_none() {
+                    return Err(ViewerError::Message(
+                        "no library is loaded (start the viewer with --library FILE)".into(),
+                    ));
+                }
+                if policy == PolicyKind::Mpc && self.policy != PolicyKind::Mpc {
+                    self.start_mpc()?;
+                }
+                self.policy = policy;
+            }
+            ClientMessage::World { world } => {
+                self.sim = Self::simulator(&self.scene, world, self.sigma, self.settings.h)?;
+                self.world = world;
+            }
+            ClientMessage::Sigma { sigma } => {
+                check_positive("sigma", sigma)?;
+                if !(1e-3..=10.0).contains(&sigma) {
+                    return Err(ViewerError::Setting {
+                        name: "sigma",
+                        value: sigma,
+                        expected: "between 0.001 and 10",
+                    });
+                }
+                self.sim = Self::simulator(&self.scene, self.world, sigma, self.settings.h)?;
+                self.sigma = sigma;
+                if self.policy == PolicyKind::Mpc {
+                    self.start_mpc()?;
+                } else {
+                    self.mpc = None;
+                }
+            }
+            ClientMessage::Speed { speed } => {
+                check_speed(speed)?;
+                self.speed = speed;
+            }
+            ClientMessage::Pause { paused } => self.paused = paused,
+            ClientMessage::Reset => {
+                self.x = self.settings.x0.clone();
+                self.u.iter_mut().for_each(|e| *e = 0.0);
+                self.t = 0.0;
+                self.steps = 0;
+                self.drag = None;
+                self.history.clear();
+                self.contacts.clear();
+                self.perturbations = 0;
+                self.reseeds = 0;
+                self.stalled = 0;
+                self.unconverged = 0;
+                self.sim.reset_warm_start();
+                if self.policy == PolicyKind::Mpc {
+                    self.start_mpc()?;
+                }
+            }
+            ClientMessage::Kick { std } => {
+                if !(std.is_finite() && (0.0..=50.0).contains(&std)) {
+                    return Err(ViewerError::Setting {
+                        name: "std",
+                        value: std,
+                        expected: "between 0 and 50",
+                    });
+                }
+                let normal =
+                    Normal::new(0.0, std).map_err(|e| ViewerError::Message(e.to_string()))?;
+                let n = self.scene.n_dof();
+                for v in &mut self.x[n..] {
+                    *v += normal.sample(&mut self.rng);
+                }
+                self.perturbations += 1;
+            }
+        }
+        Ok(())
+    }
+
+    /// The drag spring's generalised forces at the current state, and its end points.
+    fn spring(&self) -> Option<(Vec<f64>, SpringView)> {
+        let d = self.drag?;
+        let n = self.scene.n_dof();
+        let kin = Kinematics::new(&self.scene, &self.x[..n]);
+        let (phi, hinge) = (kin.phi[d.body], kin.hinge[d.body]);
+        let (s, c) = phi.sin_cos();
+        let p = [
+            hinge[0] + c * d.local[0] - s * d.local[1],
+            hinge[1] + s * d.local[0] + c * d.local[1],
+        ];
+        let velocity = kin.point_velocity(&self.scene, d.body, p, &self.x[n..]);
+        let mut force = [
+            SPRING_STIFFNESS * (d.target[0] - p[0]) - SPRING_DAMPING * velocity[0],
+            SPRING_STIFFNESS * (d.target[1] - p[1]) - SPRING_DAMPING * velocity[1],
+        ];
+        let size = force[0].hypot(force[1]);
+        if size > SPRING_MAX_FORCE {
+            force = [
+                force[0] * SPRING_MAX_FORCE / size,
+                force[1] * SPRING_MAX_FORCE / size,
+            ];
+        }
+        Some((
+            kin.point_force(&self.scene, d.body, p, force),
+            SpringView {
+                body: d.body,
+                from: p,
+                to: d.target,
+            },
+        ))
+    }
+
+    /// The policy's control at the current state (zero where it has nothing to say).
+    fn control(&mut self) -> Result<Vec<f64>, ViewerError> {
+        let m = self.scene.n_controls;
+        let start = std::time::Instant::now();
+        let u = match self.policy {
+            PolicyKind::Off => vec![0.0; m],
+            PolicyKind::Library => {
+                let mut u = vec![0.0; m];
+                if let Some((_, policy)) = &self.library {
+                    policy.control(&self.x, &mut u)?;
+                }
+                u
+            }
+            PolicyKind::Mpc => {
+                if self.mpc.is_none() {
+                    self.start_mpc()?;
+                }
+                let mpc = self.mpc.as_mut().expect("started above");
+                let u = mpc.control(&self.x)?;
+                // A plan that has not expected to turn the ellipse for a while is stuck in a local
+                // minimum (the finger pressing on it, or resting beside it): start the next plan from the
+                // library's policy, which knows a flick from here (a cheap rollout, within the step's
+                // budget).
+                if mpc.planned_turn() < STALL_TURN {
+                    self.stalled += 1;
+                } else {
+                    self.stalled = 0;
+                }
+                if self.stalled >= STALL_STEPS
+                    && let Some((_, policy)) = &self.library
+                {
+                    if mpc.seed_from_policy(policy, &self.x).is_err() {
+                        mpc.clear();
+                    }
+                    self.stalled = 0;
+                    self.reseeds += 1;
+                }
+                u
+            }
+        };
+        self.control_ms = start.elapsed().as_secs_f64() * 1e3;
+        Ok(u)
+    }
+
+    /// Advance one time step. A controller that fails (its optimiser finds nothing from a violent state,
+    /// say) applies no torque this step and says why in the frame's warning; the world goes on. A state
+    /// that becomes non-finite is reset, with a warning. `Err` only if the simulator refuses the step.
+    pub fn advance(&mut self) -> Result<(), ViewerError> {
+        let m = self.scene.n_controls;
+        let control = self.control();
+        let (u, failure) = match control {
+            Ok(u) if u.iter().all(|e| e.is_finite()) => (u, None),
+            Ok(_) => (
+                vec![0.0; m],
+                Some(ViewerError::Message(
+                    "the policy gave a non-finite torque".into(),
+                )),
+            ),
+            Err(e) => (vec![0.0; m], Some(e)),
+        };
+        let n = self.scene.n_dof();
+        let forces = self.spring().map_or_else(|| vec![0.0; n], |(f, _)| f);
+        let step = self.sim.step_with_forces(&self.x, &u, &forces)?;
+        if step.info.status != ncp::Status::Converged {
+            self.unconverged += 1;
+        }
+        if !step.x_next.iter().all(|e| e.is_finite()) {
+            self.apply(ClientMessage::Reset)?;
+            self.warning = Some("the world's state became non-finite; it was reset".into());
+            return Ok(());
+        }
+        let limit_rows: usize = self
+            .scene
+            .bodies
+            .iter()
+            .filter(|b| b.limits.is_some())
+            .count()
+            * 2;
+        self.contacts = step
+            .contacts
+            .iter()
+            .enumerate()
+            .map(|(p, c)| {
+                let (l1, l2) = (
+                    step.lambda[limit_rows + 2 * p],
+                    step.lambda[limit_rows + 2 * p + 1],
+                );
+                let friction = self.scene.contacts[p].friction;
+                let t = [-c.normal[1], c.normal[0]];
+                let (normal, tangent) = (l1 + l2, friction * (l1 - l2));
+                ContactView {
+                    point: c.point_b,
+                    normal: c.normal,
+                    distance: c.distance,
+                    impulse: [
+                        normal * c.normal[0] + tangent * t[0],
+                        normal * c.normal[1] + tangent * t[1],
+                    ],
+                }
+            })
+            .collect();
+        self.x = step.x_next;
+        self.u = u;
+        self.t += self.settings.h;
+        self.steps += 1;
+        self.history
+            .push_back((self.t, self.x[self.free], self.control_ms));
+        while self
+            .history
+            .front()
+            .is_some_and(|(t, _, _)| *t < self.t - WINDOW - 1e-9)
+        {
+            self.history.pop_front();
+        }
+        self.warning = failure.map(|e| {
+            tracing::warn!(error = %e, "the controller failed; no torque this step");
+            format!("controller: {e}")
+        });
+        Ok(())
+    }
+
+    /// Why the last step ran without its controller, if it did.
+    pub fn warning(&self) -> Option<&str> {
+        self.warning.as_deref()
+    }
+
+    /// The current frame.
+    pub fn frame(&self) -> Frame {
+        let n = self.scene.n_dof();
+        let kin = Kinematics::new(&self.scene, &self.x[..n]);
+        let spin_rate = match (self.history.front(), self.history.back()) {
+            (Some(a), Some(b)) if b.0 > a.0 => (b.1 - a.1) / (b.0 - a.0),
+            _ => 0.0,
+        };
+        Frame {
+            t: self.t,
+            step: self.steps,
+            x: self.x.clone(),
+            u: self.u.clone(),
+            bodies: (0..n)
+                .map(|i| BodyPose {
+                    centre: kin.centre[i],
+                    angle: kin.phi[i],
+                    hinge: kin.hinge[i],
+                })
+                .collect(),
+            contacts: self.contacts.clone(),
+            spring: self.spring().map(|(_, s)| s),
+            spin_rate,
+            policy: self.policy,
+            world: self.world,
+            sigma: self.sigma,
+            speed: self.speed,
+            paused: self.paused,
+            control_ms: self.control_ms,
+            control_ms_max: self.history.iter().fold(0.0, |m, e| m.max(e.2)),
+            perturbations: self.perturbations,
+            unconverged: self.unconverged,
+            warning: self.warning.clone(),
+            mpc_reseeds: self.reseeds,
+        }
+    }
+}

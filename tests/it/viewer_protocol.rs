@@ -1,0 +1,210 @@
+//! The viewer's WebSocket protocol end to end over a real socket: frames stream, a drag moves the world,
+//! malformed messages get error replies and never end the connection, two clients share one world, and
+//! a port in use or a library for another scene fails at start.
+
+use futures_util::{SinkExt, StreamExt};
+use serde_json::{Value, json};
+use std::net::{Ipv4Addr, SocketAddr};
+use std::time::Duration;
+use tokio::net::TcpStream;
+use tokio_tungstenite::tungstenite::Message;
+use tokio_tungstenite::{MaybeTlsStream, WebSocketStream};
+use viewer::protocol::PolicyKind;
+use viewer::{Viewer, ViewerConfig, ViewerError, WorldSettings};
+
+type Socket = WebSocketStream<MaybeTlsStream<TcpStream>>;
+
+fn config(port: u16) -> ViewerConfig {
+    ViewerConfig {
+        addr: SocketAddr::from((Ipv4Addr::LOCALHOST, port)),
+        scene: dynamics::Scene::flicking_finger(),
+        library: None,
+        world: WorldSettings {
+            policy: PolicyKind::Off,
+            speed: 4.0,
+            ..WorldSettings::default()
+        },
+    }
+}
+
+/// The next text message as JSON (pings and the like skipped), within a few seconds.
+async fn next(socket: &mut Socket) -> Value {
+    loop {
+        let message = tokio::time::timeout(Duration::from_secs(10), socket.next())
+            .await
+            .expect("a message within 10 s")
+            .expect("the connection stays open")
+            .expect("a well-formed frame");
+        if let Message::Text(text) = message {
+            return serde_json::from_str(text.as_str()).expect("JSON");
+        }
+    }
+}
+
+/// The next message of the given type, skipping others.
+async fn next_of(socket: &mut Socket, kind: &str) -> Value {
+    loop {
+        let m = next(socket).await;
+        if m["type"] == kind {
+            return m;
+        }
+    }
+}
+
+/// The first frame at or after simulated time `t`.
+async fn frame_after(socket: &mut Socket, t: f64) -> Value {
+    loop {
+        let m = next_of(socket, "frame").await;
+        if m["t"].as_f64().unwrap() >= t {
+            return m;
+        }
+    }
+}
+
+async fn send(socket: &mut Socket, message: Value) {
+    socket
+        .send(Message::Text(message.to_string().into()))
+        .await
+        .unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn frames_stream_a_drag_spins_the_ellipse_and_bad_messages_are_answered_not_fatal() {
+    let viewer = Viewer::bind(config(0)).await.unwrap();
+    let addr = viewer.local_addr().unwrap();
+    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
+    let server = tokio::spawn(viewer.run(async {
+        let _ = stopped.await;
+    }));
+    let url = format!("ws://{addr}/ws");
+    let (mut a, _) = tokio_tungstenite::connect_async(&url).await.unwrap();
+    let hello = next(&mut a).await;
+    assert_eq!(hello["type"], "hello");
+    assert_eq!(hello["bodies"].as_array().unwrap().len(), 3);
+    assert_eq!(hello["library"], false);
+
+    // Frames arrive with time moving on.
+    let f1 = next_of(&mut a, "frame").await;
+    let f2 = frame_after(&mut a, f1["t"].as_f64().unwrap() + 0.2).await;
+    assert!(f2["step"].as_u64().unwrap() > f1["step"].as_u64().unwrap());
+    // With no torques and no contact the free ellipse rests.
+    assert!(f2["x"][5].as_f64().unwrap().abs() < 1e-9, "{f2}");
+
+    // Grab the free ellipse (body 2, centre (0, -3), angle 0) at the end of its long axis and pull that
+    // point up: the ellipse turns counter-clockwise.
+    let t0 = f2["t"].as_f64().unwrap();
+    send(
+        &mut a,
+        json!({"type": "grab", "body": 2, "point": [0.7, -3.0]}),
+    )
+    .await;
+    send(&mut a, json!({"type": "drag", "target": [0.7, -1.5]})).await;
+    let pulled = frame_after(&mut a, t0 + 1.0).await;
+    assert!(pulled["spring"]["body"] == 2, "{pulled}");
+    let turned = pulled["x"][2].as_f64().unwrap() - f2["x"][2].as_f64().unwrap();
+    assert!(turned > 0.3, "the drag should turn the ellipse: {pulled}");
+    assert!(pulled["perturbations"].as_u64().unwrap() >= 1);
+    send(&mut a, json!({"type": "release"})).await;
+    let released = frame_after(&mut a, pulled["t"].as_f64().unwrap() + 0.2).await;
+    assert!(released["spring"].is_null());
+
+    // Malformed and out-of-range messages: each gets an error reply, the stream goes on.
+    for bad in [
+        Message::Text("not json".into()),
+        Message::Text(r#"{"type":"fly"}"#.into()),
+        Message::Text(r#"{"type":"sigma","sigma":-1}"#.into()),
+        Message::Text(r#"{"type":"sigma","sigma":"big"}"#.into()),
+        Message::Text(r#"{"type":"grab","body":9,"point":[0,0]}"#.into()),
+        Message::Text(r#"{"type":"speed","speed":1e9}"#.into()),
+        Message::Text(r#"{"type":"policy","policy":"library"}"#.into()),
+        Message::Binary(vec![1, 2, 3].into()),
+    ] {
+        let shown = format!("{bad:?}");
+        a.send(bad).await.unwrap();
+        let reply = next_of(&mut a, "error").await;
+        assert!(
+            !reply["message"].as_str().unwrap().is_empty(),
+            "{shown}: {reply}"
+        );
+    }
+    let alive = next_of(&mut a, "frame").await;
+    assert!(alive["t"].as_f64().unwrap() > released["t"].as_f64().unwrap());
+
+    // A second client at the same time: its own hello and frames of the same world; its reset is seen by
+    // the first.
+    let (mut b, _) = tokio_tungstenite::connect_async(&url).await.unwrap();
+    assert_eq!(next(&mut b).await["type"], "hello");
+    let fb = next_of(&mut b, "frame").await;
+    assert!(fb["t"].as_f64().unwrap() > 0.5);
+    send(&mut b, json!({"type": "reset"})).await;
+    loop {
+        let f = next_of(&mut a, "frame").await;
+        if f["t"].as_f64().unwrap() < 0.5 {
+            assert_eq!(f["perturbations"], 0);
+            break;
+        }
+    }
+    // Pause stops time for both.
+    send(&mut b, json!({"type": "pause", "paused": true})).await;
+    let paused = loop {
+        let f = next_of(&mut a, "frame").await;
+        if f["paused"] == true {
+            break f;
+        }
+    };
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    send(&mut a, json!({"type": "kick", "std": 1.0})).await;
+    let later = loop {
+        let f = next_of(&mut a, "frame").await;
+        if f["perturbations"] == 1 {
+            break f;
+        }
+    };
+    assert_eq!(later["t"], paused["t"], "time stands still");
+    assert_ne!(
+        later["x"][3], paused["x"][3],
+        "the kick applies while paused"
+    );
+
+    drop(a);
+    drop(b);
+    stop.send(()).unwrap();
+    tokio::time::timeout(Duration::from_secs(10), server)
+        .await
+        .expect("the server stops")
+        .unwrap()
+        .unwrap();
+}
+
+#[tokio::test]
+async fn a_port_in_use_and_a_library_for_another_scene_are_errors_at_start() {
+    let taken = std::net::TcpListener::bind((Ipv4Addr::LOCALHOST, 0)).unwrap();
+    let port = taken.local_addr().unwrap().port();
+    let err = Viewer::bind(config(port)).await.unwrap_err();
+    assert!(matches!(err, ViewerError::Bind { .. }), "{err}");
+    assert!(err.to_string().contains(&port.to_string()), "{err}");
+
+    // A small library of the finger, offered for a finger with other gravity.
+    let settings = library::LibrarySettings {
+        trajectories: 2,
+        horizon: 10,
+        first_passes: 5,
+        warm_passes: 2,
+        ..library::LibrarySettings::default()
+    };
+    let lib =
+        library::Library::build(&dynamics::Scene::flicking_finger(), &settings, |_, _| {}).unwrap();
+    let mut spec = dynamics::Scene::flicking_finger().spec().clone();
+    spec.gravity = [0.0, -9.81];
+    let mut other = config(0);
+    other.scene = dynamics::Scene::new(spec).unwrap();
+    other.library = Some(lib);
+    let err = Viewer::bind(other).await.unwrap_err();
+    assert!(
+        matches!(
+            err,
+            ViewerError::Library(library::LibraryError::SceneMismatch(_))
+        ),
+        "{err}"
+    );
+}
