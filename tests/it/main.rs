@@ -13,5 +13,6 @@ mod library_policy;
 mod ncp_functions;
 mod ncp_solvers;
 mod support;
+mod viewer_browser;
 mod viewer_protocol;
 mod viewer_world;

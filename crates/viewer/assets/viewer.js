@@ -136,7 +136,7 @@ function draw() {
         ctx.arc(px, py, 3 + Math.min(12, 40 * size), 0, 2 * Math.PI);
         ctx.fillStyle = "rgba(200, 30, 30, 0.8)";
         ctx.fill();
-        const k = Math.min(3, 10 * size) / size;
+        const k = Math.min(1, 3 * size) / size;
         ctx.beginPath();
         ctx.moveTo(px, py);
         ctx.lineTo(px + SCALE * k * c.impulse[0], py - SCALE * k * c.impulse[1]);
@@ -214,6 +214,13 @@ function bodyAt(point) {
   }
   return -1;
 }
+
+// Page (client) coordinates of a world point, for tests that drive the mouse.
+window.viewerToClient = (p) => {
+  const rect = canvas.getBoundingClientRect();
+  const [sx, sy] = toScreen(p);
+  return [rect.left + (sx * rect.width) / canvas.width, rect.top + (sy * rect.height) / canvas.height];
+};
 
 function eventPoint(event) {
   const rect = canvas.getBoundingClientRect();

@@ -1,0 +1,87 @@
+// End-to-end test of the viewer in a real headless browser: load the page, wait for the controller to
+// spin the ellipse, drag the ellipse against its spin with the mouse, release, and wait for the spin to
+// resume. Usage: node viewer.mjs URL SCREENSHOT.png. Prints one JSON line with what it measured; exits
+// non-zero if a check fails.
+import { chromium } from "playwright-core";
+
+const [url, screenshot] = process.argv.slice(2);
+const executablePath = process.env.CHROMIUM || "/usr/bin/chromium";
+const browser = await chromium.launch({
+  executablePath,
+  args: [
+    "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+    "--disable-background-networking", "--disable-component-update", "--disable-sync",
+  ],
+});
+const result = { ok: false };
+const fail = (why) => {
+  result.error = why;
+  throw new Error(why);
+};
+try {
+  const page = await browser.newPage({ viewport: { width: 1100, height: 720 } });
+  const errors = [];
+  page.on("pageerror", (e) => errors.push(String(e)));
+  await page.goto(url);
+  const frame = () => page.evaluate(() => window.lastFrame);
+  // Wait (in simulated time) for a frame satisfying `test`, polling every 100 ms of real time.
+  const waitFor = async (test, simSeconds, what) => {
+    const start = (await frame()).t;
+    for (;;) {
+      const f = await frame();
+      if (f && test(f)) {
+        return f;
+      }
+      if (f && f.t > start + simSeconds) {
+        fail(`${what}: not within ${simSeconds} simulated seconds (t = ${f.t}, spin ${f.spin_rate})`);
+      }
+      await page.waitForTimeout(100);
+    }
+  };
+  await page.waitForFunction(() => window.lastFrame !== undefined, null, { timeout: 10000 });
+  await page.click("input[name=policy][value=mpc]");
+  const spinning = await waitFor((f) => f.policy === "mpc" && f.spin_rate > 0.2, 40, "the controller spins the ellipse");
+  result.spin_before = spinning.spin_rate;
+
+  // Grab the ellipse near the end of its long axis and pull that point clockwise, against the spin.
+  const theta = spinning.x[2];
+  const centre = spinning.bodies[2].centre;
+  const grab = [centre[0] + 0.55 * Math.cos(theta), centre[1] + 0.55 * Math.sin(theta)];
+  const target = [grab[0] + 1.2 * Math.sin(theta), grab[1] - 1.2 * Math.cos(theta)];
+  const [gx, gy] = await page.evaluate((p) => window.viewerToClient(p), grab);
+  const [tx, ty] = await page.evaluate((p) => window.viewerToClient(p), target);
+  await page.mouse.move(gx, gy);
+  await page.mouse.down();
+  await page.mouse.move(tx, ty, { steps: 8 });
+  const held = await waitFor((f) => f.spring !== null && f.spring.body === 2, 2, "the server holds the ellipse on a spring");
+  result.perturbations = held.perturbations;
+  const holdStart = held;
+  const heldEnd = await waitFor((f) => f.t >= holdStart.t + 3, 10, "three seconds of holding");
+  result.spin_while_held = heldEnd.spin_rate;
+  result.turned_while_held = heldEnd.x[2] - holdStart.x[2];
+  if (!(result.turned_while_held < 0.5)) {
+    fail(`the drag did not hold the ellipse back (turned ${result.turned_while_held} rad in 3 s)`);
+  }
+  await page.screenshot({ path: screenshot.replace(/\.png$/, "-dragging.png") });
+  await page.mouse.up();
+  const released = await waitFor((f) => f.spring === null, 2, "the release reaches the server");
+  // The spin resumes: a further quarter turn forward and a positive 2 s spin rate.
+  const resumed = await waitFor(
+    (f) => f.x[2] > released.x[2] + Math.PI / 2 && f.spin_rate > 0.1,
+    40,
+    "the spin resumes after the release",
+  );
+  result.resume_seconds = resumed.t - released.t;
+  result.spin_after = resumed.spin_rate;
+  await page.screenshot({ path: screenshot });
+  if (errors.length) {
+    fail(`page errors: ${errors.join("; ")}`);
+  }
+  result.ok = true;
+} catch (e) {
+  result.error = result.error || String(e);
+} finally {
+  await browser.close();
+  console.log(JSON.stringify(result));
+  process.exitCode = result.ok ? 0 : 1;
+}

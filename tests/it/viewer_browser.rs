@@ -1,0 +1,82 @@
+//! The viewer end to end in a real headless browser (Debian's Chromium driven by playwright-core from
+//! tests/e2e/viewer.mjs): the page loads, the online controller spins the ellipse, a mouse drag against
+//! the spin reaches the server and holds the ellipse back, and after the release the spin resumes.
+//! Screenshots land in target/e2e/.
+//!
+//! Needs node, /usr/bin/chromium and `npm ci --prefix tests/e2e`, which `.ci/run` installs; elsewhere the
+//! test says what is missing and passes, unless `VIEWER_E2E=required` (as `.ci/run` sets).
+
+use std::net::{Ipv4Addr, SocketAddr};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Duration;
+use viewer::protocol::PolicyKind;
+use viewer::{Viewer, ViewerConfig, WorldSettings};
+
+fn missing(e2e: &Path) -> Vec<String> {
+    let chromium = std::env::var("CHROMIUM").unwrap_or_else(|_| "/usr/bin/chromium".into());
+    let mut missing = Vec::new();
+    if Command::new("node").arg("--version").output().is_err() {
+        missing.push("node".to_string());
+    }
+    if !Path::new(&chromium).exists() {
+        missing.push(chromium);
+    }
+    if !e2e.join("node_modules/playwright-core").exists() {
+        missing.push("tests/e2e/node_modules (npm ci --prefix tests/e2e)".into());
+    }
+    missing
+}
+
+#[test]
+fn in_a_browser_a_drag_against_the_spin_holds_the_ellipse_and_the_spin_resumes() {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let e2e = root.join("e2e");
+    let missing = missing(&e2e);
+    if !missing.is_empty() {
+        let required = std::env::var("VIEWER_E2E").is_ok_and(|v| v == "required");
+        assert!(!required, "the browser test needs {missing:?}");
+        println!("skipped: the browser test needs {missing:?} (bash .ci/run installs them)");
+        return;
+    }
+    let out = root.join("../target/e2e");
+    std::fs::create_dir_all(&out).unwrap();
+    let runtime = tokio::runtime::Runtime::new().unwrap();
+    let viewer = runtime
+        .block_on(Viewer::bind(ViewerConfig {
+            addr: SocketAddr::from((Ipv4Addr::LOCALHOST, 0)),
+            scene: dynamics::Scene::flicking_finger(),
+            library: Some(crate::support::finger_library().clone()),
+            world: WorldSettings {
+                policy: PolicyKind::Library,
+                ..WorldSettings::default()
+            },
+        }))
+        .unwrap();
+    let addr = viewer.local_addr().unwrap();
+    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
+    let server = runtime.spawn(viewer.run(async {
+        let _ = stopped.await;
+    }));
+    let output = Command::new("node")
+        .arg(e2e.join("viewer.mjs"))
+        .arg(format!("http://{addr}/"))
+        .arg(out.join("viewer.png"))
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    println!("{stdout}{}", String::from_utf8_lossy(&output.stderr));
+    stop.send(()).unwrap();
+    runtime
+        .block_on(async { tokio::time::timeout(Duration::from_secs(10), server).await })
+        .expect("the server stops")
+        .unwrap()
+        .unwrap();
+    let result: serde_json::Value =
+        serde_json::from_str(stdout.lines().last().expect("the script prints its result")).unwrap();
+    assert_eq!(result["ok"], true, "{result}");
+    assert!(result["perturbations"].as_u64().unwrap() >= 1);
+    assert!(result["turned_while_held"].as_f64().unwrap() < 0.5);
+    assert!(result["spin_after"].as_f64().unwrap() > 0.1);
+    assert!(out.join("viewer.png").exists());
+}
