@@ -41,6 +41,8 @@ pub enum Section {
     Library,
     /// The library optimiser's tolerance against build time and closed-loop quality (several minutes).
     LibraryTolerance,
+    /// The viewer's online MPC: control-step time against spin.
+    Viewer,
 }
 
 pub fn run(args: &Args) -> anyhow::Result<()> {
@@ -60,6 +62,9 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     }
     if wanted(Section::Library) {
         sections.push(("library", crate::bench_library::section()?));
+    }
+    if wanted(Section::Viewer) {
+        sections.push(("viewer", crate::bench_viewer::section()?));
     }
     if wanted(Section::LibraryTolerance) {
         sections.push((

@@ -4,6 +4,7 @@ mod bench_ddp;
 mod bench_dynamics;
 mod bench_library;
 mod bench_ncp;
+mod bench_viewer;
 mod benchmarks;
 mod distance;
 mod evaluate;
