@@ -19,7 +19,7 @@ const fail = (why) => {
   throw new Error(why);
 };
 try {
-  const page = await browser.newPage({ viewport: { width: 1100, height: 720 } });
+  const page = await browser.newPage({ viewport: { width: 1100, height: 820 } });
   const errors = [];
   page.on("pageerror", (e) => errors.push(String(e)));
   await page.goto(url);
