@@ -26,7 +26,10 @@ pub fn section() -> anyhow::Result<String> {
     )];
     for (horizon, passes) in [(40, 1), (50, 1), (60, 1), (75, 1), (60, 2)] {
         configs.push((
-            format!("MPC, N = {horizon}, {passes} pass{}", if passes > 1 { "es" } else { "" }),
+            format!(
+                "MPC, N = {horizon}, {passes} pass{}",
+                if passes > 1 { "es" } else { "" }
+            ),
             PolicyKind::Mpc,
             horizon,
             passes,
