@@ -129,3 +129,68 @@ fn bad_world_settings_and_messages_are_typed_errors_that_change_nothing() {
     world.advance().unwrap();
     assert_eq!(world.frame().world, WorldKind::Hard);
 }
+
+fn any_message() -> impl proptest::strategy::Strategy<Value = ClientMessage> {
+    use proptest::prelude::*;
+    let number = prop_oneof![
+        -10.0f64..10.0,
+        Just(f64::NAN),
+        Just(f64::INFINITY),
+        Just(-1e300),
+        Just(0.0),
+        1e-6f64..1e6,
+    ];
+    prop_oneof![
+        (0usize..5, number.clone(), number.clone()).prop_map(|(body, x, y)| ClientMessage::Grab {
+            body,
+            point: [x, y]
+        }),
+        (number.clone(), number.clone()).prop_map(|(x, y)| ClientMessage::Drag { target: [x, y] }),
+        Just(ClientMessage::Release),
+        number
+            .clone()
+            .prop_map(|sigma| ClientMessage::Sigma { sigma }),
+        number
+            .clone()
+            .prop_map(|speed| ClientMessage::Speed { speed }),
+        number.prop_map(|std| ClientMessage::Kick { std }),
+        Just(ClientMessage::Reset),
+        any::<bool>().prop_map(|paused| ClientMessage::Pause { paused }),
+        prop_oneof![Just(WorldKind::Smoothed), Just(WorldKind::Hard)]
+            .prop_map(|world| ClientMessage::World { world }),
+    ]
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(64))]
+    #[test]
+    fn no_sequence_of_messages_breaks_the_world(
+        messages in proptest::collection::vec((any_message(), 0usize..6), 1..12)
+    ) {
+        // Whatever the page sends (valid or not, in any order), the world answers Ok or a typed error,
+        // keeps stepping, and its state stays finite.
+        let mut world = World::new(
+            dynamics::Scene::flicking_finger(),
+            None,
+            WorldSettings {
+                policy: PolicyKind::Off,
+                ..WorldSettings::default()
+            },
+        )
+        .unwrap();
+        for (message, steps) in messages {
+            let _ = world.apply(message);
+            for _ in 0..steps {
+                world.advance().unwrap();
+                let frame = world.frame();
+                proptest::prop_assert!(frame.x.iter().all(|e| e.is_finite()), "{frame:?}");
+                proptest::prop_assert!(serde_json::to_string(&frame).is_ok());
+            }
+        }
+    }
+
+    #[test]
+    fn no_text_crashes_the_message_parser(text in ".{0,200}") {
+        let _ = ClientMessage::parse(&text);
+    }
+}

@@ -6,7 +6,7 @@ use thiserror::Error;
 #[derive(Debug, Error)]
 pub enum ViewerError {
     /// The address could not be bound (a port already in use, say).
-    #[error("cannot listen on {addr}: {source}")]
+    #[error("cannot listen on {addr} (another server on that port? choose one with --port)")]
     Bind {
         /// The address asked for.
         addr: std::net::SocketAddr,
