@@ -4,10 +4,9 @@
 //! real-time iteration scheme), so one pass per step is enough once it has caught on.
 
 use crate::error::ViewerError;
-use ddp::{Ddp, DdpError, DdpSettings, QuadraticCost};
+use ddp::{Ddp, DdpError, DdpSettings, QuadraticCost, Solution};
 use dynamics::{Complementarity, Scene, Simulator, StepSettings};
 use library::{FingerDynamics, Policy, finger_cost, free_joint};
-use std::time::Instant;
 
 /// The largest regularisation carried from one control step to the next (a solve that gave up at a
 /// huge `mu` should not freeze the next ones).
@@ -31,7 +30,7 @@ impl Default for MpcSettings {
         MpcSettings {
             sigma: 0.1,
             h: 0.05,
-            horizon: 75,
+            horizon: 60,
             passes: 1,
         }
     }
@@ -43,7 +42,6 @@ pub struct OnlineMpc {
     settings: MpcSettings,
     dynamics: FingerDynamics,
     cost: QuadraticCost,
-    ddp: Ddp,
     plan: Vec<Vec<f64>>,
     /// The regularisation the last solve ended with: the next starts there, so that a few passes per
     /// step add up to one optimisation rather than restarting its trust region every step.
@@ -51,7 +49,6 @@ pub struct OnlineMpc {
     /// How far the last plan turns the free body over the horizon.
     planned_turn: f64,
     free: usize,
-    last_ms: f64,
 }
 
 impl OnlineMpc {
@@ -81,33 +78,21 @@ impl OnlineMpc {
                 ..StepSettings::default()
             },
         )?;
-        let ddp = Ddp::new(DdpSettings {
-            max_iterations: settings.passes,
-            // Step sizes 1, 0.1, 0.01, 0.001: a control step's worst case stays a few rollouts.
-            line_search_steps: 4,
-            ..DdpSettings::default()
-        })?;
+        let free = free_joint(scene)?;
         Ok(OnlineMpc {
-            cost: finger_cost(scene.n_dof(), free_joint(scene)?, scene.n_controls),
+            cost: finger_cost(scene.n_dof(), free, scene.n_controls),
             plan: vec![vec![0.0; scene.n_controls]; settings.horizon],
             dynamics: FingerDynamics::new(sim),
             settings,
-            ddp,
             mu: DdpSettings::default().mu_init,
             planned_turn: 0.0,
-            free: free_joint(scene)?,
-            last_ms: 0.0,
+            free,
         })
     }
 
     /// The settings.
     pub fn settings(&self) -> &MpcSettings {
         &self.settings
-    }
-
-    /// Time the last [`OnlineMpc::control`] took, ms.
-    pub fn last_ms(&self) -> f64 {
-        self.last_ms
     }
 
     /// How far the last plan turns the free body over its horizon, rad (near zero: the optimiser sees
@@ -146,38 +131,43 @@ impl OnlineMpc {
     /// about 100 passes, some 150 ms), so that the per-step re-solves start from a flick rather than from
     /// rest. Returns the passes taken.
     pub fn converge(&mut self, x: &[f64], max_passes: usize) -> Result<usize, ViewerError> {
-        let ddp = Ddp::new(DdpSettings {
-            max_iterations: max_passes.max(1),
-            ..DdpSettings::default()
-        })?;
-        let sol = match ddp.solve(&mut self.dynamics, &self.cost, x, &self.plan) {
-            Ok(sol) => sol,
-            Err(DdpError::InitialRollout { .. }) => {
-                self.clear();
-                ddp.solve(&mut self.dynamics, &self.cost, x, &self.plan)?
-            }
-            Err(e) => return Err(e.into()),
-        };
+        let sol = self.solve(
+            DdpSettings {
+                max_iterations: max_passes.max(1),
+                ..DdpSettings::default()
+            },
+            x,
+        )?;
         self.plan = sol.controls;
         Ok(sol.iterations.len())
     }
 
-    /// Re-solve from `x` and return the first control; the plan moves on by one step.
-    pub fn control(&mut self, x: &[f64]) -> Result<Vec<f64>, ViewerError> {
-        let start = Instant::now();
-        let ddp = Ddp::new(DdpSettings {
-            mu_init: self.mu,
-            ..self.ddp.settings().clone()
-        })?;
-        let sol = match ddp.solve(&mut self.dynamics, &self.cost, x, &self.plan) {
-            Ok(sol) => sol,
-            // The plan cannot even be rolled out from here (a violent drag, say): start over from rest.
+    /// Optimise the plan from `x`; a plan that cannot even be rolled out from here (after a violent drag,
+    /// say) is dropped for one at rest.
+    fn solve(&mut self, settings: DdpSettings, x: &[f64]) -> Result<Solution, ViewerError> {
+        let ddp = Ddp::new(settings)?;
+        match ddp.solve(&mut self.dynamics, &self.cost, x, &self.plan) {
+            Ok(sol) => Ok(sol),
             Err(DdpError::InitialRollout { .. }) => {
                 self.clear();
-                ddp.solve(&mut self.dynamics, &self.cost, x, &self.plan)?
+                Ok(ddp.solve(&mut self.dynamics, &self.cost, x, &self.plan)?)
             }
-            Err(e) => return Err(e.into()),
-        };
+            Err(e) => Err(e.into()),
+        }
+    }
+
+    /// Re-solve from `x` and return the first control; the plan moves on by one step.
+    pub fn control(&mut self, x: &[f64]) -> Result<Vec<f64>, ViewerError> {
+        let sol = self.solve(
+            DdpSettings {
+                max_iterations: self.settings.passes,
+                mu_init: self.mu,
+                // Step sizes 1, 0.1, 0.01, 0.001: a control step's worst case stays a few rollouts.
+                line_search_steps: 4,
+                ..DdpSettings::default()
+            },
+            x,
+        )?;
         self.mu = sol
             .iterations
             .last()
@@ -186,7 +176,6 @@ impl OnlineMpc {
         let u = sol.controls[0].clone();
         self.planned_turn = sol.states[sol.states.len() - 1][self.free] - x[self.free];
         self.plan = ddp::shift_controls(&sol.controls, 1);
-        self.last_ms = start.elapsed().as_secs_f64() * 1e3;
         Ok(u)
     }
 }

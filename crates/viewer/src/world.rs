@@ -62,8 +62,8 @@ impl Default for WorldSettings {
             world: WorldKind::Smoothed,
             speed: 1.0,
             x0: dynamics::FLICKING_FINGER_X0.to_vec(),
-            mpc_horizon: 60,
-            mpc_passes: 1,
+            mpc_horizon: MpcSettings::default().horizon,
+            mpc_passes: MpcSettings::default().passes,
             seed: 1,
         }
     }
