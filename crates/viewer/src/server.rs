@@ -127,26 +127,36 @@ fn simulate(
     stop: &AtomicBool,
 ) {
     let mut next = Instant::now();
+    let apply = |world: &mut World, (message, reply): Input| {
+        tracing::debug!(?message, "input");
+        if let Err(e) = world.apply(message) {
+            tracing::warn!(error = %e, "refused a message");
+            let _ = reply.send(json(&ServerMessage::Error {
+                message: e.to_string(),
+            }));
+        }
+    };
     while !stop.load(Ordering::Relaxed) {
+        // Wait for a message or the next step, then take every message waiting: a flood of input
+        // cannot starve the steps, which are checked on every round.
         let wait = next.saturating_duration_since(Instant::now());
+        let mut applied = false;
         match inputs.recv_timeout(wait.min(Duration::from_millis(50))) {
-            Ok((message, reply)) => {
-                tracing::debug!(?message, "input");
-                if let Err(e) = world.apply(message) {
-                    tracing::warn!(error = %e, "refused a message");
-                    let _ = reply.send(json(&ServerMessage::Error {
-                        message: e.to_string(),
-                    }));
-                }
-                if world.paused() {
-                    let _ =
-                        frames.send(json(&ServerMessage::Frame(Box::new(world.frame()))).into());
-                }
-                continue;
+            Ok(input) => {
+                apply(&mut world, input);
+                applied = true;
             }
             Err(mpsc::RecvTimeoutError::Timeout) => {}
             // Every sender is gone: the server has stopped.
             Err(mpsc::RecvTimeoutError::Disconnected) => break,
+        }
+        while let Ok(input) = inputs.try_recv() {
+            apply(&mut world, input);
+            applied = true;
+        }
+        if applied && world.paused() {
+            // Time stands still, but the page should see what the input did.
+            let _ = frames.send(json(&ServerMessage::Frame(Box::new(world.frame()))).into());
         }
         let now = Instant::now();
         if now < next {
