@@ -88,7 +88,8 @@ function readout(f) {
   document.getElementById("time").textContent = `${fixed(f.t, 2)} s`;
   document.getElementById("spin").textContent = `${fixed(f.spin_rate, 3)} rad/s`;
   document.getElementById("control-ms").textContent =
-    `${fixed(f.control_ms, 3)} ms (max ${fixed(f.control_ms_max, 3)} ms over 2 s)`;
+    `${fixed(f.control_ms, 3)} ms (max ${fixed(f.control_ms_max, 3)} ms over 2 s)` +
+    (f.policy === "mpc" ? `; plan re-seeded ${f.mpc_reseeds}x` : "");
   const impulse = f.contacts.reduce((m, c) => Math.max(m, Math.hypot(c.impulse[0], c.impulse[1])), 0);
   document.getElementById("impulse").textContent = fixed(impulse, 4);
   document.getElementById("torques").textContent = f.u.map((u) => fixed(u, 2)).join(", ");
