@@ -30,6 +30,19 @@ impl<D: Dynamics> Dynamics for Timed<D> {
         self.step += t.elapsed();
         r
     }
+    fn step_near(
+        &mut self,
+        x: &[f64],
+        u: &[f64],
+        near_x: &[f64],
+        near_u: &[f64],
+        next: &mut [f64],
+    ) -> Result<(), D::Error> {
+        let t = Instant::now();
+        let r = self.inner.step_near(x, u, near_x, near_u, next);
+        self.step += t.elapsed();
+        r
+    }
     fn derivatives(
         &mut self,
         x: &[f64],
