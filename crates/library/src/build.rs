@@ -46,6 +46,10 @@ pub struct LibrarySettings {
     pub shift: usize,
     /// Number of trajectories (= stored controllers).
     pub trajectories: usize,
+    /// Independent receding-horizon chains the trajectories are split into, built in parallel (one
+    /// thread each); chain `c` starts from `x0` with kick seed `seed + c`. The paper's library is one
+    /// chain.
+    pub chains: usize,
     /// Perturb the initial state's velocities every this many time steps.
     pub kick_every: usize,
     /// Variance of each velocity's normal perturbation.
@@ -77,6 +81,7 @@ impl Default for LibrarySettings {
             horizon: 75,
             shift: 4,
             trajectories: 400,
+            chains: 1,
             kick_every: 15,
             kick_variance: 4.0,
             seed: 1,
@@ -115,6 +120,13 @@ impl LibrarySettings {
         }
         if self.trajectories == 0 {
             return bad("trajectories", 0.0, "at least 1");
+        }
+        if self.chains == 0 || self.chains > self.trajectories {
+            return bad(
+                "chains",
+                self.chains as f64,
+                "between 1 and the number of trajectories",
+            );
         }
         if self.kick_every == 0 {
             return bad("kick_every", 0.0, "at least 1");
@@ -176,24 +188,73 @@ pub fn free_joint(scene: &Scene) -> Result<usize, LibraryError> {
         .ok_or_else(|| LibraryError::Invalid("the scene has no unactuated joint to spin".into()))
 }
 
-/// Build the entries of a library (see the module documentation); `progress` sees each new entry.
+/// Build the entries of a library (see the module documentation): the chains' entries one chain after the
+/// other, whatever order their threads finish in. `progress` sees each trajectory's first entry as it is
+/// made, with the number of trajectories done so far.
 pub fn build_entries(
     scene: &Scene,
     settings: &LibrarySettings,
-    mut progress: impl FnMut(usize, &Entry),
+    progress: impl FnMut(usize, &Entry) + Send,
 ) -> Result<Vec<Entry>, LibraryError> {
     settings.validate(scene)?;
+    let (chains, trajectories) = (settings.chains, settings.trajectories);
+    if chains == 1 {
+        let mut progress = progress;
+        return build_chain(scene, settings, settings.seed, trajectories, &mut progress);
+    }
+    let done = std::sync::Mutex::new((0usize, progress));
+    let report = |entry: &Entry| {
+        let mut guard = done.lock().unwrap_or_else(|e| e.into_inner());
+        let (count, progress) = &mut *guard;
+        progress(*count, entry);
+        *count += 1;
+    };
+    let results: Vec<Result<Vec<Entry>, LibraryError>> = std::thread::scope(|scope| {
+        let handles: Vec<_> = (0..chains)
+            .map(|c| {
+                let length = trajectories / chains + usize::from(c < trajectories % chains);
+                let seed = settings.seed.wrapping_add(c as u64);
+                let report = &report;
+                scope.spawn(move || {
+                    build_chain(scene, settings, seed, length, &mut |_, e: &Entry| report(e))
+                })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .map(|h| {
+                h.join().unwrap_or_else(|_| {
+                    Err(LibraryError::Invalid("a chain's thread panicked".into()))
+                })
+            })
+            .collect()
+    });
+    let mut entries = Vec::with_capacity(trajectories * settings.keep);
+    for chain in results {
+        entries.extend(chain?);
+    }
+    Ok(entries)
+}
+
+/// One receding-horizon chain of `trajectories` trajectories with kick seed `seed`.
+fn build_chain(
+    scene: &Scene,
+    settings: &LibrarySettings,
+    seed: u64,
+    trajectories: usize,
+    progress: &mut dyn FnMut(usize, &Entry),
+) -> Result<Vec<Entry>, LibraryError> {
     let (n, m) = (scene.n_dof(), scene.n_controls);
     let cost = finger_cost(n, free_joint(scene)?, m);
     let mut dynamics = FingerDynamics::new(settings.simulator(scene)?);
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(settings.seed);
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
     let kick = Normal::new(0.0, settings.kick_variance.sqrt())
         .map_err(|e| LibraryError::Invalid(e.to_string()))?;
     let mut x1 = settings.x0.clone();
     let mut controls = vec![vec![0.0; m]; settings.horizon];
     let mut since_kick = 0usize;
-    let mut entries = Vec::with_capacity(settings.trajectories);
-    for k in 0..settings.trajectories {
+    let mut entries = Vec::with_capacity(trajectories * settings.keep);
+    for k in 0..trajectories {
         let span = tracing::info_span!("library.trajectory", k);
         let _guard = span.enter();
         let ddp = Ddp::new(DdpSettings {

@@ -19,7 +19,7 @@ use std::path::Path;
 /// The file's magic bytes.
 pub const MAGIC: &[u8; 8] = b"SLCPLIB\0";
 /// The format version this build writes and reads.
-pub const VERSION: u32 = 1;
+pub const VERSION: u32 = 2;
 const HEADER: usize = 8 + 4 + 8 + 4;
 
 /// A trajectory library: the scene and settings it was built with and its local controllers.
@@ -51,7 +51,7 @@ impl Library {
     pub fn build(
         scene: &Scene,
         settings: &LibrarySettings,
-        progress: impl FnMut(usize, &Entry),
+        progress: impl FnMut(usize, &Entry) + Send,
     ) -> Result<Self, LibraryError> {
         let entries = build_entries(scene, settings, progress)?;
         Ok(Library {
