@@ -210,3 +210,58 @@ fn impossible_library_settings_are_typed_errors() {
         assert!(Library::build(&scene, &s, |_, _| {}).is_err());
     }
 }
+
+fn entry(x: Vec<f64>) -> library::Entry {
+    library::Entry {
+        u: vec![x[0], -x[1]],
+        gain: (0..12).map(|i| 0.1 * i as f64).collect(),
+        x,
+        passes: 1,
+        converged: true,
+        cost: 0.0,
+    }
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(64))]
+    #[test]
+    fn the_kd_tree_finds_what_a_scan_of_every_state_finds(
+        states in proptest::collection::vec(proptest::collection::vec(-3.0f64..3.0, 6), 1..60),
+        turns in proptest::collection::vec(-40i32..40, 60),
+        duplicates in 0usize..5,
+        queries in proptest::collection::vec(
+            (proptest::collection::vec(-4.0f64..4.0, 6), -100.0f64..100.0),
+            20,
+        ),
+    ) {
+        // States anywhere, the free angle many turns away, some stored twice; queries anywhere.
+        let mut entries: Vec<library::Entry> = states
+            .iter()
+            .zip(&turns)
+            .map(|(x, k)| {
+                let mut x = x.clone();
+                x[2] += *k as f64 * std::f64::consts::PI;
+                entry(x)
+            })
+            .collect();
+        for i in 0..duplicates.min(entries.len()) {
+            entries.push(entries[i].clone());
+        }
+        let tree = library::Policy::new(&entries, 6, 2, 2).unwrap();
+        let scan = tree.clone().scanning();
+        for (x, theta) in queries {
+            let mut x = x;
+            x[2] = theta;
+            let (a, b) = (tree.nearest(&x).unwrap(), scan.nearest(&x).unwrap());
+            // The same controller, or a stored duplicate of it, at the same number of periods.
+            proptest::prop_assert!(
+                a == b || (entries[a.0].x == entries[b.0].x && a.1 == b.1),
+                "{a:?} vs {b:?}"
+            );
+            let (mut ua, mut ub) = ([0.0; 2], [0.0; 2]);
+            tree.control(&x, &mut ua).unwrap();
+            scan.control(&x, &mut ub).unwrap();
+            proptest::prop_assert!((ua[0] - ub[0]).abs() < 1e-9 && (ua[1] - ub[1]).abs() < 1e-9);
+        }
+    }
+}
