@@ -7,8 +7,8 @@
 //! periods); a stored state is at the smallest of the three distances `|y' - w' - j p|`, `j = -1, 0, 1`.
 //! The look-up is a kd-tree (`kiddo`) over the stored states, each stored three times shifted by
 //! `j p`, for states of 2, 4, 6 or 8 entries (the finger: 6), and a scan of the same distances beyond:
-//! at the finger's 400 controllers the tree answers in about 0.3 us against the scan's 3 us, at 1600 in
-//! 0.6 against 11 (docs/benchmarks.md).
+//! at the finger's 400 controllers the tree answers in 0.25-0.4 us against the scan's 2-3 us, at 1600 in
+//! 0.6 against 9 (docs/benchmarks.md).
 
 use crate::build::Entry;
 use crate::error::LibraryError;
