@@ -45,20 +45,26 @@ fn library(args: &Args) -> anyhow::Result<Library> {
     }
     let path = PathBuf::from(DEFAULT_LIBRARY);
     if path.exists() {
-        return Library::load(&path).with_context(|| {
-            format!(
-                "loading {} (remove it or pass --library to use another)",
+        match Library::load(&path) {
+            Ok(lib) => return Ok(lib),
+            // Written by another version of this project: the default library is rebuilt below.
+            Err(library::LibraryError::Version { found, expected }) => println!(
+                "{} has format version {found}, this build reads {expected}: rebuilding it",
                 path.display()
-            )
-        });
+            ),
+            Err(e) => {
+                return Err(anyhow::Error::new(e).context(format!(
+                    "loading {} (remove it or pass --library to use another)",
+                    path.display()
+                )));
+            }
+        }
     }
     let settings = LibrarySettings {
         keep: 4,
         ..LibrarySettings::default()
     };
-    println!(
-        "no --library and no {DEFAULT_LIBRARY}: building the default library (sigma 0.1, 4 controllers per trajectory) ..."
-    );
+    println!("building the default library (sigma 0.1, 4 controllers per trajectory) ...");
     let bar = ProgressBar::new(settings.trajectories as u64);
     bar.set_style(
         ProgressStyle::with_template("{bar:40} {pos}/{len} trajectories  {elapsed_precise}")
