@@ -82,6 +82,28 @@ fn the_papers_library_of_first_controllers_spins_slower_than_four_per_trajectory
 fn bad_evaluation_settings_are_typed_errors() {
     let lib = library();
     let policy = lib.policy().unwrap();
+    // Another world: the same scene gives the same run; a world of other dimensions is refused.
+    let short = EvaluationSettings {
+        seconds: 5.0,
+        ..EvaluationSettings::default()
+    };
+    // (Compared as text: the unused measures are NaN.)
+    assert_eq!(
+        format!(
+            "{:?}",
+            library::evaluate_in(lib.scene(), lib, &policy, &short).unwrap()
+        ),
+        format!("{:?}", evaluate(lib, &policy, &short).unwrap())
+    );
+    let mut spec = lib.scene().spec().clone();
+    spec.bodies.truncate(2);
+    spec.contacts.clear();
+    spec.bodies[1].joint.actuated = false;
+    let smaller = dynamics::Scene::new(spec).unwrap();
+    assert!(matches!(
+        library::evaluate_in(&smaller, lib, &policy, &short),
+        Err(library::LibraryError::SceneMismatch(_))
+    ));
     for s in [
         EvaluationSettings {
             h: 0.0,

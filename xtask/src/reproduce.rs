@@ -66,10 +66,18 @@ struct Kicked {
 }
 
 #[derive(Serialize)]
+struct Mismatched {
+    change: String,
+    world: String,
+    evaluation: Evaluation,
+}
+
+#[derive(Serialize)]
 struct Summary {
     optimised: Vec<Optimised>,
     annealing: Vec<Annealed>,
     larger_kicks: Vec<Kicked>,
+    mismatched: Vec<Mismatched>,
     libraries: Vec<(String, f64, usize)>,
     closed_loop: Vec<ClosedLoop>,
     /// Simulated seconds per closed-loop run.
@@ -120,6 +128,28 @@ fn build(sigma: f64, bars: &MultiProgress) -> anyhow::Result<(Library, f64)> {
     let lib = Library::build(&Scene::flicking_finger(), &settings, |_, _| bar.inc(1))?;
     bar.finish_and_clear();
     Ok((lib, t.elapsed().as_secs_f64()))
+}
+
+/// The flicking finger with one property changed (SCENE.md: friction 0.5, density 1, ellipse drag 0.7).
+fn mismatched_scenes() -> Vec<(String, dynamics::SceneSpec)> {
+    let base = Scene::flicking_finger().spec().clone();
+    let mut out = Vec::new();
+    for friction in [0.1, 0.25, 1.0, 2.0] {
+        let mut spec = base.clone();
+        spec.contacts[0].friction = friction;
+        out.push((format!("friction {friction} (0.5)"), spec));
+    }
+    for density in [0.25, 4.0] {
+        let mut spec = base.clone();
+        spec.bodies[2].density = density;
+        out.push((format!("ellipse density {density} (1)"), spec));
+    }
+    for damping in [0.1, 2.8] {
+        let mut spec = base.clone();
+        spec.bodies[2].joint.damping = damping;
+        out.push((format!("ellipse drag {damping} (0.7)"), spec));
+    }
+    out
 }
 
 /// The paper's library: each trajectory's first controller only.
@@ -195,6 +225,7 @@ fn finish(
     built: Vec<(Library, f64)>,
 ) -> anyhow::Result<()> {
     let mut larger_kicks = Vec::new();
+    let mut mismatched = Vec::new();
     let mut libraries = Vec::new();
     let mut closed_loop = Vec::new();
     for (lib, secs) in built {
@@ -213,7 +244,7 @@ fn finish(
             crate::figures::write_all(&lib, &args.out.join("figures"))?;
             // Kicks beyond the training's (variance 4, std 2): where does the policy break?
             let policy = lib.policy()?;
-            for kick_std in [2.0, 8.0, 16.0, 32.0] {
+            for kick_std in [2.0, 8.0, 32.0, 128.0, 256.0] {
                 for (world, model) in [
                     ("logistic 0.1", Model::Logistic(0.1)),
                     ("hard", Model::Hard),
@@ -232,6 +263,32 @@ fn finish(
                     )?;
                     larger_kicks.push(Kicked {
                         kick_std,
+                        world: world.into(),
+                        evaluation: e,
+                    });
+                }
+            }
+            // Worlds the library never saw: other friction, a heavier or lighter ellipse, other drag.
+            for (change, spec) in mismatched_scenes() {
+                let scene = Scene::new(spec)?;
+                for (world, model) in [
+                    ("logistic 0.1", Model::Logistic(0.1)),
+                    ("hard", Model::Hard),
+                ] {
+                    let e = library::evaluate_in(
+                        &scene,
+                        &lib,
+                        &policy,
+                        &EvaluationSettings {
+                            model,
+                            h: 0.05,
+                            seconds: args.seconds,
+                            kick_every: 10.0,
+                            ..EvaluationSettings::default()
+                        },
+                    )?;
+                    mismatched.push(Mismatched {
+                        change: change.clone(),
                         world: world.into(),
                         evaluation: e,
                     });
@@ -273,6 +330,7 @@ fn finish(
         optimised,
         annealing,
         larger_kicks,
+        mismatched,
         libraries,
         closed_loop,
         run_seconds: args.seconds,
@@ -343,6 +401,25 @@ fn report(s: &Summary) -> String {
             k.evaluation.resumed,
             k.evaluation.kicks,
             k.evaluation.resume_time
+        );
+    }
+    let _ = writeln!(
+        t,
+        "\n## Worlds the library never saw (library sigma = 0.1, 4 per trajectory, h = 0.05, kicks of std 2 every 10 s; nominal value in brackets)\n\n| change | world | spin (rad/s) | kicks recovered | quarter turn resumed | in contact |\n|---|---|---:|---:|---:|---:|"
+    );
+    for m in &s.mismatched {
+        let e = &m.evaluation;
+        let _ = writeln!(
+            t,
+            "| {} | {} | {:.3} | {}/{} | {}/{} | {:.0}% |",
+            m.change,
+            m.world,
+            e.spin_rate,
+            e.recovered,
+            e.kicks,
+            e.resumed,
+            e.kicks,
+            100.0 * e.contact_fraction
         );
     }
     let _ = writeln!(

@@ -84,9 +84,33 @@ pub fn evaluate(
     policy: &Policy,
     settings: &EvaluationSettings,
 ) -> Result<Evaluation, LibraryError> {
-    let scene = library.scene();
+    evaluate_in(library.scene(), library, policy, settings)
+}
+
+/// [`evaluate`] in a world whose scene differs from the library's (other friction, masses, drag: a
+/// model the library never saw); it must have the library's state, controls and free joint.
+pub fn evaluate_in(
+    scene: &dynamics::Scene,
+    library: &Library,
+    policy: &Policy,
+    settings: &EvaluationSettings,
+) -> Result<Evaluation, LibraryError> {
+    let own = library.scene();
     let n = scene.n_dof();
     let free = crate::free_joint(scene)?;
+    if scene.n_state() != own.n_state()
+        || scene.n_controls != own.n_controls
+        || free != crate::free_joint(own)?
+    {
+        return Err(LibraryError::SceneMismatch(format!(
+            "the world has {} states, {} controls and free joint {free}; the library {}, {} and {}",
+            scene.n_state(),
+            scene.n_controls,
+            own.n_state(),
+            own.n_controls,
+            crate::free_joint(own)?
+        )));
+    }
     if !(settings.h.is_finite() && settings.h > 0.0) {
         return Err(LibraryError::Setting {
             name: "h",

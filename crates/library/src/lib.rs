@@ -15,7 +15,7 @@ mod task;
 pub use anneal::{AnnealStep, anneal};
 pub use build::{Entry, LibrarySettings, Model, build_entries, free_joint};
 pub use error::LibraryError;
-pub use evaluate::{CONTACT_IMPULSE, Evaluation, EvaluationSettings, evaluate};
+pub use evaluate::{CONTACT_IMPULSE, Evaluation, EvaluationSettings, evaluate, evaluate_in};
 pub use file::{Library, MAGIC, VERSION};
 pub use policy::Policy;
 pub use task::{CONTROL_WEIGHT, FingerDynamics, TaskError, finger_cost};
