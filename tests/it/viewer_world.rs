@@ -158,6 +158,8 @@ fn any_message() -> impl proptest::strategy::Strategy<Value = ClientMessage> {
         any::<bool>().prop_map(|paused| ClientMessage::Pause { paused }),
         prop_oneof![Just(WorldKind::Smoothed), Just(WorldKind::Hard)]
             .prop_map(|world| ClientMessage::World { world }),
+        prop_oneof![Just(PolicyKind::Library), Just(PolicyKind::Off)]
+            .prop_map(|policy| ClientMessage::Policy { policy }),
     ]
 }
 
@@ -165,13 +167,14 @@ proptest::proptest! {
     #![proptest_config(proptest::prelude::ProptestConfig::with_cases(64))]
     #[test]
     fn no_sequence_of_messages_breaks_the_world(
-        messages in proptest::collection::vec((any_message(), 0usize..6), 1..12)
+        messages in proptest::collection::vec((any_message(), 0usize..6), 1..12),
+        with_library in proptest::bool::ANY,
     ) {
         // Whatever the page sends (valid or not, in any order), the world answers Ok or a typed error,
-        // keeps stepping, and its state stays finite.
+        // keeps stepping, and its state stays finite, with the library's policy in the loop or none.
         let mut world = World::new(
             dynamics::Scene::flicking_finger(),
-            None,
+            with_library.then(|| crate::support::finger_library().clone()),
             WorldSettings {
                 policy: PolicyKind::Off,
                 ..WorldSettings::default()

@@ -481,8 +481,9 @@ impl World {
     }
 
     /// Advance one time step. A controller that fails (its optimiser finds nothing from a violent state,
-    /// say) applies no torque this step and says why in the frame's warning; the world goes on. A state
-    /// that becomes non-finite is reset, with a warning. `Err` only if the simulator refuses the step.
+    /// say) applies no torque this step and says why in the frame's warning; the world goes on. A step
+    /// the simulator cannot take, or a state that becomes non-finite, resets the world, with a warning.
+    /// `Err` only if even the reset fails.
     pub fn advance(&mut self) -> Result<(), ViewerError> {
         let m = self.scene.n_controls;
         let control = self.control();
@@ -498,7 +499,17 @@ impl World {
         };
         let n = self.scene.n_dof();
         let forces = self.spring().map_or_else(|| vec![0.0; n], |(f, _)| f);
-        let step = self.sim.step_with_forces(&self.x, &u, &forces)?;
+        let step = match self.sim.step_with_forces(&self.x, &u, &forces) {
+            Ok(step) => step,
+            // The contact solve itself failed (a violent state the hard model has no answer for):
+            // start over rather than stop the world.
+            Err(e) => {
+                tracing::warn!(error = %e, "the step failed; the world was reset");
+                self.apply(ClientMessage::Reset)?;
+                self.warning = Some(format!("the step failed ({e}); the world was reset"));
+                return Ok(());
+            }
+        };
         if step.info.status != ncp::Status::Converged {
             self.unconverged += 1;
         }
