@@ -345,7 +345,6 @@ impl World {
                 self.world = world;
             }
             ClientMessage::Sigma { sigma } => {
-                check_positive("sigma", sigma)?;
                 if !(1e-3..=10.0).contains(&sigma) {
                     return Err(ViewerError::Setting {
                         name: "sigma",
