@@ -130,6 +130,34 @@ fn build(sigma: f64, bars: &MultiProgress) -> anyhow::Result<(Library, f64)> {
     Ok((lib, t.elapsed().as_secs_f64()))
 }
 
+/// The library's policy on the smoothed and the hard world of `scene` (h = 0.05, a velocity kick of
+/// standard deviation `kick_std` every 10 s).
+fn on_both_worlds(
+    scene: &Scene,
+    lib: &Library,
+    policy: &library::Policy,
+    args: &Args,
+    kick_std: f64,
+) -> anyhow::Result<Vec<(&'static str, Evaluation)>> {
+    [
+        ("logistic 0.1", Model::Logistic(0.1)),
+        ("hard", Model::Hard),
+    ]
+    .into_iter()
+    .map(|(world, model)| {
+        let settings = EvaluationSettings {
+            model,
+            h: 0.05,
+            seconds: args.seconds,
+            kick_every: 10.0,
+            kick_std,
+            ..EvaluationSettings::default()
+        };
+        Ok((world, library::evaluate_in(scene, lib, policy, &settings)?))
+    })
+    .collect()
+}
+
 /// The flicking finger with one property changed (SCENE.md: friction 0.5, density 1, ellipse drag 0.7).
 fn mismatched_scenes() -> Vec<(String, dynamics::SceneSpec)> {
     let base = Scene::flicking_finger().spec().clone();
@@ -245,52 +273,24 @@ fn finish(
             // Kicks beyond the training's (variance 4, std 2): where does the policy break?
             let policy = lib.policy()?;
             for kick_std in [2.0, 8.0, 32.0, 128.0, 256.0] {
-                for (world, model) in [
-                    ("logistic 0.1", Model::Logistic(0.1)),
-                    ("hard", Model::Hard),
-                ] {
-                    let e = evaluate(
-                        &lib,
-                        &policy,
-                        &EvaluationSettings {
-                            model,
-                            h: 0.05,
-                            seconds: args.seconds,
-                            kick_every: 10.0,
-                            kick_std,
-                            ..EvaluationSettings::default()
-                        },
-                    )?;
+                for (world, evaluation) in
+                    on_both_worlds(lib.scene(), &lib, &policy, args, kick_std)?
+                {
                     larger_kicks.push(Kicked {
                         kick_std,
                         world: world.into(),
-                        evaluation: e,
+                        evaluation,
                     });
                 }
             }
             // Worlds the library never saw: other friction, a heavier or lighter ellipse, other drag.
             for (change, spec) in mismatched_scenes() {
                 let scene = Scene::new(spec)?;
-                for (world, model) in [
-                    ("logistic 0.1", Model::Logistic(0.1)),
-                    ("hard", Model::Hard),
-                ] {
-                    let e = library::evaluate_in(
-                        &scene,
-                        &lib,
-                        &policy,
-                        &EvaluationSettings {
-                            model,
-                            h: 0.05,
-                            seconds: args.seconds,
-                            kick_every: 10.0,
-                            ..EvaluationSettings::default()
-                        },
-                    )?;
+                for (world, evaluation) in on_both_worlds(&scene, &lib, &policy, args, 2.0)? {
                     mismatched.push(Mismatched {
                         change: change.clone(),
                         world: world.into(),
-                        evaluation: e,
+                        evaluation,
                     });
                 }
             }

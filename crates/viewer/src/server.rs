@@ -61,6 +61,11 @@ fn json(message: &ServerMessage) -> String {
     serde_json::to_string(message).expect("server messages serialise")
 }
 
+/// The world's current frame as a message.
+fn frame_json(world: &World) -> String {
+    json(&ServerMessage::Frame(Box::new(world.frame())))
+}
+
 impl Viewer {
     /// Check the library against the scene and bind the address.
     pub async fn bind(config: ViewerConfig) -> Result<Self, ViewerError> {
@@ -85,7 +90,7 @@ impl Viewer {
         shutdown: impl std::future::Future<Output = ()> + Send + 'static,
     ) -> Result<(), ViewerError> {
         let (inputs, input_rx) = mpsc::channel::<Input>();
-        let first = json(&ServerMessage::Frame(Box::new(self.world.frame())));
+        let first = frame_json(&self.world);
         let (frame_tx, frames) = watch::channel::<Arc<str>>(first.into());
         let hello: Arc<str> = json(&self.world.hello()).into();
         let stop = Arc::new(AtomicBool::new(false));
@@ -156,7 +161,7 @@ fn simulate(
         }
         if applied && world.paused() {
             // Time stands still, but the page should see what the input did.
-            let _ = frames.send(json(&ServerMessage::Frame(Box::new(world.frame()))).into());
+            let _ = frames.send(frame_json(&world).into());
         }
         let now = Instant::now();
         if now < next {
@@ -176,7 +181,7 @@ fn simulate(
                 next = now;
             }
         }
-        let _ = frames.send(json(&ServerMessage::Frame(Box::new(world.frame()))).into());
+        let _ = frames.send(frame_json(&world).into());
     }
 }
 
