@@ -507,3 +507,45 @@ fn rounding_noise_in_the_steps_ends_in_convergence_not_in_a_failed_search() {
     assert_eq!(sol.status, ddp::Status::CostConverged);
     assert!((sol.cost - exact.cost).abs() < 1e-9 * exact.cost.abs());
 }
+
+#[test]
+fn the_value_model_of_a_linear_quadratic_problem_predicts_the_optimal_cost_from_other_states() {
+    // For LQ problems the backward pass's value is exact: the optimum from any other start is the
+    // quadratic model's prediction, at every knot.
+    let (mut sys, cost) = lq_problem();
+    let x0 = [1.0, -0.5, 0.3, 0.8];
+    let horizon = 40;
+    for method in [Method::Full, Method::GaussNewton] {
+        let settings = DdpSettings {
+            method,
+            mu_init: 0.0,
+            ..DdpSettings::default()
+        };
+        let ddp = Ddp::new(settings).unwrap();
+        let sol = ddp
+            .solve(&mut sys, &cost, &x0, &vec![vec![0.0; 2]; horizon])
+            .unwrap();
+        assert_eq!(sol.values.len(), horizon + 1);
+        assert!((sol.values[0].cost_to_go - sol.cost).abs() < 1e-12 * sol.cost.abs());
+        for knot in [0, 17, horizon - 1] {
+            let v = &sol.values[knot];
+            let delta = [0.3, -0.2, 0.5, 0.1];
+            let start: Vec<f64> = sol.states[knot].iter().zip(delta).map(|(a, b)| a + b).collect();
+            let (optimum, _) = riccati(&sys, &cost, &start, horizon - knot);
+            let mut predicted = v.cost_to_go;
+            for a in 0..4 {
+                predicted += v.gradient[a] * delta[a];
+                for b in 0..4 {
+                    predicted += 0.5 * delta[a] * v.hessian[a * 4 + b] * delta[b];
+                }
+            }
+            assert!(
+                (predicted - optimum).abs() < 1e-9 * optimum.abs().max(1.0),
+                "knot {knot}: predicted {predicted}, optimum {optimum}"
+            );
+        }
+        // The final knot's model is the final cost's.
+        let last = &sol.values[horizon];
+        assert!((last.cost_to_go - ddp::Cost::terminal(&cost, &sol.states[horizon])).abs() < 1e-12);
+    }
+}

@@ -212,6 +212,7 @@ fn impossible_library_settings_are_typed_errors() {
 }
 
 fn entry(x: Vec<f64>) -> library::Entry {
+    let angle = x[2];
     library::Entry {
         u: vec![x[0], -x[1]],
         gain: (0..12).map(|i| 0.1 * i as f64).collect(),
@@ -219,6 +220,12 @@ fn entry(x: Vec<f64>) -> library::Entry {
         passes: 1,
         converged: true,
         cost: 0.0,
+        value: library::LocalValue {
+            cost_to_go: -angle,
+            gradient: vec![0.0, 0.0, -1.0, 0.0, 0.0, 0.0],
+            hessian: vec![0.0; 36],
+            per_period: -std::f64::consts::PI,
+        },
     }
 }
 

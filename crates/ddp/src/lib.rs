@@ -44,7 +44,7 @@ pub use error::DdpError;
 pub use model::{Cost, CostDerivatives, Dynamics, QuadraticCost};
 pub use solver::{
     ControlLimits, Ddp, DdpSettings, Iteration, Method, RESOLUTION, Regularisation, Solution,
-    Status, rollout, shift_controls,
+    Status, ValueModel, rollout, shift_controls,
 };
 
 /// `Err` unless `v` has `len` finite entries.

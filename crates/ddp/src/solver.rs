@@ -226,6 +226,10 @@ pub struct Solution {
     pub controls: Vec<Vec<f64>>,
     /// `K_i`, row-major `m x n`, from the backward pass at this trajectory.
     pub gains: Vec<Vec<f64>>,
+    /// The local value model at each knot `i = 0 .. N`: the cost-to-go from `x_i` and the value's
+    /// gradient and Hessian from the same backward pass as the gains, so that
+    /// `V_i(x) ~ v_i + V_x,i . (x - x_i) + 1/2 (x - x_i)^T V_xx,i (x - x_i)`.
+    pub values: Vec<ValueModel>,
     /// Total cost.
     pub cost: f64,
     /// One record per pass.
@@ -234,10 +238,23 @@ pub struct Solution {
     pub status: Status,
 }
 
+/// The second-order model of the cost-to-go around one knot of a trajectory.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ValueModel {
+    /// The cost-to-go from the knot's state under the trajectory's controls.
+    pub cost_to_go: f64,
+    /// `V_x` (`n`).
+    pub gradient: Vec<f64>,
+    /// `V_xx`, row-major `n x n`, symmetric.
+    pub hessian: Vec<f64>,
+}
+
 /// What one backward pass produces.
 struct Backward {
     k: Vec<Vec<f64>>,
     gains: Vec<Vec<f64>>,
+    /// `(V_x, V_xx)` at knots `0 .. N`.
+    values: Vec<(Vec<f64>, Vec<f64>)>,
     /// `[sum k^T Q_u, sum 1/2 k^T Q_uu k]`.
     dv: [f64; 2],
 }
@@ -340,6 +357,7 @@ impl Ddp {
             iterations.push(it);
         };
         let mut gains = vec![vec![0.0; m * n]; horizon];
+        let mut values = vec![(vec![0.0; n], vec![0.0; n * n]); horizon + 1];
         let mut k_prev = vec![vec![0.0; m]; horizon];
         let mut lin: Option<Linearisation> = None;
         let mut status = Status::MaxIterations;
@@ -363,6 +381,7 @@ impl Ddp {
                             break Backward {
                                 k: Vec::new(),
                                 gains: Vec::new(),
+                                values: Vec::new(),
                                 dv: [0.0; 2],
                             };
                         }
@@ -374,6 +393,7 @@ impl Ddp {
                 break;
             }
             gains = bp.gains;
+            values = bp.values;
             k_prev = bp.k.clone();
             let step =
                 bp.k.iter()
@@ -445,6 +465,7 @@ impl Ddp {
                             self.backward(dynamics, cost, &x, &u, &k_prev, mu, &mut lin)
                         {
                             gains = bp.gains;
+                            values = bp.values;
                         }
                         break;
                     }
@@ -469,10 +490,25 @@ impl Ddp {
                 }
             }
         }
+        // The cost-to-go at each knot, summed from the end.
+        let mut to_go = vec![cost.terminal(&x[horizon]); horizon + 1];
+        for i in (0..horizon).rev() {
+            to_go[i] = to_go[i + 1] + cost.running(i, &x[i], &u[i]);
+        }
+        let values = values
+            .into_iter()
+            .zip(to_go)
+            .map(|((gradient, hessian), cost_to_go)| ValueModel {
+                cost_to_go,
+                gradient,
+                hessian,
+            })
+            .collect();
         Ok(Solution {
             states: x,
             controls: u,
             gains,
+            values,
             cost: total,
             iterations,
             status,
@@ -513,6 +549,8 @@ impl Ddp {
         let mut vx = vec![0.0; n];
         let mut vxx = vec![0.0; n * n];
         cost.terminal_derivatives(&x[horizon], &mut vx, &mut vxx);
+        let mut values = vec![(Vec::new(), Vec::new()); horizon + 1];
+        values[horizon] = (vx.clone(), vxx.clone());
         let mut k_all = vec![Vec::new(); horizon];
         let mut gains = vec![Vec::new(); horizon];
         let mut dv = [0.0; 2];
@@ -681,10 +719,12 @@ impl Ddp {
             }
             k_all[i] = k;
             gains[i] = big_k;
+            values[i] = (vx.clone(), vxx.clone());
         }
         Ok(Some(Backward {
             k: k_all,
             gains,
+            values,
             dv,
         }))
     }

@@ -6,7 +6,9 @@ use crate::error::LibraryError;
 use crate::task::{FingerDynamics, finger_cost};
 use ddp::{Ddp, DdpError, DdpSettings};
 use dynamics::{Complementarity, Scene, Simulator, StepSettings};
-use rand::SeedableRng;
+use crate::policy::Policy;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
 
@@ -44,13 +46,17 @@ pub struct LibrarySettings {
     pub horizon: usize,
     /// Shift `d` between consecutive trajectories.
     pub shift: usize,
-    /// Number of trajectories (= stored controllers).
+    /// Number of trajectories (each stores `keep` controllers), before growth.
     pub trajectories: usize,
-    /// Independent receding-horizon chains the trajectories are split into, built in parallel (one
-    /// thread each); chain `c` starts from `x0` with kick seed `seed + c`. The paper's library is one
-    /// chain.
+    /// How the trajectories explore the state space.
+    pub exploration: Exploration,
+    /// With [`Exploration::Kicks`]: independent receding-horizon chains the trajectories are split into,
+    /// built in parallel (one thread each); chain `c` starts from `x0` with kick seed `seed + c` (the
+    /// paper's library is one chain). With [`Exploration::Branches`]: threads the branches are built on
+    /// (the library is the same for any number).
     pub chains: usize,
-    /// Perturb the initial state's velocities every this many time steps.
+    /// With [`Exploration::Kicks`]: perturb the chain's initial state's velocities every this many time
+    /// steps.
     pub kick_every: usize,
     /// Variance of each velocity's normal perturbation.
     pub kick_variance: f64,
@@ -71,16 +77,60 @@ pub struct LibrarySettings {
     /// `u_t + K_t (x - x_t)` for `t < keep` as well, the controllers the trajectory runs before the next one
     /// takes over.
     pub keep: usize,
+    /// The policy compares this many nearest controllers by their local value models (1: the nearest
+    /// alone, the paper's eq. 20); see [`crate::Policy::select`].
+    pub neighbours: usize,
+    /// Rounds of growth on the policy's own stalls (see [`Exploration::Branches`]; 0: none).
+    pub growth: usize,
 }
+
+/// How a library's trajectories explore the state space.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub enum Exploration {
+    /// The paper's (V-B): one receding-horizon chain from `x0` whose initial state's velocities are
+    /// perturbed every [`LibrarySettings::kick_every`] steps.
+    Kicks,
+    /// The limit cycle first, then the space around it: an unperturbed receding-horizon chain of `trunk`
+    /// trajectories from `x0` (the transient from rest and the cycle it settles on), then branches until
+    /// the trajectory budget is spent: each starts from a trunk state drawn past its first `settle`
+    /// trajectories, its velocities perturbed (variance [`LibrarySettings::kick_variance`]), and runs a
+    /// chain of `length` trajectories warm-started from the trunk's plan there. Then
+    /// [`LibrarySettings::growth`] rounds: the policy runs in closed loop on the library's own model from
+    /// `x0` with a velocity kick every 10 s; wherever the free angle advances less than
+    /// [`STALL_ADVANCE`] in [`STALL_WINDOW`] seconds, a branch of `length` trajectories starts from that
+    /// state, warm-started from the plan of the controller the policy used there.
+    Branches {
+        /// Trajectories of the unperturbed chain.
+        trunk: usize,
+        /// Trunk trajectories branches do not start from (the transient from rest).
+        settle: usize,
+        /// Trajectories per branch.
+        length: usize,
+    },
+}
+
+/// A growth round's closed loop counts as stalled when the free angle advances less than this (rad) ...
+pub const STALL_ADVANCE: f64 = 0.3;
+/// ... over this many seconds.
+pub const STALL_WINDOW: f64 = 2.0;
+/// Simulated seconds per growth round.
+pub const GROWTH_SECONDS: f64 = 100.0;
+/// Branches at most per growth round.
+pub const GROWTH_BRANCHES: usize = 20;
 
 impl Default for LibrarySettings {
     fn default() -> Self {
         LibrarySettings {
             model: Model::Logistic(0.1),
             h: 0.05,
-            horizon: 75,
+            horizon: 90,
             shift: 4,
             trajectories: 400,
+            exploration: Exploration::Branches {
+                trunk: 100,
+                settle: 25,
+                length: 20,
+            },
             chains: 1,
             kick_every: 15,
             kick_variance: 4.0,
@@ -89,7 +139,24 @@ impl Default for LibrarySettings {
             first_passes: 300,
             warm_passes: 100,
             tolerance: 1e-5,
+            keep: 4,
+            neighbours: 8,
+            growth: 4,
+        }
+    }
+}
+
+impl LibrarySettings {
+    /// The paper's recipe (V-B, IV-C): horizon 75, one chain kicked every 15 steps, the first controller
+    /// of each trajectory, the nearest controller's law.
+    pub fn paper() -> Self {
+        LibrarySettings {
+            horizon: 75,
+            exploration: Exploration::Kicks,
             keep: 1,
+            neighbours: 1,
+            growth: 0,
+            ..LibrarySettings::default()
         }
     }
 }
@@ -147,6 +214,35 @@ impl LibrarySettings {
         if self.first_passes == 0 || self.warm_passes == 0 {
             return bad("first_passes / warm_passes", 0.0, "at least 1");
         }
+        if self.neighbours == 0 || self.neighbours > MAX_NEIGHBOURS {
+            return bad("neighbours", self.neighbours as f64, "between 1 and 64");
+        }
+        if self.trajectories > MAX_TRAJECTORIES {
+            return bad("trajectories", self.trajectories as f64, "at most 1e6");
+        }
+        if self.growth > MAX_GROWTH {
+            return bad("growth", self.growth as f64, "at most 100 rounds");
+        }
+        if let Exploration::Branches {
+            trunk,
+            settle,
+            length,
+        } = self.exploration
+        {
+            if trunk == 0 || trunk > self.trajectories {
+                return bad(
+                    "trunk",
+                    trunk as f64,
+                    "between 1 and the number of trajectories",
+                );
+            }
+            if settle >= trunk {
+                return bad("settle", settle as f64, "less than the trunk");
+            }
+            if length == 0 {
+                return bad("length", 0.0, "at least 1");
+            }
+        }
         crate::check("x0", &self.x0, scene.n_state())
     }
 
@@ -163,6 +259,11 @@ impl LibrarySettings {
     }
 }
 
+/// The largest [`LibrarySettings::neighbours`].
+pub const MAX_NEIGHBOURS: usize = 64;
+const MAX_TRAJECTORIES: usize = 1_000_000;
+const MAX_GROWTH: usize = 100;
+
 /// One stored local controller: `u(x) = u + K (x - x)` around the state `x`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Entry {
@@ -178,6 +279,76 @@ pub struct Entry {
     pub converged: bool,
     /// The trajectory's cost.
     pub cost: f64,
+    /// The trajectory's local model of the cost-to-go around `x` (what [`crate::Policy`] ranks nearby
+    /// controllers by).
+    pub value: LocalValue,
+}
+
+/// The second-order model of the cost-to-go around a stored state `x_s`, extended to the library's full
+/// horizon: `V(x) ~ cost_to_go + gradient . d + 1/2 d^T hessian d + per_period k` with `d = x - x_s - k P
+/// e_free` for `x` whose free angle lies `k` whole periods `P` from the stored one.
+///
+/// A controller kept `t` steps into its trajectory has `t` steps less to go than the trajectory's first;
+/// its cost-to-go adds `t` running costs at the trajectory's final state with zero control (the cost of
+/// idling there), so that controllers from different offsets compare on the same horizon.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LocalValue {
+    /// The cost-to-go from `x_s`.
+    pub cost_to_go: f64,
+    /// `V_x` (`n`).
+    pub gradient: Vec<f64>,
+    /// `V_xx`, row-major `n x n`.
+    pub hessian: Vec<f64>,
+    /// How much the cost-to-go changes when the free angle advances one whole period (with the
+    /// finger's cost `-theta3` per step over `N` steps and the final cost: `-(N + 1) pi`).
+    pub per_period: f64,
+}
+
+impl LocalValue {
+    /// The model's prediction at `d = x - x_s - k P e_free`, `k` whole periods on.
+    pub fn predict(&self, d: &[f64], periods: f64) -> f64 {
+        let n = d.len();
+        let mut v = self.cost_to_go + periods * self.per_period;
+        for a in 0..n {
+            let hd: f64 = (0..n).map(|b| self.hessian[a * n + b] * d[b]).sum();
+            v += d[a] * (self.gradient[a] + 0.5 * hd);
+        }
+        v
+    }
+}
+
+/// The local value model of knot `t` of `sol` (see [`LocalValue`]), for the free angle at index `free` with
+/// period `period`.
+pub(crate) fn local_value(
+    sol: &ddp::Solution,
+    cost: &impl ddp::Cost,
+    t: usize,
+    free: usize,
+    period: f64,
+) -> LocalValue {
+    let horizon = sol.controls.len();
+    let (n, m) = (sol.states[0].len(), sol.controls[0].len());
+    let last = &sol.states[horizon];
+    let idle = vec![0.0; m];
+    let mut cd = ddp::CostDerivatives::zeros(n, m);
+    // The value's slope along the free angle: every remaining cost term's, plus the idling terms'.
+    let mut slope = 0.0;
+    for i in t..horizon {
+        cost.running_derivatives(i, &sol.states[i], &sol.controls[i], &mut cd);
+        slope += cd.lx[free];
+    }
+    cost.running_derivatives(horizon - 1, last, &idle, &mut cd);
+    slope += t as f64 * cd.lx[free];
+    let (mut lfx, mut lfxx) = (vec![0.0; n], vec![0.0; n * n]);
+    cost.terminal_derivatives(last, &mut lfx, &mut lfxx);
+    slope += lfx[free];
+    let v = &sol.values[t];
+    LocalValue {
+        cost_to_go: v.cost_to_go + t as f64 * cost.running(horizon - 1, last, &idle),
+        gradient: v.gradient.clone(),
+        hessian: v.hessian.clone(),
+        per_period: slope * period,
+    }
 }
 
 /// The free joint whose angle the task spins: the last unactuated one.
@@ -188,20 +359,16 @@ pub fn free_joint(scene: &Scene) -> Result<usize, LibraryError> {
         .ok_or_else(|| LibraryError::Invalid("the scene has no unactuated joint to spin".into()))
 }
 
-/// Build the entries of a library (see the module documentation): the chains' entries one chain after the
-/// other, whatever order their threads finish in. `progress` sees each trajectory's first entry as it is
-/// made, with the number of trajectories done so far.
+/// Build the entries of a library (see the module documentation and [`Exploration`]): in an order that
+/// depends on the settings alone, whatever order threads finish in. `progress` sees each trajectory's
+/// first entry as it is made, with the number of trajectories done so far.
 pub fn build_entries(
     scene: &Scene,
     settings: &LibrarySettings,
     progress: impl FnMut(usize, &Entry) + Send,
 ) -> Result<Vec<Entry>, LibraryError> {
     settings.validate(scene)?;
-    let (chains, trajectories) = (settings.chains, settings.trajectories);
-    if chains == 1 {
-        let mut progress = progress;
-        return build_chain(scene, settings, settings.seed, trajectories, &mut progress);
-    }
+    let task = Task::new(scene, settings)?;
     let done = std::sync::Mutex::new((0usize, progress));
     let report = |entry: &Entry| {
         let mut guard = done.lock().unwrap_or_else(|e| e.into_inner());
@@ -209,114 +376,334 @@ pub fn build_entries(
         progress(*count, entry);
         *count += 1;
     };
-    let results: Vec<Result<Vec<Entry>, LibraryError>> = std::thread::scope(|scope| {
-        let handles: Vec<_> = (0..chains)
+    match settings.exploration {
+        Exploration::Kicks => kicked_chains(&task, &report),
+        Exploration::Branches {
+            trunk,
+            settle,
+            length,
+        } => branched(&task, trunk, settle, length, &report),
+    }
+}
+
+/// What every chain of a build shares.
+struct Task<'a> {
+    scene: &'a Scene,
+    settings: &'a LibrarySettings,
+    cost: ddp::QuadraticCost,
+    free: usize,
+    kick: Normal<f64>,
+}
+
+/// Trajectories built so far: `keep` entries each, and each one's plan (the warm start of branches that
+/// start near it).
+#[derive(Default)]
+struct Built {
+    entries: Vec<Entry>,
+    plans: Vec<Vec<Vec<f64>>>,
+}
+
+impl Built {
+    fn append(&mut self, other: Built) {
+        self.entries.extend(other.entries);
+        self.plans.extend(other.plans);
+    }
+}
+
+impl<'a> Task<'a> {
+    fn new(scene: &'a Scene, settings: &'a LibrarySettings) -> Result<Self, LibraryError> {
+        let free = free_joint(scene)?;
+        Ok(Task {
+            scene,
+            settings,
+            cost: finger_cost(scene.n_dof(), free, scene.n_controls),
+            free,
+            kick: Normal::new(0.0, settings.kick_variance.sqrt())
+                .map_err(|e| LibraryError::Invalid(e.to_string()))?,
+        })
+    }
+
+    fn dynamics(&self) -> Result<FingerDynamics, LibraryError> {
+        Ok(FingerDynamics::new(self.settings.simulator(self.scene)?))
+    }
+
+    /// Add the velocity perturbation to `x`.
+    fn perturb(&self, x: &mut [f64], rng: &mut ChaCha8Rng) {
+        for v in &mut x[self.scene.n_dof()..] {
+            *v += self.kick.sample(rng);
+        }
+    }
+
+    /// A receding-horizon chain of `count` trajectories from `x1`, the first warm-started from `controls`
+    /// (from zero controls if `first`, with the larger pass budget); `perturb(k, x)` may change the next
+    /// trajectory's initial state after trajectory `k`.
+    fn chain(
+        &self,
+        dynamics: &mut FingerDynamics,
+        mut x1: Vec<f64>,
+        mut controls: Vec<Vec<f64>>,
+        count: usize,
+        first: bool,
+        mut perturb: impl FnMut(usize, &mut [f64]),
+        report: &(dyn Fn(&Entry) + Sync),
+    ) -> Result<Built, LibraryError> {
+        let s = self.settings;
+        let mut out = Built::default();
+        for k in 0..count {
+            let span = tracing::info_span!("library.trajectory", k);
+            let _guard = span.enter();
+            let passes = if first && k == 0 {
+                s.first_passes
+            } else {
+                s.warm_passes
+            };
+            let sol = self.solve(dynamics, &x1, &controls, passes, k)?;
+            for t in 0..s.keep {
+                let entry = Entry {
+                    x: sol.states[t].clone(),
+                    u: sol.controls[t].clone(),
+                    gain: sol.gains[t].clone(),
+                    passes: sol.iterations.len() as u32,
+                    converged: sol.status.converged(),
+                    cost: sol.cost,
+                    value: local_value(&sol, &self.cost, t, self.free, std::f64::consts::PI),
+                };
+                if t == 0 {
+                    report(&entry);
+                }
+                out.entries.push(entry);
+            }
+            // Receding horizon (eq. 19): the next trajectory starts d steps on, warm-started by the
+            // shifted controls.
+            x1 = sol.states[s.shift].clone();
+            controls = ddp::shift_controls(&sol.controls, s.shift);
+            perturb(k, &mut x1);
+            out.plans.push(sol.controls);
+        }
+        Ok(out)
+    }
+
+    /// One trajectory from `x1`, warm-started from `controls`; a perturbed state the warm start cannot
+    /// even roll out from starts from zero controls instead.
+    fn solve(
+        &self,
+        dynamics: &mut FingerDynamics,
+        x1: &[f64],
+        controls: &[Vec<f64>],
+        passes: usize,
+        k: usize,
+    ) -> Result<ddp::Solution, LibraryError> {
+        let failed = |source| LibraryError::Optimiser {
+            trajectory: k,
+            source,
+        };
+        let ddp = Ddp::new(DdpSettings {
+            max_iterations: passes,
+            tol_cost: self.settings.tolerance,
+            ..DdpSettings::default()
+        })
+        .map_err(failed)?;
+        match ddp.solve(dynamics, &self.cost, x1, controls) {
+            Ok(sol) => Ok(sol),
+            Err(DdpError::InitialRollout { .. }) if controls.iter().flatten().any(|&u| u != 0.0) => {
+                let zero = vec![vec![0.0; self.scene.n_controls]; controls.len()];
+                ddp.solve(dynamics, &self.cost, x1, &zero).map_err(failed)
+            }
+            Err(source) => Err(failed(source)),
+        }
+    }
+}
+
+/// `count` jobs on `threads` threads (job `j` on thread `j % threads`), results in job order.
+fn in_parallel<T: Send>(
+    count: usize,
+    threads: usize,
+    job: impl Fn(usize) -> Result<T, LibraryError> + Sync,
+) -> Result<Vec<T>, LibraryError> {
+    let threads = threads.clamp(1, count.max(1));
+    if threads == 1 {
+        return (0..count).map(job).collect();
+    }
+    let job = &job;
+    let mut slots: Vec<Option<Result<T, LibraryError>>> = (0..count).map(|_| None).collect();
+    std::thread::scope(|scope| {
+        let handles: Vec<_> = (0..threads)
             .map(|c| {
-                let length = trajectories / chains + usize::from(c < trajectories % chains);
-                let seed = settings.seed.wrapping_add(c as u64);
-                let report = &report;
                 scope.spawn(move || {
-                    build_chain(scene, settings, seed, length, &mut |_, e: &Entry| report(e))
+                    (c..count)
+                        .step_by(threads)
+                        .map(|j| (j, job(j)))
+                        .collect::<Vec<_>>()
                 })
             })
             .collect();
-        handles
-            .into_iter()
-            .map(|h| {
-                h.join().unwrap_or_else(|_| {
-                    Err(LibraryError::Invalid("a chain's thread panicked".into()))
-                })
-            })
-            .collect()
-    });
-    let mut entries = Vec::with_capacity(trajectories * settings.keep);
-    for chain in results {
-        entries.extend(chain?);
-    }
-    Ok(entries)
+        for h in handles {
+            match h.join() {
+                Ok(done) => {
+                    for (j, r) in done {
+                        slots[j] = Some(r);
+                    }
+                }
+                Err(_) => {
+                    return Err(LibraryError::Invalid("a build thread panicked".into()));
+                }
+            }
+        }
+        Ok(())
+    })?;
+    slots
+        .into_iter()
+        .map(|r| r.unwrap_or_else(|| Err(LibraryError::Invalid("a build job was lost".into()))))
+        .collect()
 }
 
-/// One receding-horizon chain of `trajectories` trajectories with kick seed `seed`.
-fn build_chain(
-    scene: &Scene,
-    settings: &LibrarySettings,
-    seed: u64,
-    trajectories: usize,
-    progress: &mut dyn FnMut(usize, &Entry),
+/// The paper's exploration: `chains` kicked chains (chain `c` with kick seed `seed + c`), in chain order.
+fn kicked_chains(
+    task: &Task,
+    report: &(dyn Fn(&Entry) + Sync),
 ) -> Result<Vec<Entry>, LibraryError> {
-    let (n, m) = (scene.n_dof(), scene.n_controls);
-    let cost = finger_cost(n, free_joint(scene)?, m);
-    let mut dynamics = FingerDynamics::new(settings.simulator(scene)?);
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    let kick = Normal::new(0.0, settings.kick_variance.sqrt())
-        .map_err(|e| LibraryError::Invalid(e.to_string()))?;
-    let mut x1 = settings.x0.clone();
-    let mut controls = vec![vec![0.0; m]; settings.horizon];
-    let mut since_kick = 0usize;
-    let mut entries = Vec::with_capacity(trajectories * settings.keep);
-    for k in 0..trajectories {
-        let span = tracing::info_span!("library.trajectory", k);
-        let _guard = span.enter();
-        let ddp = Ddp::new(DdpSettings {
-            max_iterations: if k == 0 {
-                settings.first_passes
-            } else {
-                settings.warm_passes
+    let s = task.settings;
+    let (chains, trajectories) = (s.chains, s.trajectories);
+    let built = in_parallel(chains, chains, |c| {
+        let length = trajectories / chains + usize::from(c < trajectories % chains);
+        let mut rng = ChaCha8Rng::seed_from_u64(s.seed.wrapping_add(c as u64));
+        let mut since_kick = 0usize;
+        let zero = vec![vec![0.0; task.scene.n_controls]; s.horizon];
+        task.chain(
+            &mut task.dynamics()?,
+            s.x0.clone(),
+            zero,
+            length,
+            true,
+            |_, x1| {
+                since_kick += s.shift;
+                if since_kick >= s.kick_every {
+                    since_kick -= s.kick_every;
+                    task.perturb(x1, &mut rng);
+                }
             },
-            tol_cost: settings.tolerance,
-            ..DdpSettings::default()
-        })
-        .map_err(|source| LibraryError::Optimiser {
-            trajectory: k,
-            source,
-        })?;
-        let sol = match ddp.solve(&mut dynamics, &cost, &x1, &controls) {
-            Ok(sol) => sol,
-            // A perturbed state the warm start cannot even roll out from: start that trajectory from
-            // zero controls instead.
-            Err(DdpError::InitialRollout { .. }) if k > 0 => ddp
-                .solve(
-                    &mut dynamics,
-                    &cost,
-                    &x1,
-                    &vec![vec![0.0; m]; settings.horizon],
-                )
-                .map_err(|source| LibraryError::Optimiser {
-                    trajectory: k,
-                    source,
-                })?,
-            Err(source) => {
-                return Err(LibraryError::Optimiser {
-                    trajectory: k,
-                    source,
-                });
-            }
-        };
-        for t in 0..settings.keep {
-            let entry = Entry {
-                x: sol.states[t].clone(),
-                u: sol.controls[t].clone(),
-                gain: sol.gains[t].clone(),
-                passes: sol.iterations.len() as u32,
-                converged: sol.status.converged(),
-                cost: sol.cost,
-            };
-            if t == 0 {
-                progress(k, &entry);
-            }
-            entries.push(entry);
-        }
-        // Receding horizon (eq. 19): the next trajectory starts d steps on, warm-started by the shifted
-        // controls; every `kick_every` steps its velocities are perturbed.
-        x1 = sol.states[settings.shift].clone();
-        controls = ddp::shift_controls(&sol.controls, settings.shift);
-        since_kick += settings.shift;
-        if since_kick >= settings.kick_every {
-            since_kick -= settings.kick_every;
-            for v in &mut x1[n..] {
-                *v += kick.sample(&mut rng);
-            }
-        }
+            report,
+        )
+    })?;
+    Ok(built.into_iter().flat_map(|b| b.entries).collect())
+}
+
+/// The cycle-first exploration of [`Exploration::Branches`], then growth.
+fn branched(
+    task: &Task,
+    trunk: usize,
+    settle: usize,
+    length: usize,
+    report: &(dyn Fn(&Entry) + Sync),
+) -> Result<Vec<Entry>, LibraryError> {
+    let s = task.settings;
+    let zero = vec![vec![0.0; task.scene.n_controls]; s.horizon];
+    let mut dynamics = task.dynamics()?;
+    let mut built = task.chain(
+        &mut dynamics,
+        s.x0.clone(),
+        zero,
+        trunk,
+        true,
+        |_, _| {},
+        report,
+    )?;
+    // Branches off the trunk, the budget's remainder split into chains of `length` (the last shorter).
+    let rest = s.trajectories - trunk;
+    let count = rest.div_ceil(length);
+    let trunk_built = &built;
+    let branches = in_parallel(count, s.chains, |b| {
+        let mut rng = ChaCha8Rng::seed_from_u64(s.seed);
+        rng.set_stream(b as u64 + 1);
+        let j = rng.random_range(settle..trunk);
+        let mut x1 = trunk_built.entries[j * s.keep].x.clone();
+        task.perturb(&mut x1, &mut rng);
+        let this = length.min(rest - b * length);
+        let plan = trunk_built.plans[j].clone();
+        task.chain(&mut task.dynamics()?, x1, plan, this, false, |_, _| {}, report)
+    })?;
+    for b in branches {
+        built.append(b);
     }
-    Ok(entries)
+    for round in 0..s.growth {
+        let grown = grow(task, &mut dynamics, &mut built, length, round, report)?;
+        tracing::info!(round, grown, "library growth");
+    }
+    Ok(built.entries)
+}
+
+/// One growth round (see [`Exploration::Branches`]): the number of branches added.
+fn grow(
+    task: &Task,
+    dynamics: &mut FingerDynamics,
+    built: &mut Built,
+    length: usize,
+    round: usize,
+    report: &(dyn Fn(&Entry) + Sync),
+) -> Result<usize, LibraryError> {
+    let s = task.settings;
+    let free = task.free;
+    let policy_of = |built: &Built| {
+        Policy::new(
+            &built.entries,
+            task.scene.n_state(),
+            task.scene.n_controls,
+            free,
+        )?
+        .with_neighbours(s.neighbours)
+    };
+    let mut policy = policy_of(built)?;
+    // Odd rounds run on hard contact: the policy is meant for the smoothed and the hard world alike.
+    let mut world = Simulator::new(
+        task.scene.clone(),
+        StepSettings {
+            model: if round % 2 == 1 {
+                Complementarity::Hard
+            } else {
+                s.model.complementarity()
+            },
+            h: s.h,
+            ..StepSettings::default()
+        },
+    )?;
+    let mut rng = ChaCha8Rng::seed_from_u64(s.seed);
+    rng.set_stream(u64::MAX - round as u64);
+    let steps = (GROWTH_SECONDS / s.h).round() as usize;
+    let kick_steps = ((10.0 / s.h).round() as usize).max(1);
+    let window = ((STALL_WINDOW / s.h).round() as usize).max(1);
+    let mut recent = std::collections::VecDeque::with_capacity(window + 1);
+    let mut x = s.x0.clone();
+    let mut u = vec![0.0; task.scene.n_controls];
+    let mut grown = 0;
+    for k in 0..steps {
+        if k > 0 && k % kick_steps == 0 {
+            task.perturb(&mut x, &mut rng);
+            recent.clear();
+        }
+        recent.push_back(x[free]);
+        if recent.len() > window {
+            recent.pop_front();
+        }
+        let (i, _) = policy.select(&x)?;
+        if recent.len() == window && x[free] - recent[0] < STALL_ADVANCE {
+            // Stalled: a branch from here, warm-started from the plan of the controller in use.
+            let (trajectory, offset) = (i / s.keep, i % s.keep);
+            let plan = ddp::shift_controls(&built.plans[trajectory], offset);
+            let branch = task.chain(dynamics, x.clone(), plan, length, false, |_, _| {}, report)?;
+            built.append(branch);
+            policy = policy_of(built)?;
+            recent.clear();
+            grown += 1;
+            if grown == GROWTH_BRANCHES {
+                break;
+            }
+        }
+        policy.control(&x, &mut u)?;
+        let step = world.step(&x, &u)?;
+        if !step.x_next.iter().all(|v| v.is_finite()) {
+            break;
+        }
+        x = step.x_next;
+    }
+    Ok(grown)
 }

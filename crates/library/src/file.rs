@@ -19,7 +19,7 @@ use std::path::Path;
 /// The file's magic bytes.
 pub const MAGIC: &[u8; 8] = b"SLCPLIB\0";
 /// The format version this build writes and reads.
-pub const VERSION: u32 = 2;
+pub const VERSION: u32 = 3;
 const HEADER: usize = 8 + 4 + 8 + 4;
 
 /// A trajectory library: the scene and settings it was built with and its local controllers.
@@ -69,7 +69,8 @@ impl Library {
     /// The global policy (eq. 20) over its controllers.
     pub fn policy(&self) -> Result<Policy, LibraryError> {
         let s = &self.scene;
-        Policy::new(&self.entries, s.n_state(), s.n_controls, free_joint(s)?)
+        Policy::new(&self.entries, s.n_state(), s.n_controls, free_joint(s)?)?
+            .with_neighbours(self.settings.neighbours)
     }
 
     /// `Err` unless the library was built for `scene`.

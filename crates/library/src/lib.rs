@@ -13,7 +13,7 @@ mod policy;
 mod task;
 
 pub use anneal::{AnnealStep, anneal};
-pub use build::{Entry, LibrarySettings, Model, build_entries, free_joint};
+pub use build::{Entry, LibrarySettings, LocalValue, Model, build_entries, free_joint};
 pub use error::LibraryError;
 pub use evaluate::{CONTACT_IMPULSE, Evaluation, EvaluationSettings, evaluate, evaluate_in};
 pub use file::{Library, MAGIC, VERSION};

@@ -10,10 +10,11 @@
 //! at the finger's 400 controllers the tree answers in 0.25-0.4 us against the scan's 2-3 us, at 1600 in
 //! 0.6 against 9 (docs/benchmarks.md).
 
-use crate::build::Entry;
+use crate::build::{Entry, LocalValue};
 use crate::error::LibraryError;
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use std::f64::consts::PI;
+use std::num::NonZero;
 
 /// The shifts, in whole periods, each stored state is kept at.
 const SHIFTS: [f64; 3] = [-1.0, 0.0, 1.0];
@@ -38,9 +39,16 @@ fn tree<const K: usize>(points: &[f64]) -> ImmutableKdTree<f64, K> {
     ImmutableKdTree::new_from_slice(&rows)
 }
 
-fn query<const K: usize>(tree: &ImmutableKdTree<f64, K>, y: &[f64]) -> usize {
+fn query<const K: usize>(tree: &ImmutableKdTree<f64, K>, y: &[f64], count: usize) -> Vec<usize> {
     let q: [f64; K] = std::array::from_fn(|i| y[i]);
-    tree.nearest_one::<SquaredEuclidean>(&q).item as usize
+    if count == 1 {
+        return vec![tree.nearest_one::<SquaredEuclidean>(&q).item as usize];
+    }
+    let count = NonZero::new(count).unwrap_or(NonZero::<usize>::MIN);
+    tree.nearest_n::<SquaredEuclidean>(&q, count)
+        .into_iter()
+        .map(|n| n.item as usize)
+        .collect()
 }
 
 impl Index {
@@ -54,23 +62,28 @@ impl Index {
         }
     }
 
-    /// The item nearest to `y`.
-    fn nearest(&self, y: &[f64]) -> usize {
+    /// The `count` items nearest to `y`, nearest first.
+    fn nearest(&self, y: &[f64], count: usize) -> Vec<usize> {
         match self {
-            Index::K2(t) => query(t, y),
-            Index::K4(t) => query(t, y),
-            Index::K6(t) => query(t, y),
-            Index::K8(t) => query(t, y),
+            Index::K2(t) => query(t, y, count),
+            Index::K4(t) => query(t, y, count),
+            Index::K6(t) => query(t, y, count),
+            Index::K8(t) => query(t, y, count),
             Index::Scan(points) => {
                 let n = y.len();
-                let mut best = (0, f64::INFINITY);
-                for (item, w) in points.chunks_exact(n).enumerate() {
-                    let d2: f64 = y.iter().zip(w).map(|(a, b)| (a - b) * (a - b)).sum();
-                    if d2 < best.1 {
-                        best = (item, d2);
-                    }
+                let mut d: Vec<(f64, usize)> = points
+                    .chunks_exact(n)
+                    .map(|w| y.iter().zip(w).map(|(a, b)| (a - b) * (a - b)).sum())
+                    .zip(0..)
+                    .collect();
+                let count = count.min(d.len());
+                if count < d.len() {
+                    d.select_nth_unstable_by(count - 1, |a, b| a.0.total_cmp(&b.0));
+                    d.truncate(count);
                 }
-                best.0
+                // Nearest first; equal distances by item, as a scan in order would find them.
+                d.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+                d.into_iter().map(|(_, item)| item).collect()
             }
         }
     }
@@ -93,6 +106,9 @@ pub struct Policy {
     states: Vec<Vec<f64>>,
     controls: Vec<Vec<f64>>,
     gains: Vec<Vec<f64>>,
+    values: Vec<LocalValue>,
+    /// Stored controllers compared by their value models (1: the nearest alone, eq. 20).
+    neighbours: usize,
 }
 
 /// `x` wrapped into `(-p/2, p/2]`.
@@ -115,10 +131,20 @@ impl Policy {
             ));
         }
         for (i, e) in entries.iter().enumerate() {
+            let v = &e.value;
             let ok = e.x.len() == n_state
                 && e.u.len() == m
                 && e.gain.len() == m * n_state
-                && e.x.iter().chain(&e.u).chain(&e.gain).all(|v| v.is_finite());
+                && v.gradient.len() == n_state
+                && v.hessian.len() == n_state * n_state
+                && e.x
+                    .iter()
+                    .chain(&e.u)
+                    .chain(&e.gain)
+                    .chain(&v.gradient)
+                    .chain(&v.hessian)
+                    .chain([&v.cost_to_go, &v.per_period])
+                    .all(|v| v.is_finite());
             if !ok {
                 return Err(LibraryError::Invalid(format!(
                     "controller {i} has the wrong sizes or a non-finite entry"
@@ -187,7 +213,28 @@ impl Policy {
             states,
             controls: entries.iter().map(|e| e.u.clone()).collect(),
             gains: entries.iter().map(|e| e.gain.clone()).collect(),
+            values: entries.iter().map(|e| e.value.clone()).collect(),
+            neighbours: 1,
         })
+    }
+
+    /// The same policy choosing, among the `neighbours` stored states nearest to the query, the
+    /// controller whose local value model predicts the lowest cost-to-go there (1: the nearest, eq. 20).
+    pub fn with_neighbours(mut self, neighbours: usize) -> Result<Self, LibraryError> {
+        if neighbours == 0 {
+            return Err(LibraryError::Setting {
+                name: "neighbours",
+                value: 0.0,
+                expected: "at least 1",
+            });
+        }
+        self.neighbours = neighbours;
+        Ok(self)
+    }
+
+    /// How many nearest controllers the policy compares.
+    pub fn neighbours(&self) -> usize {
+        self.neighbours
     }
 
     /// Number of stored controllers.
@@ -221,21 +268,60 @@ impl Policy {
 
     /// Index of the nearest stored state to `x` and the whole periods of the free angle between them.
     pub fn nearest(&self, x: &[f64]) -> Result<(usize, f64), LibraryError> {
+        Ok(self.nearest_n(x, 1)?[0])
+    }
+
+    /// The `count` nearest stored states to `x` (nearest first), each with the whole periods of the free
+    /// angle between it and `x`.
+    pub fn nearest_n(&self, x: &[f64], count: usize) -> Result<Vec<(usize, f64)>, LibraryError> {
         crate::check("x", x, self.n)?;
         let k = (x[self.free] / self.period).floor();
         let mut y = forward(&self.chol, self.n, x);
         for (y, p) in y.iter_mut().zip(&self.period_shift) {
             *y -= k * p;
         }
-        let item = self.index.nearest(&y);
-        let (i, s) = (item / SHIFTS.len(), item % SHIFTS.len());
-        // The stored point is w_i - (k_i - j) p and the query y - k p: x is k - k_i + j periods on.
-        Ok((i, k - self.turns[i] + SHIFTS[s]))
+        Ok(self
+            .index
+            .nearest(&y, count.max(1))
+            .into_iter()
+            .map(|item| {
+                let (i, s) = (item / SHIFTS.len(), item % SHIFTS.len());
+                // The stored point is w_i - (k_i - j) p and the query y - k p: x is k - k_i + j periods
+                // on.
+                (i, k - self.turns[i] + SHIFTS[s])
+            })
+            .collect())
     }
 
-    /// The policy's control at `x` (eq. 20) written into `u`; returns the controller used.
+    /// `x - x_i` with the free angle taken `turns` whole periods back.
+    fn offset(&self, x: &[f64], i: usize, turns: f64) -> Vec<f64> {
+        let mut d: Vec<f64> = x.iter().zip(&self.states[i]).map(|(a, b)| a - b).collect();
+        d[self.free] -= turns * self.period;
+        d
+    }
+
+    /// The stored controller the policy uses at `x` and the whole periods between them: the nearest
+    /// (eq. 20), or among the [`Policy::neighbours`] nearest the one whose local value model predicts
+    /// the lowest cost-to-go at `x` (ties to the nearer).
+    pub fn select(&self, x: &[f64]) -> Result<(usize, f64), LibraryError> {
+        let candidates = self.nearest_n(x, self.neighbours)?;
+        if candidates.len() == 1 {
+            return Ok(candidates[0]);
+        }
+        let mut best = (f64::INFINITY, candidates[0]);
+        for (i, turns) in candidates {
+            let v = self.values[i].predict(&self.offset(x, i, turns), turns);
+            if v < best.0 {
+                best = (v, (i, turns));
+            }
+        }
+        Ok(best.1)
+    }
+
+    /// The policy's control at `x` (eq. 20, or the value-ranked choice of [`Policy::select`]) written
+    /// into `u`; returns the controller used.
     pub fn control(&self, x: &[f64], u: &mut [f64]) -> Result<usize, LibraryError> {
-        let (i, turns) = self.nearest(x)?;
+        let (i, turns) = self.select(x)?;
         if u.len() != self.m {
             return Err(LibraryError::Input {
                 what: "u",
