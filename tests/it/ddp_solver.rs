@@ -530,7 +530,11 @@ fn the_value_model_of_a_linear_quadratic_problem_predicts_the_optimal_cost_from_
         for knot in [0, 17, horizon - 1] {
             let v = &sol.values[knot];
             let delta = [0.3, -0.2, 0.5, 0.1];
-            let start: Vec<f64> = sol.states[knot].iter().zip(delta).map(|(a, b)| a + b).collect();
+            let start: Vec<f64> = sol.states[knot]
+                .iter()
+                .zip(delta)
+                .map(|(a, b)| a + b)
+                .collect();
             let (optimum, _) = riccati(&sys, &cost, &start, horizon - knot);
             let mut predicted = v.cost_to_go;
             for a in 0..4 {

@@ -14,7 +14,7 @@ fn small(seed: u64) -> Library {
         warm_passes: 20,
         kick_every: 8,
         seed,
-        ..LibrarySettings::default()
+        ..LibrarySettings::paper()
     };
     Library::build(&Scene::flicking_finger(), &settings, |_, _| {}).unwrap()
 }
@@ -46,7 +46,7 @@ fn chains_built_in_parallel_are_the_chains_built_one_by_one() {
             warm_passes: 10,
             kick_every: 8,
             seed,
-            ..LibrarySettings::default()
+            ..LibrarySettings::paper()
         };
         let mut seen = Vec::new();
         let lib =
@@ -204,10 +204,107 @@ fn impossible_library_settings_are_typed_errors() {
         LibrarySettings {
             trajectories: 3,
             chains: 4,
+            ..LibrarySettings::paper()
+        },
+        LibrarySettings {
+            neighbours: 0,
+            ..LibrarySettings::default()
+        },
+        LibrarySettings {
+            neighbours: 65,
+            ..LibrarySettings::default()
+        },
+        LibrarySettings {
+            trajectories: 50,
+            ..LibrarySettings::default()
+        },
+        LibrarySettings {
+            trajectories: usize::MAX,
+            ..LibrarySettings::default()
+        },
+        LibrarySettings {
+            growth: 1000,
+            ..LibrarySettings::default()
+        },
+        LibrarySettings {
+            exploration: library::Exploration::Branches {
+                trunk: 10,
+                settle: 10,
+                length: 5,
+            },
+            ..LibrarySettings::default()
+        },
+        LibrarySettings {
+            exploration: library::Exploration::Branches {
+                trunk: 10,
+                settle: 2,
+                length: 0,
+            },
             ..LibrarySettings::default()
         },
     ] {
-        assert!(Library::build(&scene, &s, |_, _| {}).is_err());
+        assert!(
+            matches!(
+                Library::build(&scene, &s, |_, _| {}),
+                Err(LibraryError::Setting { .. } | LibraryError::Input { .. })
+            ),
+            "{s:?}"
+        );
+    }
+}
+
+/// A small cycle-first library: a trunk, branches off it and growth rounds.
+fn branched(chains: usize) -> Library {
+    let settings = LibrarySettings {
+        trajectories: 10,
+        horizon: 30,
+        first_passes: 60,
+        warm_passes: 20,
+        exploration: library::Exploration::Branches {
+            trunk: 4,
+            settle: 1,
+            length: 2,
+        },
+        growth: 1,
+        chains,
+        ..LibrarySettings::default()
+    };
+    Library::build(&Scene::flicking_finger(), &settings, |_, _| {}).unwrap()
+}
+
+#[test]
+fn branched_libraries_start_on_the_trunk_and_do_not_depend_on_the_threads() {
+    let (one, two) = (branched(1), branched(2));
+    assert_eq!(one.entries, two.entries);
+    // Trunk and branches spend the budget (4 controllers each); growth may add more in branches of 2.
+    assert!(one.entries.len() >= 40, "{}", one.entries.len());
+    assert_eq!((one.entries.len() - 40) % 8, 0);
+    // The trunk is unperturbed: each trajectory starts where the previous one was 4 steps on.
+    let trunk_start = &one.entries[4].x;
+    assert!(
+        one.entries[..16]
+            .iter()
+            .all(|e| e.x.iter().all(|v| v.is_finite()))
+    );
+    assert_ne!(trunk_start, &one.entries[0].x);
+    // A branch starts from a trunk state past the transient with perturbed velocities: its angles are a
+    // trunk state's, its velocities are not.
+    let branch = &one.entries[16].x;
+    let trunk: Vec<&Vec<f64>> = one.entries[..16].iter().step_by(4).map(|e| &e.x).collect();
+    assert!(
+        trunk
+            .iter()
+            .any(|x| x[..3] == branch[..3] && x[3..] != branch[3..])
+    );
+    // Every controller carries a finite value model; a controller kept t steps into its trajectory
+    // idles at its final state for the t steps it lacks, so all compare on one horizon.
+    for e in &one.entries {
+        assert!(e.value.cost_to_go.is_finite());
+        assert!(
+            (e.value.per_period + 31.0 * std::f64::consts::PI).abs() < 1e-9,
+            "{:?}",
+            e.value
+        );
     }
 }
 
@@ -269,6 +366,50 @@ proptest::proptest! {
             tree.control(&x, &mut ua).unwrap();
             scan.control(&x, &mut ub).unwrap();
             proptest::prop_assert!((ua[0] - ub[0]).abs() < 1e-9 && (ua[1] - ub[1]).abs() < 1e-9);
+        }
+    }
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(64))]
+    #[test]
+    fn the_policy_uses_the_lowest_predicted_value_among_its_nearest_controllers(
+        states in proptest::collection::vec(proptest::collection::vec(-3.0f64..3.0, 6), 2..40),
+        levels in proptest::collection::vec((-50.0f64..50.0, -5.0f64..5.0), 40),
+        neighbours in 1usize..10,
+        queries in proptest::collection::vec(proptest::collection::vec(-4.0f64..4.0, 6), 10),
+    ) {
+        let entries: Vec<library::Entry> = states
+            .iter()
+            .zip(&levels)
+            .map(|(x, &(level, slope))| {
+                let mut e = entry(x.clone());
+                e.value.cost_to_go = level;
+                e.value.gradient[0] = slope;
+                e.value.hessian[7] = slope.abs();
+                e
+            })
+            .collect();
+        let policy = library::Policy::new(&entries, 6, 2, 2)
+            .unwrap()
+            .with_neighbours(neighbours)
+            .unwrap();
+        for x in queries {
+            let candidates = policy.nearest_n(&x, neighbours).unwrap();
+            proptest::prop_assert_eq!(candidates.len(), neighbours.min(3 * entries.len()));
+            let predict = |(i, turns): (usize, f64)| {
+                let mut d: Vec<f64> = x.iter().zip(&entries[i].x).map(|(a, b)| a - b).collect();
+                d[2] -= turns * std::f64::consts::PI;
+                entries[i].value.predict(&d, turns)
+            };
+            let chosen = policy.select(&x).unwrap();
+            proptest::prop_assert!(candidates.contains(&chosen));
+            for &c in &candidates {
+                proptest::prop_assert!(predict(chosen) <= predict(c) + 1e-9);
+            }
+            if neighbours == 1 {
+                proptest::prop_assert_eq!(chosen, policy.nearest(&x).unwrap());
+            }
         }
     }
 }

@@ -39,15 +39,30 @@ pub fn c_gradient(sim: &mut dynamics::Simulator, c: &[f64], y: &[f64]) -> Vec<f6
     g
 }
 
-/// The default library (400 trajectories, SCENE.md's settings) keeping the four controllers each
-/// trajectory runs before the next one takes over; built once per test run (about 10 s) and shared.
+/// The default library (`cargo xtask train`'s: 400 trajectories, the cycle first, growth on the policy's
+/// stalls); built once per test run (about 15 s) and shared.
 pub fn finger_library() -> &'static library::Library {
     static LIB: std::sync::OnceLock<library::Library> = std::sync::OnceLock::new();
     LIB.get_or_init(|| {
-        let settings = library::LibrarySettings {
-            keep: 4,
-            ..library::LibrarySettings::default()
-        };
-        library::Library::build(&dynamics::Scene::flicking_finger(), &settings, |_, _| {}).unwrap()
+        library::Library::build(
+            &dynamics::Scene::flicking_finger(),
+            &library::LibrarySettings::default(),
+            |_, _| {},
+        )
+        .unwrap()
+    })
+}
+
+/// The paper's recipe (horizon 75, a kicked chain, first controllers, the nearest controller's law),
+/// seed 1; built once per test run (about 7 s) and shared.
+pub fn paper_library() -> &'static library::Library {
+    static LIB: std::sync::OnceLock<library::Library> = std::sync::OnceLock::new();
+    LIB.get_or_init(|| {
+        library::Library::build(
+            &dynamics::Scene::flicking_finger(),
+            &library::LibrarySettings::paper(),
+            |_, _| {},
+        )
+        .unwrap()
     })
 }

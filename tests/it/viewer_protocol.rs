@@ -190,7 +190,7 @@ async fn a_port_in_use_and_a_library_for_another_scene_are_errors_at_start() {
         horizon: 10,
         first_passes: 5,
         warm_passes: 2,
-        ..library::LibrarySettings::default()
+        ..library::LibrarySettings::paper()
     };
     let lib =
         library::Library::build(&dynamics::Scene::flicking_finger(), &settings, |_, _| {}).unwrap();

@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// The library whose states and closed loop are drawn.
-    #[arg(long, default_value = "results/finger_sigma0.1.lib")]
+    #[arg(long, default_value = "results/finger.lib")]
     library: PathBuf,
     /// Output folder.
     #[arg(long, default_value = "results/figures")]
@@ -356,7 +356,7 @@ pub fn write_all(lib: &Library, dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
 pub fn run(args: &Args) -> anyhow::Result<()> {
     let lib = Library::load(&args.library).with_context(|| {
         format!(
-            "loading {} (cargo xtask train --keep 4 makes one)",
+            "loading {} (cargo xtask train makes one)",
             args.library.display()
         )
     })?;
@@ -378,7 +378,12 @@ mod tests {
             horizon: 40,
             first_passes: 60,
             warm_passes: 20,
-            keep: 4,
+            exploration: library::Exploration::Branches {
+                trunk: 4,
+                settle: 1,
+                length: 1,
+            },
+            growth: 0,
             ..LibrarySettings::default()
         };
         let lib = Library::build(&Scene::flicking_finger(), &settings, |_, _| {}).unwrap();

@@ -25,6 +25,125 @@ pub struct Args {
     /// Simulated seconds per closed-loop run.
     #[arg(long, default_value_t = 200.0)]
     seconds: f64,
+    /// Library seeds (kick seeds of the build) of the seed sweep: 1 to this.
+    #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u64).range(1..=64))]
+    seeds: u64,
+}
+
+/// One closed-loop run of the seed sweep.
+#[derive(Serialize)]
+struct SeedRun {
+    seed: u64,
+    /// Which recipe built the library (see the report's table).
+    recipe: String,
+    world: String,
+    h: f64,
+    kicks: bool,
+    evaluation: Evaluation,
+}
+
+/// The recipes of the seed sweep, each a library built with that seed, or one derived from it.
+const RECIPES: [&str; 4] = [
+    "paper (N = 75, kicked chain, first controllers, nearest)",
+    "default without growth",
+    "default, nearest controller only",
+    "default (N = 90, cycle first, 4 per trajectory, 8 ranked by value, 2 growth rounds)",
+];
+
+/// The seed sweep: for each seed the paper's recipe and the default, and two libraries derived from the
+/// default (its entries before growth; its nearest controller alone), each on the four worlds with and
+/// without kicks. Builds run on two threads.
+fn seed_sweep(args: &Args, bars: &MultiProgress) -> anyhow::Result<Vec<SeedRun>> {
+    let jobs: Vec<(u64, bool)> = (1..=args.seeds)
+        .flat_map(|seed| [(seed, false), (seed, true)])
+        .collect();
+    let bar = bars.add(ProgressBar::new(jobs.len() as u64));
+    bar.set_style(
+        ProgressStyle::with_template(
+            "seed sweep: {bar:40} {pos}/{len} libraries {elapsed_precise} (eta {eta})",
+        )
+        .expect("a valid template"),
+    );
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let run_job = |(seed, paper): (u64, bool)| -> anyhow::Result<Vec<SeedRun>> {
+        let base = if paper {
+            LibrarySettings::paper()
+        } else {
+            LibrarySettings::default()
+        };
+        let settings = LibrarySettings { seed, ..base };
+        let lib = Library::build(&Scene::flicking_finger(), &settings, |_, _| {})?;
+        let mut variants = Vec::new();
+        if paper {
+            variants.push((RECIPES[0], lib));
+        } else {
+            let mut ungrown = lib.clone();
+            ungrown
+                .entries
+                .truncate(settings.trajectories * settings.keep);
+            let mut nearest = lib.clone();
+            nearest.settings.neighbours = 1;
+            variants.push((RECIPES[1], ungrown));
+            variants.push((RECIPES[2], nearest));
+            variants.push((RECIPES[3], lib));
+        }
+        let mut runs = Vec::new();
+        for (recipe, lib) in variants {
+            let policy = lib.policy()?;
+            for (world, model, h) in crate::evaluate::worlds(&lib) {
+                for kicks in [false, true] {
+                    let evaluation = evaluate(
+                        &lib,
+                        &policy,
+                        &EvaluationSettings {
+                            model,
+                            h,
+                            seconds: args.seconds,
+                            kick_every: if kicks { 10.0 } else { 0.0 },
+                            ..EvaluationSettings::default()
+                        },
+                    )?;
+                    runs.push(SeedRun {
+                        seed,
+                        recipe: recipe.into(),
+                        world: world.clone(),
+                        h,
+                        kicks,
+                        evaluation,
+                    });
+                }
+            }
+        }
+        bar.inc(1);
+        Ok(runs)
+    };
+    let results: Vec<anyhow::Result<Vec<SeedRun>>> = std::thread::scope(|scope| {
+        let workers: Vec<_> = (0..2)
+            .map(|_| {
+                scope.spawn(|| {
+                    let mut done = Vec::new();
+                    loop {
+                        let j = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                        let Some(&job) = jobs.get(j) else { break };
+                        done.push((j, run_job(job)));
+                    }
+                    done
+                })
+            })
+            .collect();
+        let mut all: Vec<_> = workers
+            .into_iter()
+            .flat_map(|w| w.join().expect("a sweep worker does not panic"))
+            .collect();
+        all.sort_by_key(|(j, _)| *j);
+        all.into_iter().map(|(_, r)| r).collect()
+    });
+    bar.finish_and_clear();
+    let mut runs = Vec::new();
+    for r in results {
+        runs.extend(r?);
+    }
+    Ok(runs)
 }
 
 #[derive(Serialize)]
@@ -80,6 +199,8 @@ struct Summary {
     mismatched: Vec<Mismatched>,
     libraries: Vec<(String, f64, usize)>,
     closed_loop: Vec<ClosedLoop>,
+    /// The seed sweep: every recipe's library for every seed on every world.
+    seeds: Vec<SeedRun>,
     /// Simulated seconds per closed-loop run.
     run_seconds: f64,
     seconds: f64,
@@ -114,7 +235,6 @@ fn optimise(sigma: f64) -> anyhow::Result<Optimised> {
 fn build(sigma: f64, bars: &MultiProgress) -> anyhow::Result<(Library, f64)> {
     let settings = LibrarySettings {
         model: Model::Logistic(sigma),
-        keep: 4,
         ..LibrarySettings::default()
     };
     let bar = bars.add(ProgressBar::new(settings.trajectories as u64));
@@ -180,19 +300,6 @@ fn mismatched_scenes() -> Vec<(String, dynamics::SceneSpec)> {
     out
 }
 
-/// The paper's library: each trajectory's first controller only.
-fn firsts(lib: &Library) -> Library {
-    let mut paper = lib.clone();
-    paper.entries = lib
-        .entries
-        .iter()
-        .step_by(lib.settings.keep)
-        .cloned()
-        .collect();
-    paper.settings.keep = 1;
-    paper
-}
-
 /// Run `cargo xtask reproduce`.
 pub fn run(args: &Args) -> anyhow::Result<()> {
     let start = Instant::now();
@@ -214,7 +321,13 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             .into_iter()
             .map(|b| b.join().expect("a library build does not panic"))
             .collect();
-        finish(args, start, rest?, built?)
+        let (rest, built) = (rest?, built?);
+        let _ = bars.println(format!(
+            "seed sweep: {} seeds x (paper recipe, default) ...",
+            args.seeds
+        ));
+        let seeds = seed_sweep(args, &bars)?;
+        finish(args, start, rest, built, seeds)
     })
 }
 
@@ -251,6 +364,7 @@ fn finish(
     start: Instant,
     (optimised, annealing): (Vec<Optimised>, Vec<Annealed>),
     built: Vec<(Library, f64)>,
+    seeds: Vec<SeedRun>,
 ) -> anyhow::Result<()> {
     let mut larger_kicks = Vec::new();
     let mut mismatched = Vec::new();
@@ -261,9 +375,16 @@ fn finish(
             Model::Logistic(sigma) => sigma,
             other => anyhow::bail!("reproduce builds logistic libraries, not {other:?}"),
         };
-        lib.save(&args.out.join(format!("finger_sigma{sigma}.lib")))?;
+        // The sigma = 0.1 library is the default one (`cargo xtask train`), which `view` and `figures`
+        // load.
+        let file = if sigma == 0.1 {
+            "finger.lib".to_string()
+        } else {
+            format!("finger_sigma{sigma}.lib")
+        };
+        lib.save(&args.out.join(file))?;
         libraries.push((
-            format!("sigma {sigma}, 4 per trajectory"),
+            format!("sigma {sigma}, default recipe"),
             secs,
             lib.entries.len(),
         ));
@@ -295,11 +416,7 @@ fn finish(
                 }
             }
         }
-        let paper = firsts(&lib);
-        for (name, l) in [
-            (format!("sigma {sigma}, first controllers (paper)"), &paper),
-            (format!("sigma {sigma}, 4 per trajectory"), &lib),
-        ] {
+        for (name, l) in [(format!("sigma {sigma}, default recipe"), &lib)] {
             let policy = l.policy()?;
             for (world, model, h) in crate::evaluate::worlds(l) {
                 for kicks in [false, true] {
@@ -333,6 +450,7 @@ fn finish(
         mismatched,
         libraries,
         closed_loop,
+        seeds,
         run_seconds: args.seconds,
         seconds,
     };
@@ -459,5 +577,57 @@ fn report(s: &Summary) -> String {
             }
         );
     }
+    seed_table(&mut t, s);
     t
+}
+
+/// The seed sweep, one row per recipe, world and time step, with and without kicks.
+fn seed_table(t: &mut String, s: &Summary) {
+    let seeds: std::collections::BTreeSet<u64> = s.seeds.iter().map(|r| r.seed).collect();
+    let _ = writeln!(
+        t,
+        "\n## The seed sweep: libraries of seeds {}-{} from rest, {:.0} s per run\n\nLast quarter: the mean spin over the last quarter of the run (the paper's Fig. 5: about 0.67 rad/s, our reading); steady: seeds whose last quarter spins at 0.5 rad/s or more. With kicks (std 2 every 10 s): resumed = kicks after which the ellipse turned a further quarter turn before the next.\n\n| recipe | world | h | last quarter, no kicks: mean (min-max) rad/s | steady | with kicks: last quarter | resumed (mean) | seeds resuming after all but one kick |\n|---|---|---:|---:|---:|---:|---:|---:|",
+        seeds.first().copied().unwrap_or(0),
+        seeds.last().copied().unwrap_or(0),
+        s.run_seconds
+    );
+    for recipe in RECIPES {
+        let mut keys: Vec<(String, f64)> = Vec::new();
+        for r in s.seeds.iter().filter(|r| r.recipe == recipe) {
+            if !keys.iter().any(|(w, h)| *w == r.world && *h == r.h) {
+                keys.push((r.world.clone(), r.h));
+            }
+        }
+        for (world, h) in keys {
+            let runs = |kicks: bool| -> Vec<&Evaluation> {
+                s.seeds
+                    .iter()
+                    .filter(|r| {
+                        r.recipe == recipe && r.world == world && r.h == h && r.kicks == kicks
+                    })
+                    .map(|r| &r.evaluation)
+                    .collect()
+            };
+            let (calm, kicked) = (runs(false), runs(true));
+            let stats = |v: &[&Evaluation]| {
+                let rates: Vec<f64> = v.iter().map(|e| e.final_spin_rate).collect();
+                let mean = rates.iter().sum::<f64>() / rates.len().max(1) as f64;
+                let lo = rates.iter().copied().fold(f64::INFINITY, f64::min);
+                let hi = rates.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+                (mean, lo, hi, rates.iter().filter(|&&r| r >= 0.5).count())
+            };
+            let (mean, lo, hi, steady) = stats(&calm);
+            let (kmean, _, _, _) = stats(&kicked);
+            let resumed =
+                kicked.iter().map(|e| e.resumed as f64).sum::<f64>() / kicked.len().max(1) as f64;
+            let kicks = kicked.first().map_or(0, |e| e.kicks);
+            let all_but_one = kicked.iter().filter(|e| e.resumed + 1 >= e.kicks).count();
+            let _ = writeln!(
+                t,
+                "| {recipe} | {world} | {h} | {mean:.3} ({lo:.3}-{hi:.3}) | {steady}/{} | {kmean:.3} | {resumed:.1}/{kicks} | {all_but_one}/{} |",
+                calm.len(),
+                kicked.len()
+            );
+        }
+    }
 }

@@ -36,12 +36,27 @@ pub struct Args {
     /// Optimiser passes at most per warm-started re-solve.
     #[arg(long, default_value_t = 100)]
     warm_passes: usize,
+    /// The paper's recipe (horizon 75, one chain kicked every 15 steps, the first controller of each
+    /// trajectory, the nearest controller's law) instead of the default (horizon 90, the cycle first and
+    /// branches off it, four controllers per trajectory, the best of eight by value, two growth rounds).
+    #[arg(long)]
+    paper: bool,
+    /// Optimisation horizon in steps (default: 90, the paper's recipe 75).
+    #[arg(long)]
+    horizon: Option<usize>,
+    /// Nearest controllers the policy ranks by their value models (1: the nearest alone, eq. 20).
+    #[arg(long)]
+    neighbours: Option<usize>,
+    /// Rounds of growth on the policy's own stalls.
+    #[arg(long)]
+    growth: Option<usize>,
     /// The optimiser's stopping tolerance on the relative cost change.
     #[arg(long, default_value_t = LibrarySettings::default().tolerance)]
     tolerance: f64,
-    /// Local controllers kept per trajectory (1: the paper's first controller; up to the shift of 4).
-    #[arg(long, default_value_t = 1)]
-    keep: usize,
+    /// Local controllers kept per trajectory (1: the paper's first controller; up to the shift of 4;
+    /// default 4, the paper's recipe 1).
+    #[arg(long)]
+    keep: Option<usize>,
     /// Scene file (TOML); default: the flicking finger of SCENE.md.
     #[arg(long)]
     scene: Option<PathBuf>,
@@ -57,6 +72,11 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             Scene::from_toml_str(&text).with_context(|| format!("scene {}", path.display()))?
         }
     };
+    let base = if args.paper {
+        LibrarySettings::paper()
+    } else {
+        LibrarySettings::default()
+    };
     let settings = LibrarySettings {
         model: match args.model {
             crate::step::Model::Hard => Model::Hard,
@@ -67,12 +87,15 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         trajectories: args.trajectories,
         seed: args.seed,
         chains: args.chains,
-        keep: args.keep,
+        keep: args.keep.unwrap_or(base.keep),
+        horizon: args.horizon.unwrap_or(base.horizon),
+        neighbours: args.neighbours.unwrap_or(base.neighbours),
+        growth: args.growth.unwrap_or(base.growth),
         warm_passes: args.warm_passes,
         tolerance: args.tolerance,
-        ..LibrarySettings::default()
+        ..base
     };
-    let bar = ProgressBar::new(args.trajectories as u64);
+    let bar = ProgressBar::new(settings.trajectories as u64);
     bar.set_style(
         ProgressStyle::with_template(
             "{bar:40} {pos}/{len} controllers  {elapsed_precise} (eta {eta})  {msg}",
@@ -86,17 +109,17 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     })?;
     bar.finish_and_clear();
     let seconds = start.elapsed().as_secs_f64();
-    let firsts: Vec<_> = library.entries.iter().step_by(args.keep).collect();
+    let firsts: Vec<_> = library.entries.iter().step_by(settings.keep).collect();
     let passes: u64 = firsts.iter().map(|e| e.passes as u64).sum();
     let converged = firsts.iter().filter(|e| e.converged).count();
     println!(
-        "built {} controllers from {} trajectories ({} chain{}) in {seconds:.1} s: {passes} optimiser passes ({} for the first solve, {:.1} per trajectory), {converged} converged",
+        "built {} controllers from {} trajectories ({} beyond the budget of {} grown on the policy's stalls) in {seconds:.1} s: {passes} optimiser passes ({} for the first solve, {:.1} per trajectory), {converged} converged",
         library.entries.len(),
-        args.trajectories,
-        args.chains,
-        if args.chains > 1 { "s" } else { "" },
+        firsts.len(),
+        firsts.len() - settings.trajectories,
+        settings.trajectories,
         library.entries[0].passes,
-        passes as f64 / args.trajectories as f64
+        passes as f64 / firsts.len() as f64
     );
     if let Some(dir) = args.out.parent()
         && !dir.as_os_str().is_empty()

@@ -12,8 +12,9 @@ use viewer::{Viewer, ViewerConfig, WorldSettings};
 /// Options of `cargo xtask view`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// The library for the library policy. Default: results/finger_sigma0.1.lib (written by `cargo
-    /// xtask reproduce`) if it exists, else a library built now (about 8 s) and saved there.
+    /// The library for the library policy. Default: results/finger.lib (written by `cargo xtask train`
+    /// and `cargo xtask reproduce` with their default settings) if it exists, else that library built
+    /// now (about 15 s) and saved there.
     #[arg(long)]
     library: Option<PathBuf>,
     /// Port on 127.0.0.1 (0: any free port).
@@ -37,7 +38,7 @@ enum Policy {
     Off,
 }
 
-const DEFAULT_LIBRARY: &str = "results/finger_sigma0.1.lib";
+const DEFAULT_LIBRARY: &str = "results/finger.lib";
 
 fn library(args: &Args) -> anyhow::Result<Library> {
     if let Some(path) = &args.library {
@@ -60,11 +61,8 @@ fn library(args: &Args) -> anyhow::Result<Library> {
             }
         }
     }
-    let settings = LibrarySettings {
-        keep: 4,
-        ..LibrarySettings::default()
-    };
-    println!("building the default library (sigma 0.1, 4 controllers per trajectory) ...");
+    let settings = LibrarySettings::default();
+    println!("building the default library (as `cargo xtask train` does) ...");
     let bar = ProgressBar::new(settings.trajectories as u64);
     bar.set_style(
         ProgressStyle::with_template("{bar:40} {pos}/{len} trajectories  {elapsed_precise}")

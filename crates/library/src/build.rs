@@ -3,10 +3,10 @@
 //! with the warm start of eq. (19), and perturbing the initial state's velocities every few steps.
 
 use crate::error::LibraryError;
+use crate::policy::Policy;
 use crate::task::{FingerDynamics, finger_cost};
 use ddp::{Ddp, DdpError, DdpSettings};
 use dynamics::{Complementarity, Scene, Simulator, StepSettings};
-use crate::policy::Policy;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
@@ -141,7 +141,7 @@ impl Default for LibrarySettings {
             tolerance: 1e-5,
             keep: 4,
             neighbours: 8,
-            growth: 4,
+            growth: 2,
         }
     }
 }
@@ -437,6 +437,7 @@ impl<'a> Task<'a> {
     /// A receding-horizon chain of `count` trajectories from `x1`, the first warm-started from `controls`
     /// (from zero controls if `first`, with the larger pass budget); `perturb(k, x)` may change the next
     /// trajectory's initial state after trajectory `k`.
+    #[allow(clippy::too_many_arguments)]
     fn chain(
         &self,
         dynamics: &mut FingerDynamics,
@@ -505,7 +506,9 @@ impl<'a> Task<'a> {
         .map_err(failed)?;
         match ddp.solve(dynamics, &self.cost, x1, controls) {
             Ok(sol) => Ok(sol),
-            Err(DdpError::InitialRollout { .. }) if controls.iter().flatten().any(|&u| u != 0.0) => {
+            Err(DdpError::InitialRollout { .. })
+                if controls.iter().flatten().any(|&u| u != 0.0) =>
+            {
                 let zero = vec![vec![0.0; self.scene.n_controls]; controls.len()];
                 ddp.solve(dynamics, &self.cost, x1, &zero).map_err(failed)
             }
@@ -620,7 +623,15 @@ fn branched(
         task.perturb(&mut x1, &mut rng);
         let this = length.min(rest - b * length);
         let plan = trunk_built.plans[j].clone();
-        task.chain(&mut task.dynamics()?, x1, plan, this, false, |_, _| {}, report)
+        task.chain(
+            &mut task.dynamics()?,
+            x1,
+            plan,
+            this,
+            false,
+            |_, _| {},
+            report,
+        )
     })?;
     for b in branches {
         built.append(b);

@@ -13,7 +13,10 @@ mod policy;
 mod task;
 
 pub use anneal::{AnnealStep, anneal};
-pub use build::{Entry, LibrarySettings, LocalValue, Model, build_entries, free_joint};
+pub use build::{
+    Entry, Exploration, GROWTH_BRANCHES, GROWTH_SECONDS, LibrarySettings, LocalValue,
+    MAX_NEIGHBOURS, Model, STALL_ADVANCE, STALL_WINDOW, build_entries, free_joint,
+};
 pub use error::LibraryError;
 pub use evaluate::{CONTACT_IMPULSE, Evaluation, EvaluationSettings, evaluate, evaluate_in};
 pub use file::{Library, MAGIC, VERSION};
