@@ -1,4 +1,4 @@
-//! The step against the independent high-precision values of shared/reference/finger_steps.json, to the
+//! The step against the independent high-precision values of tests/data/finger_steps.json, to the
 //! tolerances of its README.
 
 use crate::support::reference_json;

@@ -1,4 +1,4 @@
-//! The geometry against the independent 45-digit reference of `shared/reference/ellipse_cases.json`,
+//! The geometry against the independent 45-digit reference of `tests/data/ellipse_cases.json`,
 //! to the tolerances its README gives.
 
 use crate::support::reference_json;

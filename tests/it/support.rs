@@ -1,21 +1,11 @@
-//! Shared fixtures: the independent reference files in `../shared/reference/`.
+//! Shared fixtures: the independent reference answers in `tests/data/` (copied from the project's
+//! reference files; tests/data/README.md says where they came from) and the libraries several tests use.
 
 use std::path::PathBuf;
 
-/// Path of a file in the shared reference folder (beside the repository, as CI lays it out).
+/// Path of a reference file in `tests/data/`.
 pub fn reference_path(name: &str) -> PathBuf {
-    let manifest = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
-    let candidates = [
-        manifest.join("../../shared/reference").join(name),
-        manifest.join("../shared/reference").join(name),
-    ];
-    candidates
-        .iter()
-        .find(|p| p.exists())
-        .cloned()
-        .unwrap_or_else(|| {
-            panic!("reference file {name} not found beside the repository (../shared/reference)")
-        })
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("data").join(name)
 }
 
 /// Parsed JSON of a reference file.

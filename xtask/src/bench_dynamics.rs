@@ -191,7 +191,7 @@ pub fn section(reference_dir: &Path) -> anyhow::Result<String> {
         "\nThe Hessian column is one step, its first derivatives and the 8 x 8 Hessian of c^T f (second-order adjoint) for c = [0.3, -0.7, 1, 0.2, -0.1, 0.5].\n",
     );
     out.push_str(&format!(
-        "\nDerivative error against the reference `fx` of the 10 logistic cases (shared/reference/finger_steps.json), relative to the largest entry: exact (implicit function theorem) {exact_err:.1e}; central differences with step 1e-6 {fd_err:.1e} (the README's tolerance is 1e-7).\n"
+        "\nDerivative error against the reference `fx` of the 10 logistic cases (tests/data/finger_steps.json), relative to the largest entry: exact (implicit function theorem) {exact_err:.1e}; central differences with step 1e-6 {fd_err:.1e} (the README's tolerance is 1e-7).\n"
     ));
 
     // Time step against trajectory error. The smoothed models have no common limit as h -> 0: the noise acts

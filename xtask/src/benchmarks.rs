@@ -15,8 +15,8 @@ pub struct Args {
     /// The markdown file whose generated sections are rewritten.
     #[arg(long, default_value = "docs/benchmarks.md")]
     out: PathBuf,
-    /// Folder of the shared reference files.
-    #[arg(long, default_value = "../shared/reference")]
+    /// Folder of the reference files (the repository's copies, tests/data/README.md).
+    #[arg(long, default_value = "tests/data")]
     reference: PathBuf,
     /// Print the tables only; leave the file alone.
     #[arg(long)]
@@ -294,8 +294,8 @@ fn geometry_section(reference_dir: &Path) -> anyhow::Result<String> {
     let mut s = String::new();
     s.push_str(&format!(
         "Scene poses: link 2 against the free ellipse over a {}-point grid of (theta1, theta2, theta3) \
-         ({} apart, {} overlapping). Errors: worst over the {} shared reference cases \
-         (`shared/reference/ellipse_cases.json`), distance relative to the larger semi-axis, normal and \
+         ({} apart, {} overlapping). Errors: worst over the {} reference cases \
+         (`tests/data/ellipse_cases.json`), distance relative to the larger semi-axis, normal and \
          witness point relative to the case's witness condition as its README defines.\n\n",
         scene.len(),
         apart.len(),
