@@ -5,7 +5,9 @@ use std::path::PathBuf;
 
 /// Path of a reference file in `tests/data/`.
 pub fn reference_path(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("data").join(name)
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("data")
+        .join(name)
 }
 
 /// Parsed JSON of a reference file.
@@ -29,30 +31,27 @@ pub fn c_gradient(sim: &mut dynamics::Simulator, c: &[f64], y: &[f64]) -> Vec<f6
     g
 }
 
-/// The default library (`cargo xtask train`'s: 400 trajectories, the cycle first, growth on the policy's
-/// stalls); built once per test run (about 15 s) and shared.
-pub fn finger_library() -> &'static library::Library {
-    static LIB: std::sync::OnceLock<library::Library> = std::sync::OnceLock::new();
-    LIB.get_or_init(|| {
-        library::Library::build(
-            &dynamics::Scene::flicking_finger(),
-            &library::LibrarySettings::default(),
-            |_, _| {},
-        )
-        .unwrap()
+/// A finger library built with `settings` once per test run and shared.
+fn built_once(
+    cell: &'static std::sync::OnceLock<library::Library>,
+    settings: fn() -> library::LibrarySettings,
+) -> &'static library::Library {
+    cell.get_or_init(|| {
+        library::Library::build(&dynamics::Scene::flicking_finger(), &settings(), |_, _| {})
+            .unwrap()
     })
 }
 
+/// The default library (`cargo xtask train`'s: 400 trajectories, the cycle first, growth on the policy's
+/// stalls); about 15 s.
+pub fn finger_library() -> &'static library::Library {
+    static LIB: std::sync::OnceLock<library::Library> = std::sync::OnceLock::new();
+    built_once(&LIB, library::LibrarySettings::default)
+}
+
 /// The paper's recipe (horizon 75, a kicked chain, first controllers, the nearest controller's law),
-/// seed 1; built once per test run (about 7 s) and shared.
+/// seed 1; about 7 s.
 pub fn paper_library() -> &'static library::Library {
     static LIB: std::sync::OnceLock<library::Library> = std::sync::OnceLock::new();
-    LIB.get_or_init(|| {
-        library::Library::build(
-            &dynamics::Scene::flicking_finger(),
-            &library::LibrarySettings::paper(),
-            |_, _| {},
-        )
-        .unwrap()
-    })
+    built_once(&LIB, library::LibrarySettings::paper)
 }

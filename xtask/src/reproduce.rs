@@ -50,10 +50,33 @@ const RECIPES: [&str; 4] = [
     "default (N = 90, cycle first, 4 per trajectory, 8 ranked by value, 2 growth rounds)",
 ];
 
+/// The library's policy on the worlds of `cargo xtask evaluate` (its own model and the hard one, at its
+/// time step and at 0.03), without and with kicks: `(world, h, kicks, evaluation)`.
+fn on_four_worlds(
+    lib: &Library,
+    args: &Args,
+) -> anyhow::Result<Vec<(String, f64, bool, Evaluation)>> {
+    let policy = lib.policy()?;
+    let mut runs = Vec::new();
+    for (world, model, h) in crate::evaluate::worlds(lib) {
+        for kicks in [false, true] {
+            let settings = EvaluationSettings {
+                model,
+                h,
+                seconds: args.seconds,
+                kick_every: if kicks { 10.0 } else { 0.0 },
+                ..EvaluationSettings::default()
+            };
+            runs.push((world.clone(), h, kicks, evaluate(lib, &policy, &settings)?));
+        }
+    }
+    Ok(runs)
+}
+
 /// The seed sweep: for each seed the paper's recipe and the default, and two libraries derived from the
 /// default (its entries before growth; its nearest controller alone), each on the four worlds with and
-/// without kicks. Builds run on two threads.
-fn seed_sweep(args: &Args, bars: &MultiProgress) -> anyhow::Result<Vec<SeedRun>> {
+/// without kicks. Builds run on two threads; `seed1` is the default library of seed 1, built already.
+fn seed_sweep(args: &Args, bars: &MultiProgress, seed1: &Library) -> anyhow::Result<Vec<SeedRun>> {
     let jobs: Vec<(u64, bool)> = (1..=args.seeds)
         .flat_map(|seed| [(seed, false), (seed, true)])
         .collect();
@@ -72,7 +95,11 @@ fn seed_sweep(args: &Args, bars: &MultiProgress) -> anyhow::Result<Vec<SeedRun>>
             LibrarySettings::default()
         };
         let settings = LibrarySettings { seed, ..base };
-        let lib = Library::build(&Scene::flicking_finger(), &settings, |_, _| {})?;
+        let lib = if seed1.settings == settings {
+            seed1.clone()
+        } else {
+            Library::build(&Scene::flicking_finger(), &settings, |_, _| {})?
+        };
         let mut variants = Vec::new();
         if paper {
             variants.push((RECIPES[0], lib));
@@ -89,29 +116,15 @@ fn seed_sweep(args: &Args, bars: &MultiProgress) -> anyhow::Result<Vec<SeedRun>>
         }
         let mut runs = Vec::new();
         for (recipe, lib) in variants {
-            let policy = lib.policy()?;
-            for (world, model, h) in crate::evaluate::worlds(&lib) {
-                for kicks in [false, true] {
-                    let evaluation = evaluate(
-                        &lib,
-                        &policy,
-                        &EvaluationSettings {
-                            model,
-                            h,
-                            seconds: args.seconds,
-                            kick_every: if kicks { 10.0 } else { 0.0 },
-                            ..EvaluationSettings::default()
-                        },
-                    )?;
-                    runs.push(SeedRun {
-                        seed,
-                        recipe: recipe.into(),
-                        world: world.clone(),
-                        h,
-                        kicks,
-                        evaluation,
-                    });
-                }
+            for (world, h, kicks, evaluation) in on_four_worlds(&lib, args)? {
+                runs.push(SeedRun {
+                    seed,
+                    recipe: recipe.into(),
+                    world,
+                    h,
+                    kicks,
+                    evaluation,
+                });
             }
         }
         bar.inc(1);
@@ -326,7 +339,12 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             "seed sweep: {} seeds x (paper recipe, default) ...",
             args.seeds
         ));
-        let seeds = seed_sweep(args, &bars)?;
+        let seed1 = built
+            .iter()
+            .map(|(lib, _)| lib)
+            .find(|lib| lib.settings == LibrarySettings::default())
+            .expect("the default library is among the built ones");
+        let seeds = seed_sweep(args, &bars, seed1)?;
         finish(args, start, rest, built, seeds)
     })
 }
@@ -416,30 +434,14 @@ fn finish(
                 }
             }
         }
-        for (name, l) in [(format!("sigma {sigma}, default recipe"), &lib)] {
-            let policy = l.policy()?;
-            for (world, model, h) in crate::evaluate::worlds(l) {
-                for kicks in [false, true] {
-                    let e = evaluate(
-                        l,
-                        &policy,
-                        &EvaluationSettings {
-                            model,
-                            h,
-                            seconds: args.seconds,
-                            kick_every: if kicks { 10.0 } else { 0.0 },
-                            ..EvaluationSettings::default()
-                        },
-                    )?;
-                    closed_loop.push(ClosedLoop {
-                        library: name.clone(),
-                        world: world.clone(),
-                        h,
-                        kicks,
-                        evaluation: e,
-                    });
-                }
-            }
+        for (world, h, kicks, evaluation) in on_four_worlds(&lib, args)? {
+            closed_loop.push(ClosedLoop {
+                library: format!("sigma {sigma}, default recipe"),
+                world,
+                h,
+                kicks,
+                evaluation,
+            });
         }
     }
     let seconds = start.elapsed().as_secs_f64();

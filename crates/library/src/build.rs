@@ -317,38 +317,43 @@ impl LocalValue {
     }
 }
 
-/// The local value model of knot `t` of `sol` (see [`LocalValue`]), for the free angle at index `free` with
-/// period `period`.
-pub(crate) fn local_value(
+/// The local value models of the first `keep` knots of `sol` (see [`LocalValue`]), for the free angle at
+/// index `free` with period `period`.
+pub(crate) fn local_values(
     sol: &ddp::Solution,
     cost: &impl ddp::Cost,
-    t: usize,
+    keep: usize,
     free: usize,
     period: f64,
-) -> LocalValue {
+) -> Vec<LocalValue> {
     let horizon = sol.controls.len();
     let (n, m) = (sol.states[0].len(), sol.controls[0].len());
     let last = &sol.states[horizon];
     let idle = vec![0.0; m];
     let mut cd = ddp::CostDerivatives::zeros(n, m);
-    // The value's slope along the free angle: every remaining cost term's, plus the idling terms'.
-    let mut slope = 0.0;
-    for i in t..horizon {
-        cost.running_derivatives(i, &sol.states[i], &sol.controls[i], &mut cd);
-        slope += cd.lx[free];
-    }
-    cost.running_derivatives(horizon - 1, last, &idle, &mut cd);
-    slope += t as f64 * cd.lx[free];
+    // The value's slope along the free angle from knot t: every remaining cost term's (summed from the
+    // end), plus t idling terms'.
     let (mut lfx, mut lfxx) = (vec![0.0; n], vec![0.0; n * n]);
     cost.terminal_derivatives(last, &mut lfx, &mut lfxx);
-    slope += lfx[free];
-    let v = &sol.values[t];
-    LocalValue {
-        cost_to_go: v.cost_to_go + t as f64 * cost.running(horizon - 1, last, &idle),
-        gradient: v.gradient.clone(),
-        hessian: v.hessian.clone(),
-        per_period: slope * period,
+    let mut remaining = vec![lfx[free]; horizon + 1];
+    for i in (0..horizon).rev() {
+        cost.running_derivatives(i, &sol.states[i], &sol.controls[i], &mut cd);
+        remaining[i] = remaining[i + 1] + cd.lx[free];
     }
+    cost.running_derivatives(horizon - 1, last, &idle, &mut cd);
+    let idle_slope = cd.lx[free];
+    let idle_cost = cost.running(horizon - 1, last, &idle);
+    (0..keep)
+        .map(|t| {
+            let v = &sol.values[t];
+            LocalValue {
+                cost_to_go: v.cost_to_go + t as f64 * idle_cost,
+                gradient: v.gradient.clone(),
+                hessian: v.hessian.clone(),
+                per_period: (remaining[t] + t as f64 * idle_slope) * period,
+            }
+        })
+        .collect()
 }
 
 /// The free joint whose angle the task spins: the last unactuated one.
@@ -459,7 +464,8 @@ impl<'a> Task<'a> {
                 s.warm_passes
             };
             let sol = self.solve(dynamics, &x1, &controls, passes, k)?;
-            for t in 0..s.keep {
+            let values = local_values(&sol, &self.cost, s.keep, self.free, std::f64::consts::PI);
+            for (t, value) in values.into_iter().enumerate() {
                 let entry = Entry {
                     x: sol.states[t].clone(),
                     u: sol.controls[t].clone(),
@@ -467,7 +473,7 @@ impl<'a> Task<'a> {
                     passes: sol.iterations.len() as u32,
                     converged: sol.status.converged(),
                     cost: sol.cost,
-                    value: local_value(&sol, &self.cost, t, self.free, std::f64::consts::PI),
+                    value,
                 };
                 if t == 0 {
                     report(&entry);
@@ -695,7 +701,7 @@ fn grow(
         if recent.len() > window {
             recent.pop_front();
         }
-        let (i, _) = policy.select(&x)?;
+        let i = policy.control(&x, &mut u)?;
         if recent.len() == window && x[free] - recent[0] < STALL_ADVANCE {
             // Stalled: a branch from here, warm-started from the plan of the controller in use.
             let (trajectory, offset) = (i / s.keep, i % s.keep);
@@ -708,8 +714,8 @@ fn grow(
             if grown == GROWTH_BRANCHES {
                 break;
             }
+            policy.control(&x, &mut u)?;
         }
-        policy.control(&x, &mut u)?;
         let step = world.step(&x, &u)?;
         if !step.x_next.iter().all(|v| v.is_finite()) {
             break;

@@ -293,53 +293,57 @@ impl Policy {
             .collect())
     }
 
-    /// `x - x_i` with the free angle taken `turns` whole periods back.
-    fn offset(&self, x: &[f64], i: usize, turns: f64) -> Vec<f64> {
-        let mut d: Vec<f64> = x.iter().zip(&self.states[i]).map(|(a, b)| a - b).collect();
+    /// `x - x_i` with the free angle taken `turns` whole periods back, into `d`.
+    fn offset(&self, x: &[f64], i: usize, turns: f64, d: &mut [f64]) {
+        for ((d, a), b) in d.iter_mut().zip(x).zip(&self.states[i]) {
+            *d = a - b;
+        }
         d[self.free] -= turns * self.period;
-        d
     }
 
     /// The stored controller the policy uses at `x` and the whole periods between them: the nearest
     /// (eq. 20), or among the [`Policy::neighbours`] nearest the one whose local value model predicts
     /// the lowest cost-to-go at `x` (ties to the nearer).
     pub fn select(&self, x: &[f64]) -> Result<(usize, f64), LibraryError> {
+        Ok(self.choose(x)?.0)
+    }
+
+    /// [`Policy::select`] and the offset of `x` from the chosen state.
+    fn choose(&self, x: &[f64]) -> Result<((usize, f64), Vec<f64>), LibraryError> {
         let candidates = self.nearest_n(x, self.neighbours)?;
-        if candidates.len() == 1 {
-            return Ok(candidates[0]);
-        }
+        let mut d = vec![0.0; self.n];
         let mut best = (f64::INFINITY, candidates[0]);
-        for (i, turns) in candidates {
-            let v = self.values[i].predict(&self.offset(x, i, turns), turns);
-            if v < best.0 {
-                best = (v, (i, turns));
+        if candidates.len() > 1 {
+            for &(i, turns) in &candidates {
+                self.offset(x, i, turns, &mut d);
+                let v = self.values[i].predict(&d, turns);
+                if v < best.0 {
+                    best = (v, (i, turns));
+                }
             }
         }
-        Ok(best.1)
+        let (i, turns) = best.1;
+        self.offset(x, i, turns, &mut d);
+        Ok(((i, turns), d))
     }
 
     /// The policy's control at `x` (eq. 20, or the value-ranked choice of [`Policy::select`]) written
     /// into `u`; returns the controller used.
     pub fn control(&self, x: &[f64], u: &mut [f64]) -> Result<usize, LibraryError> {
-        let (i, turns) = self.select(x)?;
+        let ((i, _), d) = self.choose(x)?;
         if u.len() != self.m {
             return Err(LibraryError::Input {
                 what: "u",
                 problem: format!("has {} entries, expected {}", u.len(), self.m),
             });
         }
-        let xi = &self.states[i];
         let k = &self.gains[i];
-        for a in 0..self.m {
-            let mut s = self.controls[i][a];
-            for b in 0..self.n {
-                let mut d = x[b] - xi[b];
-                if b == self.free {
-                    d -= turns * self.period;
-                }
-                s += k[a * self.n + b] * d;
-            }
-            u[a] = s;
+        for (a, u) in u.iter_mut().enumerate() {
+            let row = &k[a * self.n..(a + 1) * self.n];
+            *u = row
+                .iter()
+                .zip(&d)
+                .fold(self.controls[i][a], |s, (k, d)| s + k * d);
         }
         Ok(i)
     }
