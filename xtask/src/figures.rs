@@ -7,6 +7,7 @@ use anyhow::{Context, anyhow};
 use dynamics::{Constraints, Kinematics, Scene, Simulator, StepSettings};
 use library::{Library, Policy};
 use plotters::coord::Shift;
+use plotters::coord::ranged3d::Cartesian3d;
 use plotters::prelude::*;
 use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
@@ -24,17 +25,17 @@ pub struct Args {
 
 static FONT: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
 
-fn register_font() -> anyhow::Result<()> {
+pub(crate) fn register_font() -> anyhow::Result<()> {
     plotters::style::register_font("sans-serif", FontStyle::Normal, FONT)
         .map_err(|_| anyhow!("the bundled font does not load"))
 }
 
-fn err<E: std::fmt::Debug>(e: E) -> anyhow::Error {
+pub(crate) fn err<E: std::fmt::Debug>(e: E) -> anyhow::Error {
     anyhow!("drawing: {e:?}")
 }
 
 /// Draw with `f` into `name.png` and `name.svg` under `dir`.
-fn both(
+pub(crate) fn both(
     dir: &Path,
     name: &str,
     size: (u32, u32),
@@ -58,10 +59,10 @@ fn both(
     Ok(())
 }
 
-/// Points of the contact surface: for each (theta3, theta1) the smallest theta2 in the joint's range at
-/// which link 2 touches the free ellipse (bisection on the signed distance), in cylindrical coordinates
-/// (angle theta3 doubled, the ellipse's period being pi; radius theta1 + pi + 0.5; height theta2).
-fn contact_surface(scene: &Scene) -> Vec<(f64, f64, f64)> {
+/// Points `(theta1, theta2, theta3)` of the contact surface, `theta3` in `[0, pi)`: for each (theta3,
+/// theta1) the theta2 nearest 0 in the joint's range at which link 2 touches the free ellipse (bisection
+/// on the signed distance).
+fn contact_surface(scene: &Scene) -> Vec<[f64; 3]> {
     let d = |q: [f64; 3]| -> Option<f64> {
         let kin = Kinematics::new(scene, &q);
         Constraints::new(scene, &kin, &q)
@@ -75,8 +76,8 @@ fn contact_surface(scene: &Scene) -> Vec<(f64, f64, f64)> {
     let mut out = Vec::new();
     for i in 0..48 {
         let t3 = PI * i as f64 / 48.0;
-        for j in 0..40 {
-            let t1 = -PI + PI * (j as f64 + 0.5) / 40.0;
+        for j in 0..120 {
+            let t1 = -PI + PI * (j as f64 + 0.5) / 120.0;
             // Scan theta2 for a sign change, then bisect.
             let steps = 60;
             let mut prev: Option<(f64, f64)> = None;
@@ -96,8 +97,7 @@ fn contact_surface(scene: &Scene) -> Vec<(f64, f64, f64)> {
                             b = m;
                         }
                     }
-                    let r = t1 + PI + 0.5;
-                    out.push((r * (2.0 * t3).cos(), 0.5 * (a + b), r * (2.0 * t3).sin()));
+                    out.push([t1, 0.5 * (a + b), t3]);
                     break;
                 }
                 prev = Some((t2, v));
@@ -107,10 +107,39 @@ fn contact_surface(scene: &Scene) -> Vec<(f64, f64, f64)> {
     out
 }
 
+/// Names on a 3D chart's axes (plotters' 3D axes have none): each text at its point.
+fn axis_names<DB: DrawingBackend, X, Y, Z>(
+    chart: &mut ChartContext<'_, DB, Cartesian3d<X, Y, Z>>,
+    names: [(&str, (f64, f64, f64)); 3],
+) -> anyhow::Result<()>
+where
+    X: Ranged<ValueType = f64>,
+    Y: Ranged<ValueType = f64>,
+    Z: Ranged<ValueType = f64>,
+{
+    chart
+        .draw_series(
+            names
+                .into_iter()
+                .map(|(name, at)| Text::new(name.to_string(), at, ("sans-serif", 15).into_font())),
+        )
+        .map_err(err)?;
+    Ok(())
+}
+
 fn draw_surface<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
-    pts: &[(f64, f64, f64)],
+    surface: &[[f64; 3]],
 ) -> anyhow::Result<()> {
+    // Cylindrical coordinates: angle 2 theta3 (the ellipse's period is pi), radius theta1 + pi + 0.5,
+    // height theta2.
+    let pts: Vec<(f64, f64, f64)> = surface
+        .iter()
+        .map(|&[t1, t2, t3]| {
+            let r = t1 + PI + 0.5;
+            (r * (2.0 * t3).cos(), t2, r * (2.0 * t3).sin())
+        })
+        .collect();
     let r = pts
         .iter()
         .fold(1.0f64, |m, p| m.max(p.0.abs()).max(p.2.abs()));
@@ -132,6 +161,20 @@ fn draw_surface<DB: DrawingBackend>(
         p.into_matrix()
     });
     chart.configure_axes().draw().map_err(err)?;
+    axis_names(
+        &mut chart,
+        [
+            (
+                "(theta1 + pi + 0.5) cos 2 theta3",
+                (0.0, zmin.min(-2.2), -r),
+            ),
+            ("theta2 (rad)", (-r, 0.1, -r)),
+            (
+                "(theta1 + pi + 0.5) sin 2 theta3",
+                (-r, zmin.min(-2.2), 0.0),
+            ),
+        ],
+    )?;
     chart
         .draw_series(pts.iter().map(|&(x, y, z)| {
             let c = HSLColor(0.6 - 0.6 * (y - zmin) / (zmax - zmin + 1e-12), 0.8, 0.45);
@@ -163,6 +206,16 @@ fn draw_states<DB: DrawingBackend>(
         p.into_matrix()
     });
     chart.configure_axes().draw().map_err(err)?;
+    axis_names(
+        &mut chart,
+        // Beside the edges plotters puts each axis's ticks on (theta1 at theta3 = pi, theta3 at theta1 = 0,
+        // theta2 at theta1 = theta3 = 0).
+        [
+            ("theta1 (rad)", (-2.2, -2.6, PI)),
+            ("theta2 (rad)", (0.0, 0.35, 0.0)),
+            ("theta3 mod pi (rad)", (0.0, -2.6, 1.2)),
+        ],
+    )?;
     chart
         .draw_series(lib.entries.iter().map(|e| {
             let t3 = e.x[2].rem_euclid(PI);
@@ -172,12 +225,16 @@ fn draw_states<DB: DrawingBackend>(
     Ok(())
 }
 
-/// The closed loop of the library's policy on its own smoothed model: states, controls, contact impulses.
-struct Run {
-    states: Vec<Vec<f64>>,
-    impulses: Vec<f64>,
+/// A closed-loop run: the states and each step's contact impulse (normal, summed over the contact rows;
+/// entry `k` belongs to the step into state `k`).
+pub(crate) struct Run {
+    pub(crate) states: Vec<Vec<f64>>,
+    pub(crate) impulses: Vec<f64>,
+    /// Time step.
+    pub(crate) h: f64,
 }
 
+/// The closed loop of the library's policy on its own smoothed model.
 fn closed_loop(lib: &Library, policy: &Policy, seconds: f64) -> anyhow::Result<Run> {
     let mut sim = Simulator::new(
         lib.scene().clone(),
@@ -205,17 +262,27 @@ fn closed_loop(lib: &Library, policy: &Policy, seconds: f64) -> anyhow::Result<R
         x = s.x_next;
         states.push(x.clone());
     }
-    Ok(Run { states, impulses })
+    Ok(Run {
+        states,
+        impulses,
+        h: lib.settings.h,
+    })
 }
 
-fn draw_cycle<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, run: &Run) -> anyhow::Result<()> {
-    let start = run.states.len().saturating_sub(400);
+/// The run's last 20 s in (theta1, theta2), coloured by contact impulse (blue none, red the run's
+/// largest).
+pub(crate) fn draw_cycle_2d<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    run: &Run,
+    caption: &str,
+) -> anyhow::Result<()> {
+    let start = run
+        .states
+        .len()
+        .saturating_sub((20.0 / run.h).round() as usize);
     let top = run.impulses[start..].iter().fold(1e-9f64, |m, v| m.max(*v));
     let mut chart = ChartBuilder::on(root)
-        .caption(
-            "Fig. 4: the controlled finger's last 20 s in (theta1, theta2), coloured by contact impulse",
-            ("sans-serif", 16),
-        )
+        .caption(caption, ("sans-serif", 14))
         .margin(10)
         .x_label_area_size(35)
         .y_label_area_size(45)
@@ -229,16 +296,111 @@ fn draw_cycle<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, run: &Run) -> a
         .map_err(err)?;
     for k in start + 1..run.states.len() {
         let (a, b) = (&run.states[k - 1], &run.states[k]);
-        let w = (run.impulses[k] / top).clamp(0.0, 1.0);
-        let colour = RGBColor((40.0 + 215.0 * w) as u8, 60, (200.0 * (1.0 - w)) as u8);
         chart
             .draw_series(LineSeries::new(
                 [(a[0], a[1]), (b[0], b[1])],
-                colour.stroke_width(2),
+                impulse_colour(run.impulses[k], top).stroke_width(2),
             ))
             .map_err(err)?;
     }
     Ok(())
+}
+
+/// The impulse colour scale: blue (none) to red (`top`).
+fn impulse_colour(impulse: f64, top: f64) -> RGBColor {
+    let w = (impulse / top).clamp(0.0, 1.0);
+    RGBColor((40.0 + 215.0 * w) as u8, 60, (200.0 * (1.0 - w)) as u8)
+}
+
+/// A vertical colour bar of [`impulse_colour`] from 0 to `top`, labelled.
+fn colour_bar<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, top: f64) -> anyhow::Result<()> {
+    let mut bar = ChartBuilder::on(root)
+        .margin_top(60)
+        .margin_bottom(60)
+        .y_label_area_size(70)
+        .build_cartesian_2d(0.0..1.0, 0.0..top)
+        .map_err(err)?;
+    bar.configure_mesh()
+        .disable_x_mesh()
+        .disable_x_axis()
+        .y_desc("contact impulse per step")
+        .y_labels(6)
+        .label_style(("sans-serif", 13))
+        .axis_desc_style(("sans-serif", 14))
+        .draw()
+        .map_err(err)?;
+    let steps = 64;
+    bar.draw_series((0..steps).map(|k| {
+        let (a, b) = (
+            top * k as f64 / steps as f64,
+            top * (k + 1) as f64 / steps as f64,
+        );
+        Rectangle::new([(0.0, a), (1.0, b)], impulse_colour(a, top).filled())
+    }))
+    .map_err(err)?;
+    Ok(())
+}
+
+/// Fig. 4 in the paper's configuration space: the run's last 20 s in (theta1, theta2, theta3 mod pi)
+/// over the contact surface (grey), coloured by contact impulse, with the colour scale.
+fn draw_cycle_3d<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    run: &Run,
+    surface: &[[f64; 3]],
+) -> anyhow::Result<()> {
+    let start = run
+        .states
+        .len()
+        .saturating_sub((20.0 / run.h).round() as usize);
+    let top = run.impulses[start..].iter().fold(1e-9f64, |m, v| m.max(*v));
+    let (left, right) = root.split_horizontally(root.dim_in_pixel().0 as i32 - 130);
+    let mut chart = ChartBuilder::on(&left)
+        .caption(
+            "Fig. 4: the limit cycle's last 20 s in (theta1, theta2, theta3 mod pi) over the contact surface",
+            ("sans-serif", 16),
+        )
+        .margin(10)
+        .build_cartesian_3d(-PI..0.0, -2.2..0.2, 0.0..PI)
+        .map_err(err)?;
+    chart.with_projection(|mut p| {
+        p.pitch = 0.35;
+        p.yaw = 0.8;
+        p.scale = 0.85;
+        p.into_matrix()
+    });
+    chart.configure_axes().draw().map_err(err)?;
+    axis_names(
+        &mut chart,
+        // Beside the edges plotters puts each axis's ticks on (theta1 at theta3 = pi, theta3 at theta1 = 0,
+        // theta2 at theta1 = theta3 = 0).
+        [
+            ("theta1 (rad)", (-2.2, -2.6, PI)),
+            ("theta2 (rad)", (0.0, 0.35, 0.0)),
+            ("theta3 mod pi (rad)", (0.0, -2.6, 1.2)),
+        ],
+    )?;
+    chart
+        .draw_series(
+            surface
+                .iter()
+                .map(|&[a, b, c]| Circle::new((a, b, c), 1, RGBColor(170, 170, 170).filled())),
+        )
+        .map_err(err)?;
+    for k in start + 1..run.states.len() {
+        let (a, b) = (&run.states[k - 1], &run.states[k]);
+        let (ta, tb) = (a[2].rem_euclid(PI), b[2].rem_euclid(PI));
+        // theta3 wraps at pi: no segment across the cut.
+        if (ta - tb).abs() > PI / 2.0 {
+            continue;
+        }
+        chart
+            .draw_series(LineSeries::new(
+                [(a[0], a[1], ta), (b[0], b[1], tb)],
+                impulse_colour(run.impulses[k], top).stroke_width(3),
+            ))
+            .map_err(err)?;
+    }
+    colour_bar(&right, top)
 }
 
 fn ellipse_outline(c: [f64; 2], phi: f64, a: f64, b: f64) -> Vec<(f64, f64)> {
@@ -259,25 +421,41 @@ fn draw_frames<DB: DrawingBackend>(
     scene: &Scene,
     run: &Run,
 ) -> anyhow::Result<()> {
+    // The run's last half turn of the free angle (one cycle: the ellipse's period is pi), in 12 frames.
+    let n = scene.n_dof();
+    let last = run.states.len() - 1;
+    let end_angle = run.states[last][n - 1];
+    let first = (0..last)
+        .rev()
+        .find(|&k| run.states[k][n - 1] <= end_angle - PI)
+        .unwrap_or(0);
+    let frames = 12;
+    let stride = ((last - first) as f64 / (frames - 1) as f64).max(1.0);
     root.titled(
-        "Fig. 5: frames of the controlled finger, 0.5 s apart (red: contact impulse)",
+        &format!(
+            "Fig. 5: one cycle (the last half turn, {:.2} s) in {frames} frames {:.2} s apart; red arrow: contact impulse on the ellipse",
+            (last - first) as f64 * run.h,
+            stride * run.h
+        ),
         ("sans-serif", 16),
     )
     .map_err(err)?;
-    let panels = root.margin(30, 5, 5, 5).split_evenly((2, 4));
-    let start = run.states.len().saturating_sub(80);
+    let panels = root.margin(30, 5, 5, 5).split_evenly((3, frames / 3));
+    let top = run.impulses[first..].iter().fold(1e-9f64, |m, v| m.max(*v));
     for (p, panel) in panels.iter().enumerate() {
-        let k = start + 10 * p;
+        let k = first + (p as f64 * stride).round() as usize;
         let Some(x) = run.states.get(k) else { break };
-        let n = scene.n_dof();
         let kin = Kinematics::new(scene, &x[..n]);
         let mut chart = ChartBuilder::on(panel)
-            .caption(format!("t = {:.2} s", k as f64 * 0.05), ("sans-serif", 12))
-            .build_cartesian_2d(-2.2..2.2, -3.8..0.6)
+            .caption(
+                format!("t = {:.2} s", (k - first) as f64 * run.h),
+                ("sans-serif", 12),
+            )
+            .build_cartesian_2d(-2.9..1.3, -3.8..0.8)
             .map_err(err)?;
         for (i, body) in scene.bodies.iter().enumerate() {
-            let outline =
-                ellipse_outline(kin.centre[i], kin.phi[i], body.shape.a(), body.shape.b());
+            let (a, b) = (body.shape.a(), body.shape.b());
+            let outline = ellipse_outline(kin.centre[i], kin.phi[i], a, b);
             chart
                 .draw_series(std::iter::once(Polygon::new(
                     outline.clone(),
@@ -287,17 +465,39 @@ fn draw_frames<DB: DrawingBackend>(
             chart
                 .draw_series(LineSeries::new(outline, BLACK.stroke_width(1)))
                 .map_err(err)?;
+            if body.actuator.is_none() {
+                // The free body's orientation: its major axis, one end marked.
+                let (c, phi) = (kin.centre[i], kin.phi[i]);
+                let tip = (c[0] + a * phi.cos(), c[1] + a * phi.sin());
+                chart
+                    .draw_series(LineSeries::new(
+                        [(c[0] - a * phi.cos(), c[1] - a * phi.sin()), tip],
+                        BLACK.stroke_width(1),
+                    ))
+                    .map_err(err)?;
+                chart
+                    .draw_series(std::iter::once(Circle::new(tip, 3, BLACK.filled())))
+                    .map_err(err)?;
+            }
         }
         let q = &x[..n];
         if let Ok(c) = Constraints::new(scene, &kin, q)
             && run.impulses[k] > library::CONTACT_IMPULSE
             && let Some(f) = c.contacts.first()
         {
+            // An arrow from the contact point along the normal into the ellipse, its length the
+            // impulse (relative to the cycle's largest): the contact itself stays visible.
+            let length = 0.3 + 0.9 * run.impulses[k] / top;
+            let (p0, nrm) = (f.point_b, f.normal);
+            let p1 = (p0[0] + length * nrm[0], p0[1] + length * nrm[1]);
+            chart
+                .draw_series(LineSeries::new([(p0[0], p0[1]), p1], RED.stroke_width(3)))
+                .map_err(err)?;
             chart
                 .draw_series(std::iter::once(Circle::new(
-                    (f.point_a[0], f.point_a[1]),
-                    (3.0 + 20.0 * run.impulses[k].min(1.0)) as i32,
-                    RED.filled(),
+                    (p0[0], p0[1]),
+                    4,
+                    RED.stroke_width(2),
                 )))
                 .map_err(err)?;
         }
@@ -331,13 +531,13 @@ pub fn write_all(lib: &Library, dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
         dir,
         "fig4_limit_cycle",
         (900, 700),
-        |r| draw_cycle(r, &run),
-        |r| draw_cycle(r, &run),
+        |r| draw_cycle_3d(r, &run, &surface),
+        |r| draw_cycle_3d(r, &run, &surface),
     )?;
     both(
         dir,
         "fig5_frames",
-        (1200, 700),
+        (1200, 1000),
         |r| draw_frames(r, scene, &run),
         |r| draw_frames(r, scene, &run),
     )?;

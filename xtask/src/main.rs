@@ -6,6 +6,7 @@ mod bench_library;
 mod bench_ncp;
 mod bench_viewer;
 mod benchmarks;
+mod diagnose;
 mod distance;
 mod evaluate;
 mod figures;
@@ -59,6 +60,9 @@ enum Command {
     /// The paper's experiments end to end with default settings: summary, libraries and JSON under one
     /// folder (default results/).
     Reproduce(reproduce::Args),
+    /// Where the paper's limit cycle is won or lost: the optimiser as MPC (N = 75 and 90), online MPC
+    /// and the libraries' policies from rest without kicks; a table and a picture per run.
+    Diagnose(diagnose::Args),
     /// The paper's figures (contact surface, library states, limit cycle, frames) as PNG and SVG.
     Figures(figures::Args),
     /// Measure speed against error and rewrite the generated tables of docs/benchmarks.md.
@@ -79,6 +83,7 @@ fn main() -> anyhow::Result<()> {
         Command::Evaluate(args) => evaluate::run(&args),
         Command::Reproduce(args) => reproduce::run(&args),
         Command::Figures(args) => figures::run(&args),
+        Command::Diagnose(args) => diagnose::run(&args),
         Command::Benchmarks(args) => benchmarks::run(&args),
         Command::View(args) => view::run(&args),
     }

@@ -78,6 +78,32 @@ pub struct Evaluation {
 /// A contact impulse this large (in the normal direction, per step) counts as touching.
 pub const CONTACT_IMPULSE: f64 = 1e-3;
 
+/// Counts contact events along a run: the impulse rising above [`CONTACT_IMPULSE`] after having fallen
+/// below a tenth of it, so that a smoothed impulse flickering around the threshold counts once.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ContactEvents {
+    touching: bool,
+    /// Events so far.
+    pub events: usize,
+    /// Steps with an impulse above the threshold so far.
+    pub touching_steps: usize,
+}
+
+impl ContactEvents {
+    /// Count one step's contact impulse.
+    pub fn observe(&mut self, impulse: f64) {
+        if impulse > CONTACT_IMPULSE {
+            self.touching_steps += 1;
+            if !self.touching {
+                self.events += 1;
+            }
+            self.touching = true;
+        } else if impulse < 0.1 * CONTACT_IMPULSE {
+            self.touching = false;
+        }
+    }
+}
+
 /// Run the library's policy on a world described by `settings`.
 pub fn evaluate(
     library: &Library,
@@ -154,8 +180,8 @@ pub fn evaluate_in(
     let limit_rows: usize = scene.bodies.iter().filter(|b| b.limits.is_some()).count() * 2;
     let mut x = settings.x0.clone();
     let mut u = vec![0.0; scene.n_controls];
-    let (mut events, mut touching_steps, mut unconverged) = (0usize, 0usize, 0usize);
-    let mut was_touching = false;
+    let mut contacts = ContactEvents::default();
+    let mut unconverged = 0usize;
     let (mut kicks, mut recovered) = (0usize, 0usize);
     // The free angle at the last kick, until the ellipse has turned a quarter turn past it.
     let mut since_kick: Option<(usize, f64)> = None;
@@ -192,16 +218,7 @@ pub fn evaluate_in(
         if s.info.status != ncp::Status::Converged {
             unconverged += 1;
         }
-        let impulse = s.lambda[limit_rows..].iter().sum::<f64>();
-        if impulse > CONTACT_IMPULSE {
-            touching_steps += 1;
-            if !was_touching {
-                events += 1;
-            }
-            was_touching = true;
-        } else if impulse < 0.1 * CONTACT_IMPULSE {
-            was_touching = false;
-        }
+        contacts.observe(s.lambda[limit_rows..].iter().sum::<f64>());
         x = s.x_next;
         if let Some((at, angle)) = since_kick
             && x[free] - angle >= std::f64::consts::FRAC_PI_2
@@ -216,6 +233,7 @@ pub fn evaluate_in(
             )));
         }
     }
+    let (events, touching_steps) = (contacts.events, contacts.touching_steps);
     let turned = x[free] - settings.x0[free];
     let time = steps as f64 * settings.h;
     Ok(Evaluation {

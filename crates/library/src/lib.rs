@@ -18,7 +18,9 @@ pub use build::{
     MAX_NEIGHBOURS, Model, STALL_ADVANCE, STALL_WINDOW, build_entries, free_joint,
 };
 pub use error::LibraryError;
-pub use evaluate::{CONTACT_IMPULSE, Evaluation, EvaluationSettings, evaluate, evaluate_in};
+pub use evaluate::{
+    CONTACT_IMPULSE, ContactEvents, Evaluation, EvaluationSettings, evaluate, evaluate_in,
+};
 pub use file::{Library, MAGIC, VERSION};
 pub use policy::Policy;
 pub use task::{CONTROL_WEIGHT, FingerDynamics, TaskError, finger_cost};
