@@ -253,8 +253,6 @@ pub struct ValueModel {
 struct Backward {
     k: Vec<Vec<f64>>,
     gains: Vec<Vec<f64>>,
-    /// `(V_x, V_xx)` at knots `0 .. N`.
-    values: Vec<(Vec<f64>, Vec<f64>)>,
     /// `[sum k^T Q_u, sum 1/2 k^T Q_uu k]`.
     dv: [f64; 2],
 }
@@ -357,7 +355,10 @@ impl Ddp {
             iterations.push(it);
         };
         let mut gains = vec![vec![0.0; m * n]; horizon];
+        // The value model of the last successful backward pass, and the one being computed (swapped on
+        // success, so that a pass that fails half way leaves the last one intact; no allocation per pass).
         let mut values = vec![(vec![0.0; n], vec![0.0; n * n]); horizon + 1];
+        let mut trial_values = values.clone();
         let mut k_prev = vec![vec![0.0; m]; horizon];
         let mut lin: Option<Linearisation> = None;
         let mut status = Status::MaxIterations;
@@ -372,8 +373,19 @@ impl Ddp {
             let _guard = span.enter();
             // Backward pass, raising mu until Q_uu is positive definite everywhere.
             let bp = loop {
-                match self.backward(dynamics, cost, &x, &u, &k_prev, mu, &mut lin) {
-                    Ok(Some(bp)) => break bp,
+                match self.backward(
+                    dynamics,
+                    cost,
+                    (&x, &u),
+                    &k_prev,
+                    mu,
+                    &mut lin,
+                    &mut trial_values,
+                ) {
+                    Ok(Some(bp)) => {
+                        std::mem::swap(&mut values, &mut trial_values);
+                        break bp;
+                    }
                     Ok(None) => {
                         increase(&mut mu, &mut dmu);
                         if mu > s.mu_max {
@@ -381,7 +393,6 @@ impl Ddp {
                             break Backward {
                                 k: Vec::new(),
                                 gains: Vec::new(),
-                                values: Vec::new(),
                                 dv: [0.0; 2],
                             };
                         }
@@ -393,7 +404,6 @@ impl Ddp {
                 break;
             }
             gains = bp.gains;
-            values = bp.values;
             k_prev = bp.k.clone();
             let step =
                 bp.k.iter()
@@ -461,11 +471,17 @@ impl Ddp {
                     if reduction < s.tol_cost * (1.0 + total.abs()) {
                         status = Status::CostConverged;
                         // The gains of the final trajectory.
-                        if let Ok(Some(bp)) =
-                            self.backward(dynamics, cost, &x, &u, &k_prev, mu, &mut lin)
-                        {
+                        if let Ok(Some(bp)) = self.backward(
+                            dynamics,
+                            cost,
+                            (&x, &u),
+                            &k_prev,
+                            mu,
+                            &mut lin,
+                            &mut trial_values,
+                        ) {
                             gains = bp.gains;
-                            values = bp.values;
+                            std::mem::swap(&mut values, &mut trial_values);
                         }
                         break;
                     }
@@ -515,17 +531,18 @@ impl Ddp {
         })
     }
 
-    /// The backward pass at regularisation `mu`; `Ok(None)` when `Q_uu` is not positive definite.
+    /// The backward pass at regularisation `mu` along the trajectory `(x, u)`, writing `(V_x, V_xx)` at
+    /// every knot into `values`; `Ok(None)` when `Q_uu` is not positive definite.
     #[allow(clippy::too_many_arguments)]
     fn backward<D: Dynamics, C: Cost>(
         &self,
         dynamics: &mut D,
         cost: &C,
-        x: &[Vec<f64>],
-        u: &[Vec<f64>],
+        (x, u): (&[Vec<f64>], &[Vec<f64>]),
         k_prev: &[Vec<f64>],
         mu: f64,
         lin: &mut Option<Linearisation>,
+        values: &mut [(Vec<f64>, Vec<f64>)],
     ) -> Result<Option<Backward>, DdpError> {
         let (n, m) = (dynamics.state_dim(), dynamics.control_dim());
         let horizon = u.len();
@@ -549,8 +566,8 @@ impl Ddp {
         let mut vx = vec![0.0; n];
         let mut vxx = vec![0.0; n * n];
         cost.terminal_derivatives(&x[horizon], &mut vx, &mut vxx);
-        let mut values = vec![(Vec::new(), Vec::new()); horizon + 1];
-        values[horizon] = (vx.clone(), vxx.clone());
+        values[horizon].0.copy_from_slice(&vx);
+        values[horizon].1.copy_from_slice(&vxx);
         let mut k_all = vec![Vec::new(); horizon];
         let mut gains = vec![Vec::new(); horizon];
         let mut dv = [0.0; 2];
@@ -719,12 +736,12 @@ impl Ddp {
             }
             k_all[i] = k;
             gains[i] = big_k;
-            values[i] = (vx.clone(), vxx.clone());
+            values[i].0.copy_from_slice(&vx);
+            values[i].1.copy_from_slice(&vxx);
         }
         Ok(Some(Backward {
             k: k_all,
             gains,
-            values,
             dv,
         }))
     }
