@@ -10,12 +10,19 @@ use viewer::{World, WorldSettings};
 const SECONDS: f64 = 120.0;
 
 pub fn section() -> anyhow::Result<String> {
-    let lib = Library::build(&Scene::flicking_finger(), &LibrarySettings::default(), |_, _| {})?;
+    let lib = Library::build(
+        &Scene::flicking_finger(),
+        &LibrarySettings::default(),
+        |_, _| {},
+    )?;
     let mut out = format!(
         "Online MPC in the viewer's world (`viewer::World`, `cargo xtask view`): each control step re-solves iLQG from the current state with the given passes, warm-started from the previous plan shifted by one step (regularisation carried over), and re-seeds the plan from the library's policy after 20 steps of plans that expect less than 0.1 rad of turn. {SECONDS:.0} s from SCENE.md's x0 with velocity kicks of std 2 every 10 s, h = 0.05 (real time: 50 ms per step); control-step times over all steps, single thread. Target: one control step at most 2.5 ms.\n\n| controller | world | control step median / 95% / 99% / max (ms) | spin (rad/s) | re-seeds |\n|---|---|---:|---:|---:|\n"
     );
     let mut configs: Vec<(String, PolicyKind, usize, usize)> = vec![(
-        format!("library policy (default, {} controllers)", lib.entries.len()),
+        format!(
+            "library policy (default, {} controllers)",
+            lib.entries.len()
+        ),
         PolicyKind::Library,
         60,
         1,
