@@ -282,8 +282,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         jobs.len(),
         args.seconds
     );
-    let next = std::sync::atomic::AtomicUsize::new(0);
-    let work = |(c, hard): (Controller, bool)| -> anyhow::Result<(Run, f64)> {
+    let work = |&(c, hard): &(Controller, bool)| -> anyhow::Result<(Run, f64)> {
         let t = Instant::now();
         let run = match c {
             Controller::Receding { horizon, shift } => {
@@ -296,29 +295,10 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         let ms = t.elapsed().as_secs_f64() * 1e3 / (run.states.len() - 1) as f64;
         Ok((run, ms))
     };
-    let mut done: Vec<(usize, anyhow::Result<(Run, f64)>)> = std::thread::scope(|scope| {
-        let workers: Vec<_> = (0..2)
-            .map(|_| {
-                scope.spawn(|| {
-                    let mut out = Vec::new();
-                    loop {
-                        let j = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                        let Some(&job) = jobs.get(j) else { break };
-                        out.push((j, work(job)));
-                    }
-                    out
-                })
-            })
-            .collect();
-        workers
-            .into_iter()
-            .flat_map(|w| w.join().expect("a diagnosis worker does not panic"))
-            .collect()
-    });
-    done.sort_by_key(|(j, _)| *j);
+    let done = crate::on_two_threads(&jobs, work);
     let mut rows = Vec::new();
     let mut runs = Vec::new();
-    for ((c, hard), (_, result)) in jobs.iter().zip(done) {
+    for ((c, hard), result) in jobs.iter().zip(done) {
         let (run, ms) = result?;
         let (last_quarter, contacts_per_half_turn) = measure(&run);
         let world = if *hard { "hard" } else { "logistic 0.1" };

@@ -157,8 +157,7 @@ fn seed_sweep(args: &Args, bars: &MultiProgress, seed1: &Library) -> anyhow::Res
         )
         .expect("a valid template"),
     );
-    let next = std::sync::atomic::AtomicUsize::new(0);
-    let run_job = |(seed, paper): (u64, bool)| -> anyhow::Result<Vec<SeedRun>> {
+    let run_job = |&(seed, paper): &(u64, bool)| -> anyhow::Result<Vec<SeedRun>> {
         let base = if paper {
             LibrarySettings::paper()
         } else {
@@ -200,27 +199,7 @@ fn seed_sweep(args: &Args, bars: &MultiProgress, seed1: &Library) -> anyhow::Res
         bar.inc(1);
         Ok(runs)
     };
-    let results: Vec<anyhow::Result<Vec<SeedRun>>> = std::thread::scope(|scope| {
-        let workers: Vec<_> = (0..2)
-            .map(|_| {
-                scope.spawn(|| {
-                    let mut done = Vec::new();
-                    loop {
-                        let j = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                        let Some(&job) = jobs.get(j) else { break };
-                        done.push((j, run_job(job)));
-                    }
-                    done
-                })
-            })
-            .collect();
-        let mut all: Vec<_> = workers
-            .into_iter()
-            .flat_map(|w| w.join().expect("a sweep worker does not panic"))
-            .collect();
-        all.sort_by_key(|(j, _)| *j);
-        all.into_iter().map(|(_, r)| r).collect()
-    });
+    let results = crate::on_two_threads(&jobs, run_job);
     bar.finish_and_clear();
     let mut runs = Vec::new();
     for r in results {
