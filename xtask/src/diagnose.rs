@@ -51,8 +51,8 @@ struct Measured {
     world: String,
     /// Mean spin over the last quarter, rad/s.
     last_quarter: f64,
-    /// Contact events per half turn of the ellipse over the last quarter.
-    contacts_per_half_turn: f64,
+    /// Contact events per half turn of the ellipse over the last quarter (null when it did not turn).
+    contacts_per_half_turn: Option<f64>,
     /// Wall time per control step, ms.
     ms_per_step: f64,
 }
@@ -306,7 +306,9 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             controller: c.name(),
             world: world.into(),
             last_quarter,
-            contacts_per_half_turn,
+            contacts_per_half_turn: contacts_per_half_turn
+                .is_finite()
+                .then_some(contacts_per_half_turn),
             ms_per_step: ms,
         });
         runs.push((format!("{}, {world}", c.name()), run));
@@ -316,10 +318,13 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         args.seconds
     );
     for r in &rows {
+        let per_half_turn = r
+            .contacts_per_half_turn
+            .map_or("- (no turn)".into(), |c| format!("{c:.2}"));
         let _ = writeln!(
             md,
-            "| {} | {} | {:.3} | {:.2} | {:.2} |",
-            r.controller, r.world, r.last_quarter, r.contacts_per_half_turn, r.ms_per_step
+            "| {} | {} | {:.3} | {per_half_turn} | {:.2} |",
+            r.controller, r.world, r.last_quarter, r.ms_per_step
         );
     }
     let _ = writeln!(
