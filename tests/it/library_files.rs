@@ -386,7 +386,8 @@ proptest::proptest! {
                 let mut e = entry(x.clone());
                 e.value.cost_to_go = level;
                 e.value.gradient[0] = slope;
-                e.value.hessian[7] = slope.abs();
+                // Curvature of either sign: the policy ranks the convexified models.
+                e.value.hessian[7] = slope;
                 e
             })
             .collect();
@@ -400,7 +401,7 @@ proptest::proptest! {
             let predict = |(i, turns): (usize, f64)| {
                 let mut d: Vec<f64> = x.iter().zip(&entries[i].x).map(|(a, b)| a - b).collect();
                 d[2] -= turns * std::f64::consts::PI;
-                entries[i].value.predict(&d, turns)
+                entries[i].value.convexified().predict(&d, turns)
             };
             let chosen = policy.select(&x).unwrap();
             proptest::prop_assert!(candidates.contains(&chosen));
@@ -412,4 +413,57 @@ proptest::proptest! {
             }
         }
     }
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(128))]
+    #[test]
+    fn a_convexified_value_model_is_convex_never_predicts_less_and_keeps_a_convex_model(
+        factors in proptest::collection::vec(-3.0f64..3.0, 36),
+        signs in proptest::collection::vec(proptest::bool::ANY, 6),
+        d in proptest::collection::vec(-2.0f64..2.0, 6),
+    ) {
+        // H = A diag(+-1) A^T: indefinite when the signs differ, convex when they are all positive.
+        let mut e = entry(vec![0.0; 6]);
+        e.value.gradient = vec![0.0; 6];
+        let h = &mut e.value.hessian;
+        for i in 0..6 {
+            for j in 0..6 {
+                h[i * 6 + j] = (0..6)
+                    .map(|k| factors[i * 6 + k] * factors[j * 6 + k] * if signs[k] { 1.0 } else { -1.0 })
+                    .sum();
+            }
+        }
+        let raw = e.value.clone();
+        let convex = raw.convexified();
+        let scale = 200.0 * raw.hessian.iter().fold(1.0f64, |m, v| m.max(v.abs()));
+        // Convex along every direction tried, and never below the raw model.
+        proptest::prop_assert!(convex.predict(&d, 0.0) - convex.cost_to_go >= -1e-9 * scale);
+        proptest::prop_assert!(convex.predict(&d, 0.0) >= raw.predict(&d, 0.0) - 1e-9 * scale);
+        if signs.iter().all(|s| *s) {
+            for (a, b) in convex.hessian.iter().zip(&raw.hessian) {
+                proptest::prop_assert!((a - b).abs() <= 1e-9 * scale);
+            }
+        }
+    }
+}
+
+#[test]
+fn a_concave_value_model_does_not_win_the_ranking_by_extrapolating() {
+    // Two controllers a unit apart, the query a unit beyond the second: the far one's model is concave
+    // (raw prediction 1 - 500 there), the near one's flat at 0. Ranked raw, the far one would win.
+    let mut near = entry(vec![1.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
+    near.value.cost_to_go = 0.0;
+    let mut far = entry(vec![0.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
+    far.value.cost_to_go = 1.0;
+    far.value.hessian[0] = -250.0;
+    let x = [2.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+    assert!(far.value.predict(&[2.0, 0.0, 0.0, 0.0, 0.0, 0.0], 0.0) < -400.0);
+    let entries = vec![far, near];
+    let policy = library::Policy::new(&entries, 6, 2, 2)
+        .unwrap()
+        .with_neighbours(2)
+        .unwrap();
+    assert_eq!(policy.nearest_n(&x, 2).unwrap().len(), 2);
+    assert_eq!(policy.select(&x).unwrap().0, 1);
 }

@@ -315,6 +315,41 @@ impl LocalValue {
         }
         v
     }
+
+    /// The same model with the Hessian's negative curvature removed (its eigenvalues below zero set to
+    /// zero): what [`crate::Policy`] ranks controllers by. A concave model predicts ever lower costs the
+    /// farther it extrapolates, so among nearby controllers the one with the most negative curvature would
+    /// win wherever it is wrong; the convex part only penalises distance. (Measured on the finger: the
+    /// raw models chose controllers with gains in the thousands far from their states, and closed loops
+    /// stalled.)
+    pub fn convexified(&self) -> LocalValue {
+        LocalValue {
+            hessian: positive_part(&self.hessian, self.gradient.len()),
+            ..self.clone()
+        }
+    }
+}
+
+/// The positive semi-definite part of the symmetrised `n x n` matrix `a` (row-major): its eigenvalues below
+/// zero set to zero (zero if the eigendecomposition fails, which it does only for non-finite entries).
+fn positive_part(a: &[f64], n: usize) -> Vec<f64> {
+    let sym = faer::Mat::<f64>::from_fn(n, n, |i, j| 0.5 * (a[i * n + j] + a[j * n + i]));
+    let mut out = vec![0.0; n * n];
+    let Ok(evd) = sym.self_adjoint_eigen(faer::Side::Lower) else {
+        return out;
+    };
+    let (u, s) = (evd.U(), evd.S());
+    for k in 0..n {
+        let l = s[k];
+        if l > 0.0 {
+            for i in 0..n {
+                for j in 0..n {
+                    out[i * n + j] += l * u[(i, k)] * u[(j, k)];
+                }
+            }
+        }
+    }
+    out
 }
 
 /// The local value models of the first `keep` knots of `sol` (see [`LocalValue`]), for the free angle at

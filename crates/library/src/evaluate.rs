@@ -194,7 +194,8 @@ pub fn evaluate_in(
         if k == quarter {
             angle_at_quarter = x[free];
         }
-        if k > 0 && k % kick_steps == 0 {
+        // A kick with less than a whole interval left could not be judged: none is given.
+        if k > 0 && k % kick_steps == 0 && k + kick_steps <= steps {
             // The interval that ends here: did it spin forward over its second half?
             kicks += 1;
             since_kick = Some((k, x[free]));

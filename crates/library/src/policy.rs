@@ -213,7 +213,7 @@ impl Policy {
             states,
             controls: entries.iter().map(|e| e.u.clone()).collect(),
             gains: entries.iter().map(|e| e.gain.clone()).collect(),
-            values: entries.iter().map(|e| e.value.clone()).collect(),
+            values: entries.iter().map(|e| e.value.convexified()).collect(),
             neighbours: 1,
         })
     }
@@ -303,7 +303,8 @@ impl Policy {
 
     /// The stored controller the policy uses at `x` and the whole periods between them: the nearest
     /// (eq. 20), or among the [`Policy::neighbours`] nearest the one whose local value model predicts
-    /// the lowest cost-to-go at `x` (ties to the nearer).
+    /// the lowest cost-to-go at `x` (ties to the nearer). The models are ranked convexified
+    /// ([`LocalValue::convexified`]), so that none wins by extrapolating negative curvature.
     pub fn select(&self, x: &[f64]) -> Result<(usize, f64), LibraryError> {
         Ok(self.choose(x)?.0)
     }
