@@ -117,7 +117,7 @@ const RECIPES: [&str; 4] = [
     "paper (N = 75, kicked chain, first controllers, nearest)",
     "default without growth",
     "default, nearest controller only",
-    "default (N = 90, cycle first, 4 per trajectory, 8 ranked by value, 2 growth rounds)",
+    "default (N = 90, cycle first, 4 per trajectory, 8 ranked by value, 4 growth rounds)",
 ];
 
 /// The library's policy on the worlds of `cargo xtask evaluate` (its own model and the hard one, at its

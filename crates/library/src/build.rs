@@ -95,8 +95,8 @@ pub enum Exploration {
     /// the trajectory budget is spent: each starts from a trunk state drawn past its first `settle`
     /// trajectories, its velocities perturbed (variance [`LibrarySettings::kick_variance`]), and runs a
     /// chain of `length` trajectories warm-started from the trunk's plan there. Then
-    /// [`LibrarySettings::growth`] rounds: the policy runs in closed loop on the library's own model from
-    /// `x0` with a velocity kick every 10 s; wherever the free angle advances less than
+    /// [`LibrarySettings::growth`] rounds: the policy runs in closed loop from `x0` with a velocity kick
+    /// every 10 s, on the library's own model in even rounds and on hard contact in odd ones; wherever the free angle advances less than
     /// [`STALL_ADVANCE`] in [`STALL_WINDOW`] seconds, a branch of `length` trajectories starts from that
     /// state, warm-started from the plan of the controller the policy used there.
     Branches {
@@ -141,7 +141,7 @@ impl Default for LibrarySettings {
             tolerance: 1e-5,
             keep: 4,
             neighbours: 8,
-            growth: 2,
+            growth: 4,
         }
     }
 }
