@@ -49,7 +49,7 @@ pub fn answer_line(line: &str, derivatives: bool) -> Result<String, String> {
         gradient: d.map(|d| d.gradient),
         hessian: d.map(|d| d.hessian),
     };
-    serde_json::to_string(&answer).map_err(|e| e.to_string())
+    crate::jsonl::finite_line(&answer)
 }
 
 pub fn run(args: &Args) -> anyhow::Result<()> {

@@ -114,7 +114,7 @@ pub fn answer_line(line: &str, args: &Args) -> Result<String, String> {
         status: s.info.status,
         residual: s.info.residual,
     };
-    serde_json::to_string(&answer).map_err(|e| e.to_string())
+    crate::jsonl::finite_line(&answer)
 }
 
 pub fn run(args: &Args) -> anyhow::Result<()> {

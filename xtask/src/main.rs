@@ -36,17 +36,20 @@ enum Command {
     ///
     /// Each input line is {"a":[a1,b1],"pose_a":[x,y,theta],"b":[a2,b2],"pose_b":[x,y,theta]};
     /// each output line is {"distance":d,"point_a":[x,y],"point_b":[x,y],"normal":[nx,ny],
-    /// "witness_unique":bool} or {"error":"..."}; a bad line never stops the stream.
+    /// "witness_unique":bool} or {"error":"..."}.
+    #[command(after_help = jsonl::STREAM_HELP)]
     Distance(distance::Args),
     /// Complementarity problems through the ncp solvers: JSON lines in on stdin, JSON lines out.
     ///
     /// Each input line is {"M":[[...],...],"q":[...]} with optional "n_free" (leading equality rows)
     /// and "z0" (warm start); each output line is {"z":[...],"w":[...],"iterations":k,
-    /// "status":"converged"|...,"residual":r} or {"error":"..."}; a bad line never stops the stream.
+    /// "status":"converged"|...,"residual":r} or {"error":"..."}.
+    #[command(after_help = jsonl::STREAM_HELP)]
     Lcp(lcp::Args),
     /// One step of the simulator per JSON line on stdin: {"x":[6],"u":[2]} ->
     /// {"x_next":[6],"lambda":[6],"d":[6],"status":..,"fx":[[..]],"fu":[[..]]} (fx[i][j] = dx'_i/dx_j,
     /// with --derivatives) or {"error":"..."}.
+    #[command(after_help = jsonl::STREAM_HELP)]
     Step(step::StepArgs),
     /// Roll out a control sequence from a state; writes the trajectory and impulses as JSON or CSV.
     Simulate(step::SimulateArgs),

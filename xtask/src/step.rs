@@ -114,7 +114,7 @@ pub fn answer_line(sim: &mut Simulator, line: &str, derivatives: bool) -> Result
         fx: der.as_ref().map(|d| rows(&d.fx, nx)),
         fu: der.as_ref().map(|d| rows(&d.fu, nu.max(1))),
     };
-    serde_json::to_string(&answer).map_err(|e| e.to_string())
+    crate::jsonl::finite_line(&answer)
 }
 
 pub fn run_step(args: &StepArgs) -> anyhow::Result<()> {
