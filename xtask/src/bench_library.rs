@@ -150,8 +150,9 @@ pub fn tolerance_section() -> anyhow::Result<String> {
                         )
                     };
                     let e = run(EvaluationSettings::default().kick_every)?;
-                    kicked[w] += e.spin_after_kicks;
-                    seed_spin += e.spin_after_kicks;
+                    // Kicks are on: the spin after them is measured.
+                    kicked[w] += e.spin_after_kicks.unwrap_or(0.0);
+                    seed_spin += e.spin_after_kicks.unwrap_or(0.0);
                     recovered[w] += e.recovered;
                     resumed[w] += e.resumed;
                     kicks[w] += e.kicks;

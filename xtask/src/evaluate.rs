@@ -4,6 +4,7 @@
 use anyhow::Context;
 use library::{Evaluation, EvaluationSettings, Library, Model, evaluate};
 use serde::Serialize;
+use std::fmt::Write as _;
 use std::path::PathBuf;
 
 /// Options of `cargo xtask evaluate`.
@@ -57,22 +58,45 @@ pub fn worlds(library: &Library) -> Vec<(String, Model, f64)> {
     out
 }
 
+/// A mean time in seconds, or "-" when there was nothing to average.
+pub fn seconds(v: Option<f64>) -> String {
+    v.map_or("-".into(), |v| format!("{v:.1} s"))
+}
+
+/// Write `text` to stdout and clear it; false when the reader has gone away (a closed pipe), which
+/// ends the command quietly rather than in a panic.
+fn emit(text: &mut String) -> bool {
+    use std::io::Write;
+    let mut stdout = std::io::stdout().lock();
+    let ok = stdout
+        .write_all(text.as_bytes())
+        .and_then(|()| stdout.flush())
+        .is_ok();
+    text.clear();
+    ok
+}
+
 /// Run `cargo xtask evaluate`.
 pub fn run(args: &Args) -> anyhow::Result<()> {
     let library = Library::load(&args.library)
         .with_context(|| format!("loading {}", args.library.display()))?;
     let policy = library.policy()?;
-    println!(
+    let mut out = String::new();
+    let _ = writeln!(
+        out,
         "library {}: {} controllers, built on {:?} at h = {}",
         args.library.display(),
         library.entries.len(),
         library.settings.model,
         library.settings.h
     );
-    println!(
-        "| world | h | spin rate (rad/s) | last quarter | after kicks | contacts per half-turn | contacts/s | in contact | kicks recovered | quarter turn resumed (mean time) |"
+    let _ = writeln!(
+        out,
+        "| world | h | spin rate (rad/s) | last quarter | after kicks | contacts per half-turn | contacts/s | in contact | kicks recovered | quarter turn resumed (mean time) |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
     );
-    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+    if !emit(&mut out) {
+        return Ok(());
+    }
     let mut rows = Vec::new();
     for (world, model, h) in worlds(&library) {
         let settings = EvaluationSettings {
@@ -85,20 +109,31 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             ..EvaluationSettings::default()
         };
         let e = evaluate(&library, &policy, &settings)?;
-        println!(
-            "| {world} | {h} | {:.3} | {:.3} | {:.3} | {:.2} | {:.2} | {:.0}% | {}/{} | {}/{} ({:.1} s) |",
+        let kicked = e.kicks > 0;
+        let _ = writeln!(
+            out,
+            "| {world} | {h} | {:.3} | {:.3} | {} | {} | {:.2} | {:.0}% | {} | {} |",
             e.spin_rate,
             e.final_spin_rate,
-            e.spin_after_kicks,
-            e.contacts_per_half_turn,
+            e.spin_after_kicks.map_or("-".into(), |v| format!("{v:.3}")),
+            e.contacts_per_half_turn
+                .map_or("- (under half a turn)".into(), |v| format!("{v:.2}")),
             e.contacts_per_second,
             100.0 * e.contact_fraction,
-            e.recovered,
-            e.kicks,
-            e.resumed,
-            e.kicks,
-            e.resume_time
+            if kicked {
+                format!("{}/{}", e.recovered, e.kicks)
+            } else {
+                "- (no kicks)".into()
+            },
+            if kicked {
+                format!("{}/{} ({})", e.resumed, e.kicks, seconds(e.resume_time))
+            } else {
+                "-".into()
+            },
         );
+        if !emit(&mut out) {
+            return Ok(());
+        }
         rows.push(Row {
             world,
             h,
@@ -108,7 +143,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     if let Some(path) = &args.out {
         std::fs::write(path, serde_json::to_string_pretty(&rows)?)
             .with_context(|| format!("writing {}", path.display()))?;
-        println!("wrote {}", path.display());
+        let _ = writeln!(out, "wrote {}", path.display());
+        emit(&mut out);
     }
     Ok(())
 }

@@ -185,4 +185,72 @@ mod tests {
         }
         filter_with(&b"1\n2\n"[..], Closed, |l| Ok(l.to_string())).unwrap();
     }
+
+    #[derive(clap::Parser)]
+    struct LcpCli {
+        #[command(flatten)]
+        args: crate::lcp::Args,
+    }
+
+    type Answer<'a> = dyn FnMut(&str) -> Result<String, String> + 'a;
+
+    /// Lines of `input` that get an answer: all but the blank ones (UTF-8 and only white space).
+    fn answered(input: &[u8]) -> usize {
+        let mut parts: Vec<&[u8]> = input.split(|&b| b == b'\n').collect();
+        if parts.last().is_some_and(|p| p.is_empty()) {
+            parts.pop();
+        }
+        parts
+            .iter()
+            .filter(|p| !std::str::from_utf8(p).is_ok_and(|s| s.trim().is_empty()))
+            .count()
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(48))]
+        #[test]
+        fn no_byte_string_crashes_a_stream_command(
+            chunks in proptest::collection::vec(
+                proptest::prop_oneof![
+                    proptest::collection::vec(proptest::num::u8::ANY, 0..40),
+                    proptest::sample::select(vec![
+                        br#"{"x":[-0.7,-0.5,0,0,0,0],"u":[0,0]}"#.to_vec(),
+                        br#"{"x":[1e308,-1e308,0,0,0,0],"u":[1e308,0]}"#.to_vec(),
+                        br#"{"a":[1,0.5],"pose_a":[0,0,0],"b":[1e-300,0.5],"pose_b":[3,0,0]}"#.to_vec(),
+                        br#"{"a":[1e200,1e-200],"pose_a":[0,0,0],"b":[0.7,0.5],"pose_b":[0,0,0]}"#.to_vec(),
+                        br#"{"M":[[0,-1],[1,0]],"q":[-1,-1]}"#.to_vec(),
+                        br#"{"M":[[1e308]],"q":[-1e308]}"#.to_vec(),
+                        b"\xff\xfe\x00".to_vec(),
+                        b"   ".to_vec(),
+                    ]),
+                ],
+                0..8,
+            ),
+        ) {
+            let input = chunks.join(&b'\n');
+            let expected = answered(&input);
+            let lcp = <LcpCli as clap::Parser>::parse_from(["lcp"]).args;
+            let mut sim = dynamics::Simulator::new(
+                dynamics::Scene::flicking_finger(),
+                dynamics::StepSettings::default(),
+            )
+            .unwrap();
+            let mut answers: Vec<Box<Answer<'_>>> = vec![
+                Box::new(|l| crate::distance::answer_line(l, true)),
+                Box::new(|l| crate::lcp::answer_line(l, &lcp)),
+                Box::new(|l| crate::step::answer_line(&mut sim, l, true)),
+            ];
+            for answer in &mut answers {
+                let mut out = Vec::new();
+                filter_with(&input[..], &mut out, answer).unwrap();
+                let text = String::from_utf8(out).unwrap();
+                proptest::prop_assert_eq!(text.lines().count(), expected);
+                for line in text.lines() {
+                    let v: serde_json::Value = serde_json::from_str(line).unwrap();
+                    proptest::prop_assert!(!line.contains("null"), "{}", line);
+                    proptest::prop_assert!(v.is_object());
+                }
+            }
+        }
+    }
 }

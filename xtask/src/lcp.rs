@@ -32,7 +32,7 @@ pub struct Args {
     #[arg(long, value_enum, default_value = "lemke")]
     method: Method,
     /// Noise scale of the smoothed methods.
-    #[arg(long, default_value_t = 0.1)]
+    #[arg(long, default_value_t = 0.1, allow_negative_numbers = true)]
     sigma: f64,
 }
 

@@ -47,11 +47,13 @@ pub struct Args {
     /// Simulator options (finger only).
     #[command(flatten)]
     sim: SimArgs,
-    /// Horizon N (default: 75).
-    #[arg(long, default_value_t = 75)]
+    /// Horizon N (1 to 100000).
+    #[arg(long, default_value_t = 75,
+          value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=100_000))]
     horizon: usize,
-    /// Passes at most.
-    #[arg(long, default_value_t = 300)]
+    /// Passes at most (up to 100000).
+    #[arg(long, default_value_t = 300,
+          value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(0..=100_000))]
     iterations: usize,
     /// Backward pass.
     #[arg(long, value_enum, default_value = "full")]

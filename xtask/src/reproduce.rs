@@ -595,7 +595,7 @@ fn report(s: &Summary) -> String {
     for k in &s.larger_kicks {
         let _ = writeln!(
             t,
-            "| {} | {} | {:.3} | {}/{} | {}/{} | {:.1} |",
+            "| {} | {} | {:.3} | {}/{} | {}/{} | {} |",
             k.kick_std,
             k.world,
             k.evaluation.spin_rate,
@@ -603,7 +603,9 @@ fn report(s: &Summary) -> String {
             k.evaluation.kicks,
             k.evaluation.resumed,
             k.evaluation.kicks,
-            k.evaluation.resume_time
+            k.evaluation
+                .resume_time
+                .map_or("-".into(), |t| format!("{t:.1}"))
         );
     }
     let _ = writeln!(
@@ -656,7 +658,12 @@ fn report(s: &Summary) -> String {
                 "-".into()
             },
             if c.kicks {
-                format!("{}/{} ({:.1} s)", e.resumed, e.kicks, e.resume_time)
+                format!(
+                    "{}/{} ({})",
+                    e.resumed,
+                    e.kicks,
+                    crate::evaluate::seconds(e.resume_time)
+                )
             } else {
                 "-".into()
             }

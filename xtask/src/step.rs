@@ -24,10 +24,10 @@ pub struct SimArgs {
     #[arg(long, value_enum, default_value = "logistic")]
     model: Model,
     /// Noise scale of the smoothed models.
-    #[arg(long, default_value_t = 0.1)]
+    #[arg(long, default_value_t = 0.1, allow_negative_numbers = true)]
     sigma: f64,
     /// Time step.
-    #[arg(long, default_value_t = 0.05)]
+    #[arg(long, default_value_t = 0.05, allow_negative_numbers = true)]
     h: f64,
     /// Scene file (TOML); default: the flicking finger of SCENE.md (scenes/finger.toml).
     #[arg(long)]
@@ -122,6 +122,11 @@ pub fn run_step(args: &StepArgs) -> anyhow::Result<()> {
     crate::jsonl::filter(|line| answer_line(&mut sim, line, args.derivatives))
 }
 
+/// Steps at most in one `simulate` run (about 3 minutes of the finger at 20 us a step).
+pub const MAX_STEPS: u64 = 10_000_000;
+/// Steps at most the `json` format holds in memory (the others stream).
+pub const MAX_HELD_STEPS: usize = 1_000_000;
+
 #[derive(Debug, clap::Args)]
 pub struct SimulateArgs {
     #[command(flatten)]
@@ -129,24 +134,66 @@ pub struct SimulateArgs {
     /// Initial state (comma-separated); default SCENE.md's x0 for the finger.
     #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
     x0: Option<Vec<f64>>,
-    /// Controls: a JSON file holding an array of control vectors, one per step.
+    /// Controls: a JSON file holding an array of control vectors, one per step, or the file `optimize
+    /// --out` writes (its solution's controls).
     #[arg(long)]
     controls: Option<PathBuf>,
-    /// Without --controls: this many steps with zero controls.
-    #[arg(long, default_value_t = 75)]
+    /// Without --controls: this many steps with zero controls (at most 10^7).
+    #[arg(long, default_value_t = 75,
+          value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(0..=MAX_STEPS))]
     steps: usize,
     /// Output format.
     #[arg(long, value_enum, default_value = "json")]
     format: Format,
+    /// Exit with status 1 if a step's complementarity solve did not converge.
+    #[arg(long)]
+    strict: bool,
 }
 
 /// Trajectory output formats.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum Format {
-    /// {"t":[...],"x":[[...]],"u":[[...]],"lambda":[[...]]}
+    /// One object {"h","t":[T+1],"x":[T+1][n],"u":[T][m],"lambda":[T][rows],"status":[T]} (held in
+    /// memory: at most 10^6 steps).
     Json,
-    /// One row per step: t, x..., u..., lambda...
+    /// One line per step {"k","t","x","u","lambda","status"}, then {"k","t","x"} for the final state;
+    /// streamed.
+    Jsonl,
+    /// A header, one row per step (t, x..., u..., lambda..., status), then the final state's row with
+    /// the other columns empty; streamed.
     Csv,
+}
+
+/// The controls of `simulate --controls FILE`: a bare array, or `optimize --out`'s report.
+fn read_controls(path: &std::path::Path) -> anyhow::Result<Vec<Vec<f64>>> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let value: serde_json::Value =
+        serde_json::from_str(&text).with_context(|| format!("{}: not JSON", path.display()))?;
+    let array = match &value {
+        serde_json::Value::Array(_) => value,
+        serde_json::Value::Object(o) => o
+            .get("solution")
+            .and_then(|s| s.get("controls"))
+            .or_else(|| o.get("controls"))
+            .cloned()
+            .ok_or_else(|| {
+                anyhow::anyhow!(
+                    "{}: an object without \"controls\" or \"solution\".\"controls\"",
+                    path.display()
+                )
+            })?,
+        _ => anyhow::bail!("{}: expected an array of control vectors", path.display()),
+    };
+    serde_json::from_value(array)
+        .with_context(|| format!("{}: expected an array of control vectors", path.display()))
+}
+
+fn status_name(s: ncp::Status) -> String {
+    serde_json::to_value(s)
+        .ok()
+        .and_then(|v| v.as_str().map(str::to_string))
+        .unwrap_or_else(|| format!("{s:?}"))
 }
 
 pub fn run_simulate(args: &SimulateArgs) -> anyhow::Result<()> {
@@ -157,51 +204,136 @@ pub fn run_simulate(args: &SimulateArgs) -> anyhow::Result<()> {
         None if scene.n_state() == 6 => dynamics::FLICKING_FINGER_X0.to_vec(),
         None => vec![0.0; scene.n_state()],
     };
-    let controls: Vec<Vec<f64>> = match &args.controls {
-        Some(path) => {
-            let text = std::fs::read_to_string(path)
-                .with_context(|| format!("reading {}", path.display()))?;
-            serde_json::from_str(&text).with_context(|| {
-                format!("{}: expected an array of control vectors", path.display())
-            })?
-        }
-        None => vec![vec![0.0; scene.n_controls]; args.steps],
+    let controls = match &args.controls {
+        Some(path) => Some(read_controls(path)?),
+        None => None,
     };
-    let h = sim.settings().h;
-    let (mut xs, mut lambdas) = (vec![x0.clone()], Vec::new());
-    let mut x = x0;
-    for (k, u) in controls.iter().enumerate() {
-        let s = sim.step(&x, u).with_context(|| format!("step {k}"))?;
-        x = s.x_next;
-        xs.push(x.clone());
-        lambdas.push(s.lambda);
+    let steps = controls.as_ref().map_or(args.steps, Vec::len);
+    if steps as u64 > MAX_STEPS {
+        anyhow::bail!("{steps} controls: at most {MAX_STEPS} steps per run");
     }
+    if args.format == Format::Json && steps > MAX_HELD_STEPS {
+        anyhow::bail!(
+            "{steps} steps: --format json holds the trajectory in memory, at most {MAX_HELD_STEPS} \
+             steps; --format jsonl or csv stream any number"
+        );
+    }
+    let zero = vec![0.0; scene.n_controls];
+    let control = |k: usize| controls.as_ref().map_or(&zero, |c| &c[k]);
+    let h = sim.settings().h;
+    let (n, rows) = (scene.n_state(), scene.n_constraints());
     let mut out = std::io::BufWriter::new(std::io::stdout().lock());
-    match args.format {
+    // Held for --format json only.
+    let (mut xs, mut us, mut lambdas, mut statuses) = (vec![x0.clone()], vec![], vec![], vec![]);
+    if args.format == Format::Csv {
+        let mut header: Vec<String> = vec!["t".into()];
+        header.extend((0..n).map(|i| format!("x{i}")));
+        header.extend((0..scene.n_controls).map(|i| format!("u{i}")));
+        header.extend((0..rows).map(|i| format!("lambda{i}")));
+        header.push("status".into());
+        writeln!(out, "{}", header.join(","))?;
+    }
+    let mut x = x0;
+    let mut unconverged = 0usize;
+    let mut failure = None;
+    let mut done = 0usize;
+    for k in 0..steps {
+        let u = control(k);
+        let s = match sim.step(&x, u) {
+            Ok(s) if s.x_next.iter().all(|v| v.is_finite()) => s,
+            Ok(_) => {
+                failure = Some(format!("step {k}: the next state is not finite"));
+                break;
+            }
+            Err(e) => {
+                failure = Some(format!("step {k}: {e}"));
+                break;
+            }
+        };
+        if s.info.status != ncp::Status::Converged {
+            unconverged += 1;
+        }
+        let status = status_name(s.info.status);
+        let t = k as f64 * h;
+        let written = match args.format {
+            Format::Json => {
+                us.push(u.clone());
+                lambdas.push(s.lambda.clone());
+                statuses.push(status);
+                Ok(())
+            }
+            Format::Jsonl => writeln!(
+                out,
+                "{}",
+                serde_json::json!({"k": k, "t": t, "x": x, "u": u, "lambda": s.lambda, "status": status})
+            ),
+            Format::Csv => {
+                let mut row = vec![format!("{t}")];
+                row.extend(x.iter().map(|v| format!("{v:e}")));
+                row.extend(u.iter().map(|v| format!("{v:e}")));
+                row.extend(s.lambda.iter().map(|v| format!("{v:e}")));
+                row.push(status);
+                writeln!(out, "{}", row.join(","))
+            }
+        };
+        if let Err(e) = written {
+            if e.kind() == std::io::ErrorKind::BrokenPipe {
+                return Ok(());
+            }
+            return Err(e.into());
+        }
+        x = s.x_next;
+        if args.format == Format::Json {
+            xs.push(x.clone());
+        }
+        done = k + 1;
+    }
+    let t_end = done as f64 * h;
+    let last = match args.format {
         Format::Json => {
             let t: Vec<f64> = (0..xs.len()).map(|k| k as f64 * h).collect();
-            let json =
-                serde_json::json!({ "h": h, "t": t, "x": xs, "u": controls, "lambda": lambdas });
-            writeln!(out, "{json}")?;
-        }
-        Format::Csv => {
-            let n = scene.n_state();
-            let m = scene.n_constraints();
-            let mut header: Vec<String> = vec!["t".into()];
-            header.extend((0..n).map(|i| format!("x{i}")));
-            header.extend((0..scene.n_controls).map(|i| format!("u{i}")));
-            header.extend((0..m).map(|i| format!("lambda{i}")));
-            writeln!(out, "{}", header.join(","))?;
-            for k in 0..controls.len() {
-                let mut row = vec![format!("{}", k as f64 * h)];
-                row.extend(xs[k].iter().map(|v| format!("{v:e}")));
-                row.extend(controls[k].iter().map(|v| format!("{v:e}")));
-                row.extend(lambdas[k].iter().map(|v| format!("{v:e}")));
-                writeln!(out, "{}", row.join(","))?;
+            let mut json = serde_json::json!({ "h": h, "t": t, "x": xs, "u": us, "lambda": lambdas,
+                "status": statuses });
+            if let Some(f) = &failure {
+                json["error"] = serde_json::json!(f);
             }
+            writeln!(out, "{json}")
+        }
+        Format::Jsonl => writeln!(
+            out,
+            "{}",
+            serde_json::json!({"k": done, "t": t_end, "x": x})
+        )
+        .and_then(|()| match &failure {
+            Some(f) => writeln!(out, "{}", serde_json::json!({ "error": f })),
+            None => Ok(()),
+        }),
+        Format::Csv => {
+            let mut row = vec![format!("{t_end}")];
+            row.extend(x.iter().map(|v| format!("{v:e}")));
+            row.extend(std::iter::repeat_n(
+                String::new(),
+                scene.n_controls + rows + 1,
+            ));
+            writeln!(out, "{}", row.join(","))
+        }
+    };
+    match last.and_then(|()| out.flush()) {
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => return Ok(()),
+        r => r?,
+    }
+    if let Some(f) = failure {
+        anyhow::bail!("{f} (the {done} steps before it were written)");
+    }
+    if unconverged > 0 {
+        eprintln!(
+            "{unconverged} of {done} steps' complementarity solves did not converge (their state \
+             still advances; see \"status\")"
+        );
+        if args.strict {
+            anyhow::bail!("--strict: {unconverged} steps did not converge");
         }
     }
-    out.flush()?;
     Ok(())
 }
 

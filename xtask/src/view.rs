@@ -23,11 +23,13 @@ pub struct Args {
     /// The controller at start.
     #[arg(long, value_enum, default_value = "library")]
     policy: Policy,
-    /// Optimiser passes per control step of the online MPC.
-    #[arg(long, default_value_t = WorldSettings::default().mpc_passes)]
+    /// Optimiser passes per control step of the online MPC (1 to 100).
+    #[arg(long, default_value_t = WorldSettings::default().mpc_passes,
+          value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=viewer::MAX_MPC_PASSES as u64))]
     mpc_passes: usize,
-    /// Horizon of the online MPC, steps.
-    #[arg(long, default_value_t = WorldSettings::default().mpc_horizon)]
+    /// Horizon of the online MPC, steps (1 to 2000).
+    #[arg(long, default_value_t = WorldSettings::default().mpc_horizon,
+          value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=viewer::MAX_MPC_HORIZON as u64))]
     mpc_horizon: usize,
 }
 

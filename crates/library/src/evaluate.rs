@@ -52,8 +52,9 @@ pub struct Evaluation {
     pub final_spin_rate: f64,
     /// Contact events (the contact impulse rising above [`CONTACT_IMPULSE`] after having fallen below a
     /// tenth of it, so that a smoothed impulse flickering around the threshold counts once) per half-turn
-    /// of the ellipse.
-    pub contacts_per_half_turn: f64,
+    /// of the ellipse; `None` when the ellipse turned less than half a turn in all (no ratio to speak of).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub contacts_per_half_turn: Option<f64>,
     /// Contact events per second.
     pub contacts_per_second: f64,
     /// Fraction of steps with a contact impulse.
@@ -65,10 +66,12 @@ pub struct Evaluation {
     /// Kicks after which the ellipse turned a further quarter turn forward before the next kick (the
     /// stricter measure).
     pub resumed: usize,
-    /// Mean time from a kick to that quarter turn, over the kicks that resumed, s.
-    pub resume_time: f64,
-    /// Mean spin rate over the second half of each interval between kicks, rad/s.
-    pub spin_after_kicks: f64,
+    /// Mean time from a kick to that quarter turn, over the kicks that resumed, s; `None` when none did.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub resume_time: Option<f64>,
+    /// Mean spin rate over the second half of each interval between kicks, rad/s; `None` without kicks.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub spin_after_kicks: Option<f64>,
     /// Steps whose complementarity solve did not converge (they still advance the state).
     pub unconverged_steps: usize,
     /// The free angle at the end.
@@ -240,26 +243,15 @@ pub fn evaluate_in(
     Ok(Evaluation {
         spin_rate: turned / time,
         final_spin_rate: (x[free] - angle_at_quarter) / ((steps - quarter) as f64 * settings.h),
-        contacts_per_half_turn: if turned.abs() > 1e-9 {
-            events as f64 / (turned.abs() / std::f64::consts::PI)
-        } else {
-            f64::INFINITY
-        },
+        contacts_per_half_turn: (turned.abs() >= std::f64::consts::PI)
+            .then(|| events as f64 / (turned.abs() / std::f64::consts::PI)),
         contacts_per_second: events as f64 / time,
         contact_fraction: touching_steps as f64 / steps as f64,
         kicks,
         recovered: recovered.min(kicks),
         resumed,
-        resume_time: if resumed > 0 {
-            resume_steps as f64 * settings.h / resumed as f64
-        } else {
-            f64::NAN
-        },
-        spin_after_kicks: if after_time > 0.0 {
-            after_sum / after_time
-        } else {
-            f64::NAN
-        },
+        resume_time: (resumed > 0).then(|| resume_steps as f64 * settings.h / resumed as f64),
+        spin_after_kicks: (after_time > 0.0).then(|| after_sum / after_time),
         unconverged_steps: unconverged,
         final_angle: x[free],
     })

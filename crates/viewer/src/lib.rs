@@ -15,6 +15,6 @@ mod server;
 mod world;
 
 pub use error::ViewerError;
-pub use mpc::{MpcSettings, OnlineMpc};
+pub use mpc::{MAX_MPC_HORIZON, MAX_MPC_PASSES, MpcSettings, OnlineMpc};
 pub use server::{Viewer, ViewerConfig};
 pub use world::{SPRING_DAMPING, SPRING_MAX_FORCE, SPRING_STIFFNESS, World, WorldSettings};

@@ -52,7 +52,8 @@ pub struct OnlineMpc {
 }
 
 impl OnlineMpc {
-    /// An optimiser for the task on `scene`, with an empty (all zero) plan.
+    /// An optimiser for the task on `scene`, with an empty (all zero) plan; the horizon at most
+    /// [`MAX_MPC_HORIZON`] steps and the passes at most [`MAX_MPC_PASSES`].
     pub fn new(scene: &Scene, settings: MpcSettings) -> Result<Self, ViewerError> {
         if !(settings.sigma.is_finite() && settings.sigma > 0.0) {
             return Err(ViewerError::Setting {
@@ -61,13 +62,8 @@ impl OnlineMpc {
                 expected: "finite and positive",
             });
         }
-        if settings.horizon == 0 || settings.passes == 0 {
-            return Err(ViewerError::Setting {
-                name: "horizon / passes",
-                value: 0.0,
-                expected: "at least 1",
-            });
-        }
+        check_count("horizon", settings.horizon, MAX_MPC_HORIZON)?;
+        check_count("passes", settings.passes, MAX_MPC_PASSES)?;
         let sim = Simulator::new(
             scene.clone(),
             StepSettings {
@@ -178,4 +174,26 @@ impl OnlineMpc {
         self.plan = ddp::shift_controls(&sol.controls, 1);
         Ok(u)
     }
+}
+
+/// The online optimiser's horizon at most, steps (real time: the control step grows with it, about 40 us
+/// per step of horizon and pass on the finger).
+pub const MAX_MPC_HORIZON: usize = 2000;
+/// The online optimiser's passes per control step at most.
+pub const MAX_MPC_PASSES: usize = 100;
+
+/// `Err` unless `1 <= value <= max`.
+pub(crate) fn check_count(name: &'static str, value: usize, max: usize) -> Result<(), ViewerError> {
+    if value == 0 || value > max {
+        return Err(ViewerError::Setting {
+            name,
+            value: value as f64,
+            expected: if max == MAX_MPC_HORIZON {
+                "between 1 and 2000 steps"
+            } else {
+                "between 1 and 100"
+            },
+        });
+    }
+    Ok(())
 }

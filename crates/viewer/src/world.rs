@@ -152,13 +152,8 @@ impl World {
         check_positive("h", settings.h)?;
         check_positive("sigma", settings.sigma)?;
         check_speed(settings.speed)?;
-        if settings.mpc_horizon == 0 || settings.mpc_passes == 0 {
-            return Err(ViewerError::Setting {
-                name: "mpc_horizon / mpc_passes",
-                value: 0.0,
-                expected: "at least 1",
-            });
-        }
+        crate::mpc::check_count("mpc_horizon", settings.mpc_horizon, crate::MAX_MPC_HORIZON)?;
+        crate::mpc::check_count("mpc_passes", settings.mpc_passes, crate::MAX_MPC_PASSES)?;
         if settings.x0.len() != scene.n_state() || !settings.x0.iter().all(|e| e.is_finite()) {
             return Err(ViewerError::Message(format!(
                 "x0 must have {} finite entries",

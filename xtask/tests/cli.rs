@@ -1,0 +1,230 @@
+//! The command-line driver as a user's script drives it: a co-process answering line by line, and the
+//! bad arguments and inputs that must end in a clear error, never a panic or a hang.
+
+use std::io::{BufRead, BufReader, Write};
+use std::process::{Command, Stdio};
+use std::sync::mpsc;
+use std::time::Duration;
+
+fn xtask() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_xtask"));
+    c.env_remove("RUST_BACKTRACE")
+        .env_remove("RUST_LIB_BACKTRACE");
+    c
+}
+
+/// Spawn `args` with piped stdin and stdout; its stdout lines arrive on the returned channel.
+fn co_process(
+    args: &[&str],
+) -> (
+    std::process::Child,
+    std::process::ChildStdin,
+    mpsc::Receiver<String>,
+) {
+    let mut child = xtask()
+        .args(args)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("xtask starts");
+    let stdin = child.stdin.take().expect("piped stdin");
+    let stdout = child.stdout.take().expect("piped stdout");
+    let (send, lines) = mpsc::channel();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stdout).lines() {
+            let Ok(line) = line else { break };
+            if send.send(line).is_err() {
+                break;
+            }
+        }
+    });
+    (child, stdin, lines)
+}
+
+/// The answer to one line, waiting at most a minute (a command that held its answers would hang here).
+fn ask(
+    stdin: &mut std::process::ChildStdin,
+    lines: &mpsc::Receiver<String>,
+    line: &[u8],
+) -> String {
+    stdin.write_all(line).unwrap();
+    stdin.write_all(b"\n").unwrap();
+    stdin.flush().unwrap();
+    lines
+        .recv_timeout(Duration::from_secs(60))
+        .expect("an answer to a line while the input stays open")
+}
+
+#[test]
+fn step_answers_each_line_before_the_next_is_written() {
+    let (mut child, mut stdin, lines) = co_process(&["step"]);
+    let mut x = "[-0.7853981633974483,-0.5235987755982989,0,0,0,0]".to_string();
+    for _ in 0..5 {
+        let answer = ask(
+            &mut stdin,
+            &lines,
+            format!(r#"{{"x":{x},"u":[1,0]}}"#).as_bytes(),
+        );
+        let v: serde_json::Value = serde_json::from_str(&answer).unwrap();
+        assert_eq!(v["status"], "converged", "{answer}");
+        x = v["x_next"].to_string();
+    }
+    // Bytes that are not UTF-8, a blank line (no answer) and a state of the wrong size: each bad line
+    // gets its error line and the stream goes on.
+    let bad = ask(&mut stdin, &lines, b"\xff\xfe{\"x\":1}");
+    assert!(bad.contains("not UTF-8"), "{bad}");
+    stdin.write_all(b"\n").unwrap();
+    let answer = ask(&mut stdin, &lines, br#"{"x":[1,2],"u":[0,0]}"#);
+    assert!(answer.starts_with(r#"{"error""#), "{answer}");
+    let answer = ask(
+        &mut stdin,
+        &lines,
+        format!(r#"{{"x":{x},"u":[0,0]}}"#).as_bytes(),
+    );
+    assert!(answer.contains("x_next"), "{answer}");
+    drop(stdin);
+    assert!(child.wait().unwrap().success());
+}
+
+#[test]
+fn distance_and_lcp_answer_line_by_line_too() {
+    let (mut child, mut stdin, lines) = co_process(&["distance"]);
+    let a = ask(
+        &mut stdin,
+        &lines,
+        br#"{"a":[1,0.5],"pose_a":[0,0,0],"b":[0.7,0.5],"pose_b":[3,0,0]}"#,
+    );
+    assert!(a.starts_with(r#"{"distance":1.3"#), "{a}");
+    let a = ask(
+        &mut stdin,
+        &lines,
+        br#"{"a":[1e250,0.5],"pose_a":[0,0,0],"b":[0.7,0.5],"pose_b":[3,0,0]}"#,
+    );
+    assert!(a.starts_with(r#"{"error""#) && !a.contains("null"), "{a}");
+    drop(stdin);
+    assert!(child.wait().unwrap().success());
+
+    let (mut child, mut stdin, lines) = co_process(&["lcp"]);
+    let a = ask(&mut stdin, &lines, br#"{"M":[[2,1],[1,2]],"q":[-1,-1]}"#);
+    assert!(a.contains(r#""status":"converged""#), "{a}");
+    drop(stdin);
+    assert!(child.wait().unwrap().success());
+}
+
+#[test]
+fn simulate_streams_keeps_the_final_state_and_accepts_optimize_output() {
+    let out = xtask()
+        .args(["simulate", "--steps", "3", "--format", "csv"])
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let text = String::from_utf8(out.stdout).unwrap();
+    let rows: Vec<&str> = text.lines().collect();
+    // Header, three steps, the final state.
+    assert_eq!(rows.len(), 5, "{text}");
+    assert!(rows[0].ends_with(",status"));
+    assert!(rows[4].starts_with("0.15"), "{}", rows[4]);
+
+    let out = xtask()
+        .args(["simulate", "--steps", "2", "--format", "jsonl"])
+        .output()
+        .unwrap();
+    let lines: Vec<serde_json::Value> = String::from_utf8(out.stdout)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(lines.len(), 3);
+    assert_eq!(lines[2]["k"], 2);
+    assert_eq!(lines[2]["x"].as_array().unwrap().len(), 6);
+
+    // The report `optimize --out` writes is a valid --controls file.
+    let dir = std::env::temp_dir().join(format!("xtask-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let report = dir.join("optimized.json");
+    std::fs::write(
+        &report,
+        r#"{"problem":"finger","solution":{"controls":[[1,0],[0,1],[0,0],[1,1]]}}"#,
+    )
+    .unwrap();
+    let out = xtask()
+        .args(["simulate", "--format", "jsonl", "--controls"])
+        .arg(&report)
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    assert_eq!(String::from_utf8(out.stdout).unwrap().lines().count(), 5);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn impossible_counts_and_failing_runs_end_in_an_error_not_a_panic() {
+    for args in [
+        &["simulate", "--steps", "1000000000000"][..],
+        &["simulate", "--steps", "18446744073709551615"],
+        &["simulate", "--steps", "2000000"],
+        &["optimize", "--horizon", "100000000000"],
+        &["view", "--mpc-horizon", "100000000000"],
+        &[
+            "train",
+            "--trajectories",
+            "10000000000000",
+            "--out",
+            "/dev/null",
+        ],
+    ] {
+        let out = xtask().args(args).output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{args:?} succeeded");
+        assert!(!err.contains("panicked"), "{args:?}: {err}");
+        assert!(
+            err.contains("range") || err.contains("at most") || err.contains("not in"),
+            "{args:?}: {err}"
+        );
+    }
+    // A step that fails mid-run: the steps before it are written, then the error, and the exit code
+    // says so.
+    let out = xtask()
+        .args([
+            "simulate", "--steps", "3", "--h", "1e300", "--format", "jsonl",
+        ])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert!(text.lines().last().unwrap().contains("error"), "{text}");
+}
+
+#[test]
+fn a_reader_that_goes_away_is_not_a_crash() {
+    let mut child = xtask()
+        .args(["simulate", "--steps", "200000", "--format", "jsonl"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut first = String::new();
+    BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut first)
+        .unwrap();
+    assert!(first.starts_with('{'));
+    let out = child.wait_with_output().unwrap();
+    assert!(
+        !String::from_utf8_lossy(&out.stderr).contains("panicked"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+#[test]
+fn a_negative_number_is_read_as_a_value_and_range_checked() {
+    let out = xtask()
+        .args(["simulate", "--sigma", "-1", "--steps", "1"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(err.contains("sigma") && err.contains("positive"), "{err}");
+    assert!(!err.contains("unexpected argument"), "{err}");
+}
