@@ -124,15 +124,22 @@ fn a_step_started_from_a_nearby_steps_solution_is_the_same_step() {
         for shift in [1e-6, 1e-3, 0.1] {
             let near_x: Vec<f64> = x.iter().map(|e| e + shift).collect();
             let near_u: Vec<f64> = u.iter().map(|e| e - shift).collect();
+            // The same knot's data from a step near this one (the line search's hint).
             let mut hinted = FingerDynamics::new(sim());
+            let mut near = hinted.create_data();
             let mut scratch = vec![0.0; 6];
-            hinted.step(&near_x, &near_u, &mut scratch).unwrap();
+            hinted
+                .calc(&mut near, None, &near_x, &near_u, &mut scratch)
+                .unwrap();
+            let mut data = hinted.create_data();
             let mut next = vec![0.0; 6];
             hinted
-                .step_near(&x, &u, &near_x, &near_u, &mut next)
+                .calc(&mut data, Some(&near), &x, &u, &mut next)
                 .unwrap();
             let mut plain = vec![0.0; 6];
-            FingerDynamics::new(sim()).step(&x, &u, &mut plain).unwrap();
+            let mut fresh = FingerDynamics::new(sim());
+            let mut data = fresh.create_data();
+            fresh.calc(&mut data, None, &x, &u, &mut plain).unwrap();
             let diff = next
                 .iter()
                 .zip(&plain)

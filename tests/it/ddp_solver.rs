@@ -3,7 +3,9 @@
 //! that fail for some controls, long horizons, bad input).
 
 use ddp::problems::{Linear, Unicycle};
-use ddp::{ControlLimits, Ddp, DdpError, DdpSettings, Dynamics, Method, QuadraticCost};
+use ddp::{
+    ControlLimits, Ddp, DdpError, DdpSettings, Dynamics, Method, QuadraticCost, SecondOrder,
+};
 
 fn lq_problem() -> (Linear, QuadraticCost) {
     // A lightly unstable 4-state, 2-control system.
@@ -107,7 +109,7 @@ fn riccati(sys: &Linear, c: &QuadraticCost, x0: &[f64], horizon: usize) -> (f64,
             .collect();
         total += ddp::Cost::running(c, i, &x, &u);
         let mut next = vec![0.0; n];
-        sys.step(&x, &u, &mut next).unwrap();
+        sys.calc(&mut (), None, &x, &u, &mut next).unwrap();
         x = next;
     }
     total += ddp::Cost::terminal(c, &x);
@@ -210,7 +212,8 @@ fn unicycle_second_derivatives_match_differences_of_its_first() {
     let y0 = [0.2, -0.4, 0.9, 1.3, -0.6];
     let grad = |u: &mut Unicycle, y: &[f64]| {
         let (mut fx, mut fu) = (vec![0.0; 9], vec![0.0; 6]);
-        u.derivatives(&y[..3], &y[3..], &mut fx, &mut fu).unwrap();
+        u.calc_diff(&mut (), &y[..3], &y[3..], &mut fx, &mut fu)
+            .unwrap();
         let mut g = vec![0.0; 5];
         for j in 0..3 {
             g[j] = (0..3).map(|i| c[i] * fx[i * 3 + j]).sum();
@@ -221,7 +224,7 @@ fn unicycle_second_derivatives_match_differences_of_its_first() {
         g
     };
     let (mut fx, mut fu, mut hess) = (vec![0.0; 9], vec![0.0; 6], vec![0.0; 25]);
-    u.second_derivatives(&y0[..3], &y0[3..], &c, &mut fx, &mut fu, &mut hess)
+    u.calc_diff_second(&mut (), &y0[..3], &y0[3..], &c, &mut fx, &mut fu, &mut hess)
         .unwrap();
     for k in 0..5 {
         let (mut yp, mut ym) = (y0.to_vec(), y0.to_vec());
@@ -249,30 +252,40 @@ impl std::error::Error for TooFast {}
 
 impl Dynamics for Fragile {
     type Error = TooFast;
+    type Data = ();
     fn state_dim(&self) -> usize {
         3
     }
     fn control_dim(&self) -> usize {
         2
     }
-    fn step(&mut self, x: &[f64], u: &[f64], next: &mut [f64]) -> Result<(), TooFast> {
+    fn create_data(&self) {}
+    fn calc(
+        &mut self,
+        _: &mut (),
+        _: Option<&()>,
+        x: &[f64],
+        u: &[f64],
+        next: &mut [f64],
+    ) -> Result<(), TooFast> {
         if u[0].abs() > 1.5 {
             return Err(TooFast);
         }
-        self.0.step(x, u, next).unwrap();
+        self.0.calc(&mut (), None, x, u, next).unwrap();
         if u[1].abs() > 1.5 {
             next[2] = f64::NAN;
         }
         Ok(())
     }
-    fn derivatives(
+    fn calc_diff(
         &mut self,
+        _: &mut (),
         x: &[f64],
         u: &[f64],
         fx: &mut [f64],
         fu: &mut [f64],
     ) -> Result<(), TooFast> {
-        self.0.derivatives(x, u, fx, fu).unwrap();
+        self.0.calc_diff(&mut (), x, u, fx, fu).unwrap();
         Ok(())
     }
 }
@@ -434,14 +447,23 @@ struct Rounded(Unicycle);
 
 impl Dynamics for Rounded {
     type Error = std::convert::Infallible;
+    type Data = ();
     fn state_dim(&self) -> usize {
         3
     }
     fn control_dim(&self) -> usize {
         2
     }
-    fn step(&mut self, x: &[f64], u: &[f64], next: &mut [f64]) -> Result<(), Self::Error> {
-        self.0.step(x, u, next)?;
+    fn create_data(&self) {}
+    fn calc(
+        &mut self,
+        _: &mut (),
+        _: Option<&()>,
+        x: &[f64],
+        u: &[f64],
+        next: &mut [f64],
+    ) -> Result<(), Self::Error> {
+        self.0.calc(&mut (), None, x, u, next)?;
         let mut bits = x.iter().chain(u).fold(0x9e37_79b9_7f4a_7c15u64, |h, e| {
             (h ^ e.to_bits()).wrapping_mul(0x0100_0000_01b3)
         });
@@ -452,20 +474,26 @@ impl Dynamics for Rounded {
         }
         Ok(())
     }
-    fn derivatives(
+    fn calc_diff(
         &mut self,
+        _: &mut (),
         x: &[f64],
         u: &[f64],
         fx: &mut [f64],
         fu: &mut [f64],
     ) -> Result<(), Self::Error> {
-        self.0.derivatives(x, u, fx, fu)
+        self.0.calc_diff(&mut (), x, u, fx, fu)
     }
-    fn has_second_derivatives(&self) -> bool {
-        true
+    fn second_order(&mut self) -> Option<&mut dyn SecondOrder<(), Error = Self::Error>> {
+        Some(self)
     }
-    fn second_derivatives(
+}
+
+impl SecondOrder<()> for Rounded {
+    type Error = std::convert::Infallible;
+    fn calc_diff_second(
         &mut self,
+        _: &mut (),
         x: &[f64],
         u: &[f64],
         c: &[f64],
@@ -473,7 +501,7 @@ impl Dynamics for Rounded {
         fu: &mut [f64],
         hess: &mut [f64],
     ) -> Result<(), Self::Error> {
-        self.0.second_derivatives(x, u, c, fx, fu, hess)
+        self.0.calc_diff_second(&mut (), x, u, c, fx, fu, hess)
     }
 }
 

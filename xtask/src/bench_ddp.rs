@@ -2,7 +2,9 @@
 //! at several noise levels with full DDP and Gauss-Newton iLQR, and where a finger solve spends its time.
 
 use ddp::problems::Unicycle;
-use ddp::{ControlLimits, Ddp, DdpSettings, Dynamics, Method, Regularisation, Solution};
+use ddp::{
+    ControlLimits, Ddp, DdpSettings, Dynamics, Method, Regularisation, SecondOrder, Solution,
+};
 use dynamics::{Complementarity, Scene, Simulator, StepSettings};
 use library::{FingerDynamics, finger_cost};
 use std::time::{Duration, Instant};
@@ -18,48 +20,53 @@ struct Timed<D> {
 
 impl<D: Dynamics> Dynamics for Timed<D> {
     type Error = D::Error;
+    type Data = D::Data;
     fn state_dim(&self) -> usize {
         self.inner.state_dim()
     }
     fn control_dim(&self) -> usize {
         self.inner.control_dim()
     }
-    fn step(&mut self, x: &[f64], u: &[f64], next: &mut [f64]) -> Result<(), D::Error> {
-        let t = Instant::now();
-        let r = self.inner.step(x, u, next);
-        self.step += t.elapsed();
-        r
+    fn create_data(&self) -> D::Data {
+        self.inner.create_data()
     }
-    fn step_near(
+    fn calc(
         &mut self,
+        data: &mut D::Data,
+        near: Option<&D::Data>,
         x: &[f64],
         u: &[f64],
-        near_x: &[f64],
-        near_u: &[f64],
         next: &mut [f64],
     ) -> Result<(), D::Error> {
         let t = Instant::now();
-        let r = self.inner.step_near(x, u, near_x, near_u, next);
+        let r = self.inner.calc(data, near, x, u, next);
         self.step += t.elapsed();
         r
     }
-    fn derivatives(
+    fn calc_diff(
         &mut self,
+        data: &mut D::Data,
         x: &[f64],
         u: &[f64],
         fx: &mut [f64],
         fu: &mut [f64],
     ) -> Result<(), D::Error> {
         let t = Instant::now();
-        let r = self.inner.derivatives(x, u, fx, fu);
+        let r = self.inner.calc_diff(data, x, u, fx, fu);
         self.first += t.elapsed();
         r
     }
-    fn has_second_derivatives(&self) -> bool {
-        self.inner.has_second_derivatives()
+    fn second_order(&mut self) -> Option<&mut dyn SecondOrder<D::Data, Error = D::Error>> {
+        self.inner.second_order()?;
+        Some(self)
     }
-    fn second_derivatives(
+}
+
+impl<D: Dynamics> SecondOrder<D::Data> for Timed<D> {
+    type Error = D::Error;
+    fn calc_diff_second(
         &mut self,
+        data: &mut D::Data,
         x: &[f64],
         u: &[f64],
         c: &[f64],
@@ -68,7 +75,11 @@ impl<D: Dynamics> Dynamics for Timed<D> {
         hess: &mut [f64],
     ) -> Result<(), D::Error> {
         let t = Instant::now();
-        let r = self.inner.second_derivatives(x, u, c, fx, fu, hess);
+        let inner = self
+            .inner
+            .second_order()
+            .expect("asked only through Timed::second_order, which checked it");
+        let r = inner.calc_diff_second(data, x, u, c, fx, fu, hess);
         self.second += t.elapsed();
         self.second_calls += 1;
         r
@@ -299,7 +310,7 @@ One pass (backward pass with the steps' derivatives, then the forward pass with 
         let step = t.step.as_secs_f64() * 1e3;
         let rest = total - second - step - t.first.as_secs_f64() * 1e3;
         out.push_str(&format!(
-            "\nWhere the time of the full-DDP solve at sigma = 0.1 goes ({passes} passes, {total:.0} ms): second derivatives of the steps (`FingerDynamics::second_derivatives`: one `Simulator::second_order_step` per step and trajectory, then a cheap contraction per backward attempt; {} calls) {second:.0} ms ({:.0}%), steps of the forward passes and line searches {step:.0} ms ({:.0}%), the optimiser's own backward-pass algebra, box QP and bookkeeping {rest:.0} ms ({:.0}%).\n",
+            "\nWhere the time of the full-DDP solve at sigma = 0.1 goes ({passes} passes, {total:.0} ms): second derivatives of the steps (`FingerDynamics`'s `calc_diff_second`: one `Simulator::second_order_step` per step and trajectory, kept in the knot's data, then a cheap contraction per backward attempt; {} calls) {second:.0} ms ({:.0}%), steps of the forward passes and line searches {step:.0} ms ({:.0}%), the optimiser's own backward-pass algebra, box QP and bookkeeping {rest:.0} ms ({:.0}%).\n",
             t.second_calls,
             100.0 * second / total,
             100.0 * step / total,

@@ -9,14 +9,16 @@
 //! struct Integrator;
 //! impl Dynamics for Integrator {
 //!     type Error = std::convert::Infallible;
+//!     type Data = ();
 //!     fn state_dim(&self) -> usize { 2 }
 //!     fn control_dim(&self) -> usize { 1 }
-//!     fn step(&mut self, x: &[f64], u: &[f64], next: &mut [f64]) -> Result<(), Self::Error> {
+//!     fn create_data(&self) {}
+//!     fn calc(&mut self, _: &mut (), _: Option<&()>, x: &[f64], u: &[f64], next: &mut [f64]) -> Result<(), Self::Error> {
 //!         next[0] = x[0] + 0.1 * x[1];
 //!         next[1] = x[1] + 0.1 * u[0];
 //!         Ok(())
 //!     }
-//!     fn derivatives(&mut self, _x: &[f64], _u: &[f64], fx: &mut [f64], fu: &mut [f64]) -> Result<(), Self::Error> {
+//!     fn calc_diff(&mut self, _: &mut (), _x: &[f64], _u: &[f64], fx: &mut [f64], fu: &mut [f64]) -> Result<(), Self::Error> {
 //!         fx.copy_from_slice(&[1.0, 0.1, 0.0, 1.0]);
 //!         fu.copy_from_slice(&[0.0, 0.1]);
 //!         Ok(())
@@ -41,7 +43,7 @@ pub mod problems;
 mod solver;
 
 pub use error::DdpError;
-pub use model::{Cost, CostDerivatives, Dynamics, QuadraticCost};
+pub use model::{Cost, CostDerivatives, Dynamics, QuadraticCost, SecondOrder};
 pub use solver::{
     ControlLimits, Ddp, DdpSettings, Iteration, Method, RESOLUTION, Regularisation, Solution,
     Status, ValueModel, rollout, shift_controls,

@@ -1,10 +1,19 @@
 //! What the optimiser consumes: discrete dynamics with derivatives, and a cost with derivatives. Matrices
 //! are row-major slices (`fx[i * n + j] = d x'_i / d x_j`).
 
-/// Discrete dynamics `x' = f(x, u)` with derivatives.
+/// Discrete dynamics `x' = f(x, u)` with first derivatives, computed in two stages per knot (as action
+/// models and their data are in crocoddyl): [`Dynamics::calc`] computes the step and keeps in the knot's
+/// [`Dynamics::Data`] what its linearisation needs; [`Dynamics::calc_diff`] linearises the step `calc`
+/// stored there. The optimiser creates one data per knot once per solve (and one per knot for its line
+/// search's trial trajectory, swapped in on acceptance), so nothing is looked up by the values of `x` and
+/// `u`. Full second-order DDP needs the capability [`SecondOrder`] as well ([`Dynamics::second_order`]).
 pub trait Dynamics {
     /// What a failed step reports (a failed step in a line search is a rejected trial, never propagated).
     type Error: std::error::Error + Send + Sync + 'static;
+
+    /// What one knot's step keeps: for its linearisation, and as the warm start of the next step
+    /// computed at that knot (`()` for dynamics in closed form).
+    type Data: Send;
 
     /// `n`, the state's length.
     fn state_dim(&self) -> usize;
@@ -12,55 +21,61 @@ pub trait Dynamics {
     /// `m`, the control's length.
     fn control_dim(&self) -> usize;
 
-    /// Write `f(x, u)` into `next` (length `n`).
-    fn step(&mut self, x: &[f64], u: &[f64], next: &mut [f64]) -> Result<(), Self::Error>;
+    /// Fresh data for one knot.
+    fn create_data(&self) -> Self::Data;
 
-    /// Write `f(x, u)` into `next`, knowing that the step from `(near_x, near_u)` was taken before (the
-    /// forward pass steps near the previous trajectory): dynamics whose step is an iterative solve may
-    /// start it from that step's solution. The result must not depend on the hint beyond the solver's
-    /// tolerance. The default is [`Dynamics::step`].
-    fn step_near(
+    /// Write `f(x, u)` into `next` (length `n`) and keep in `data` what [`Dynamics::calc_diff`] and
+    /// [`SecondOrder::calc_diff_second`] need. `near`, when given, is the same knot's data from the
+    /// trajectory the optimiser is improving (the line search steps near it): dynamics whose step is an
+    /// iterative solve may start from the solution it holds. The result must not depend on `near` or on
+    /// what `data` held before beyond the solver's tolerance.
+    fn calc(
         &mut self,
+        data: &mut Self::Data,
+        near: Option<&Self::Data>,
         x: &[f64],
         u: &[f64],
-        near_x: &[f64],
-        near_u: &[f64],
         next: &mut [f64],
-    ) -> Result<(), Self::Error> {
-        let _ = (near_x, near_u);
-        self.step(x, u, next)
-    }
+    ) -> Result<(), Self::Error>;
 
-    /// Write `fx` (`n x n`) and `fu` (`n x m`) at `(x, u)`.
-    fn derivatives(
+    /// Write `fx` (`n x n`) and `fu` (`n x m`) of the step [`Dynamics::calc`] last computed in `data`
+    /// (at these `x` and `u`).
+    fn calc_diff(
         &mut self,
+        data: &mut Self::Data,
         x: &[f64],
         u: &[f64],
         fx: &mut [f64],
         fu: &mut [f64],
     ) -> Result<(), Self::Error>;
 
-    /// Whether [`Dynamics::second_derivatives`] is provided (full second-order DDP needs it).
-    fn has_second_derivatives(&self) -> bool {
-        false
+    /// The second-order capability, if these dynamics have it (full second-order DDP needs it; without
+    /// it only Gauss-Newton iLQR runs). The default: none.
+    fn second_order(&mut self) -> Option<&mut dyn SecondOrder<Self::Data, Error = Self::Error>> {
+        None
     }
+}
 
-    /// Write `fx`, `fu` and, for the given `c` (length `n`), the Hessian of `c^T f(x, u)` with respect to
-    /// `(x, u)` into `hess` (`(n + m) x (n + m)`): the second-order terms of DDP contracted with the value
-    /// gradient. The default writes the first derivatives and a zero Hessian (Gauss-Newton).
-    fn second_derivatives(
+/// The second-order terms of DDP: the Hessian of `c^T f(x, u)` for the value gradient `c`.
+pub trait SecondOrder<Data> {
+    /// As [`Dynamics::Error`].
+    type Error;
+
+    /// Write `fx`, `fu` and the Hessian of `c^T f(x, u)` with respect to `(x, u)` into `hess`
+    /// (`(n + m) x (n + m)`), for the step [`Dynamics::calc`] last computed in `data` (at these `x` and
+    /// `u`). Called again with another `c` at the same data (a backward pass retried with more
+    /// regularisation), it may reuse what it kept there.
+    #[allow(clippy::too_many_arguments)]
+    fn calc_diff_second(
         &mut self,
+        data: &mut Data,
         x: &[f64],
         u: &[f64],
         c: &[f64],
         fx: &mut [f64],
         fu: &mut [f64],
         hess: &mut [f64],
-    ) -> Result<(), Self::Error> {
-        let _ = c;
-        hess.iter_mut().for_each(|e| *e = 0.0);
-        self.derivatives(x, u, fx, fu)
-    }
+    ) -> Result<(), Self::Error>;
 }
 
 /// The derivatives of a running cost at one step.

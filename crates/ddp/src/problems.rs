@@ -1,7 +1,7 @@
 //! Textbook problems with exact derivatives, for comparing the solver with other DDP libraries on
 //! identical terms (and for its own tests): linear dynamics, and the unicycle.
 
-use crate::model::Dynamics;
+use crate::model::{Dynamics, SecondOrder};
 use std::convert::Infallible;
 
 /// `x' = A x + B u`.
@@ -19,6 +19,7 @@ pub struct Linear {
 
 impl Dynamics for Linear {
     type Error = Infallible;
+    type Data = ();
 
     fn state_dim(&self) -> usize {
         self.n
@@ -28,7 +29,16 @@ impl Dynamics for Linear {
         self.m
     }
 
-    fn step(&mut self, x: &[f64], u: &[f64], next: &mut [f64]) -> Result<(), Infallible> {
+    fn create_data(&self) {}
+
+    fn calc(
+        &mut self,
+        _: &mut (),
+        _: Option<&()>,
+        x: &[f64],
+        u: &[f64],
+        next: &mut [f64],
+    ) -> Result<(), Infallible> {
         for i in 0..self.n {
             next[i] = (0..self.n)
                 .map(|j| self.a[i * self.n + j] * x[j])
@@ -40,8 +50,9 @@ impl Dynamics for Linear {
         Ok(())
     }
 
-    fn derivatives(
+    fn calc_diff(
         &mut self,
+        _: &mut (),
         _x: &[f64],
         _u: &[f64],
         fx: &mut [f64],
@@ -52,8 +63,27 @@ impl Dynamics for Linear {
         Ok(())
     }
 
-    fn has_second_derivatives(&self) -> bool {
-        true
+    fn second_order(&mut self) -> Option<&mut dyn SecondOrder<(), Error = Infallible>> {
+        Some(self)
+    }
+}
+
+/// Linear dynamics have no second-order terms: the Hessian is zero.
+impl SecondOrder<()> for Linear {
+    type Error = Infallible;
+
+    fn calc_diff_second(
+        &mut self,
+        data: &mut (),
+        x: &[f64],
+        u: &[f64],
+        _c: &[f64],
+        fx: &mut [f64],
+        fu: &mut [f64],
+        hess: &mut [f64],
+    ) -> Result<(), Infallible> {
+        hess.iter_mut().for_each(|e| *e = 0.0);
+        self.calc_diff(data, x, u, fx, fu)
     }
 }
 
@@ -80,6 +110,7 @@ impl Unicycle {
 
 impl Dynamics for Unicycle {
     type Error = Infallible;
+    type Data = ();
 
     fn state_dim(&self) -> usize {
         3
@@ -89,7 +120,16 @@ impl Dynamics for Unicycle {
         2
     }
 
-    fn step(&mut self, x: &[f64], u: &[f64], next: &mut [f64]) -> Result<(), Infallible> {
+    fn create_data(&self) {}
+
+    fn calc(
+        &mut self,
+        _: &mut (),
+        _: Option<&()>,
+        x: &[f64],
+        u: &[f64],
+        next: &mut [f64],
+    ) -> Result<(), Infallible> {
         let (s, c) = x[2].sin_cos();
         next[0] = x[0] + u[0] * c * self.dt;
         next[1] = x[1] + u[0] * s * self.dt;
@@ -97,8 +137,9 @@ impl Dynamics for Unicycle {
         Ok(())
     }
 
-    fn derivatives(
+    fn calc_diff(
         &mut self,
+        _: &mut (),
         x: &[f64],
         u: &[f64],
         fx: &mut [f64],
@@ -121,12 +162,17 @@ impl Dynamics for Unicycle {
         Ok(())
     }
 
-    fn has_second_derivatives(&self) -> bool {
-        true
+    fn second_order(&mut self) -> Option<&mut dyn SecondOrder<(), Error = Infallible>> {
+        Some(self)
     }
+}
 
-    fn second_derivatives(
+impl SecondOrder<()> for Unicycle {
+    type Error = Infallible;
+
+    fn calc_diff_second(
         &mut self,
+        data: &mut (),
         x: &[f64],
         u: &[f64],
         cv: &[f64],
@@ -134,7 +180,7 @@ impl Dynamics for Unicycle {
         fu: &mut [f64],
         hess: &mut [f64],
     ) -> Result<(), Infallible> {
-        self.derivatives(x, u, fx, fu)?;
+        self.calc_diff(data, x, u, fx, fu)?;
         let (s, c) = x[2].sin_cos();
         let dt = self.dt;
         // y = (px, py, theta, v, w): d2/dtheta2 and d2/dtheta dv of c0 px' + c1 py'.

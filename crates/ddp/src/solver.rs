@@ -15,7 +15,7 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub enum Method {
     /// Full second-order DDP: `Q` includes `V_x . f_xx`, `V_x . f_ux`, `V_x . f_uu` (the dynamics'
-    /// [`Dynamics::second_derivatives`]).
+    /// [`crate::SecondOrder`] capability).
     Full,
     /// Gauss-Newton iLQR: those terms dropped.
     GaussNewton,
@@ -321,7 +321,7 @@ impl Ddp {
                 problem: format!("needs {m} entries, has {}", l.lower.len()),
             });
         }
-        if s.method == Method::Full && !dynamics.has_second_derivatives() {
+        if s.method == Method::Full && dynamics.second_order().is_none() {
             return Err(DdpError::NoSecondDerivatives);
         }
         let horizon = controls.len();
@@ -333,7 +333,11 @@ impl Ddp {
                 }
             }
         }
-        let (mut x, mut total) = match rollout(dynamics, cost, x0, &u) {
+        // Each knot's step data: the accepted trajectory's, and the line search's trial (swapped in on
+        // acceptance). Created once per solve.
+        let mut data: Vec<D::Data> = (0..horizon).map(|_| dynamics.create_data()).collect();
+        let mut trial: Vec<D::Data> = (0..horizon).map(|_| dynamics.create_data()).collect();
+        let (mut x, mut total) = match rollout_into(dynamics, cost, x0, &u, &mut data) {
             Ok(r) => r,
             Err((step, reason)) => return Err(DdpError::InitialRollout { step, reason }),
         };
@@ -375,6 +379,7 @@ impl Ddp {
             let bp = loop {
                 match self.backward(
                     dynamics,
+                    &mut data,
                     cost,
                     (&x, &u),
                     &k_prev,
@@ -427,8 +432,16 @@ impl Ddp {
             let mut accepted = None;
             for (index, &alpha) in alphas.iter().enumerate().skip(first_alpha) {
                 let expected = -alpha * (bp.dv[0] + alpha * bp.dv[1]);
-                if let Ok((xn, un, cn)) = self.forward(dynamics, cost, &x, &u, &bp.k, &gains, alpha)
-                {
+                if let Ok((xn, un, cn)) = self.forward(
+                    dynamics,
+                    (&data, &mut trial),
+                    cost,
+                    &x,
+                    &u,
+                    &bp.k,
+                    &gains,
+                    alpha,
+                ) {
                     let reduction = total - cn;
                     let ratio = if expected > 0.0 {
                         reduction / expected
@@ -456,6 +469,7 @@ impl Ddp {
                     x = xn;
                     u = un;
                     total = cn;
+                    std::mem::swap(&mut data, &mut trial);
                     lin = None;
                     record(
                         &mut iterations,
@@ -473,6 +487,7 @@ impl Ddp {
                         // The gains of the final trajectory.
                         if let Ok(Some(bp)) = self.backward(
                             dynamics,
+                            &mut data,
                             cost,
                             (&x, &u),
                             &k_prev,
@@ -537,6 +552,7 @@ impl Ddp {
     fn backward<D: Dynamics, C: Cost>(
         &self,
         dynamics: &mut D,
+        data: &mut [D::Data],
         cost: &C,
         (x, u): (&[Vec<f64>], &[Vec<f64>]),
         k_prev: &[Vec<f64>],
@@ -553,7 +569,7 @@ impl Ddp {
             for i in 0..horizon {
                 let (mut a, mut b) = (vec![0.0; n * n], vec![0.0; n * m]);
                 dynamics
-                    .derivatives(&x[i], &u[i], &mut a, &mut b)
+                    .calc_diff(&mut data[i], &x[i], &u[i], &mut a, &mut b)
                     .map_err(|e| DdpError::Derivatives {
                         step: i,
                         source: Box::new(e),
@@ -596,7 +612,17 @@ impl Ddp {
             cost.running_derivatives(i, &x[i], &u[i], &mut cd);
             let (fx, fu): (&[f64], &[f64]) = if full {
                 dynamics
-                    .second_derivatives(&x[i], &u[i], &vx, &mut fx_buf, &mut fu_buf, &mut hess)
+                    .second_order()
+                    .ok_or(DdpError::NoSecondDerivatives)?
+                    .calc_diff_second(
+                        &mut data[i],
+                        &x[i],
+                        &u[i],
+                        &vx,
+                        &mut fx_buf,
+                        &mut fu_buf,
+                        &mut hess,
+                    )
                     .map_err(|e| DdpError::Derivatives {
                         step: i,
                         source: Box::new(e),
@@ -751,6 +777,7 @@ impl Ddp {
     fn forward<D: Dynamics, C: Cost>(
         &self,
         dynamics: &mut D,
+        (data, trial): (&[D::Data], &mut [D::Data]),
         cost: &C,
         x: &[Vec<f64>],
         u: &[Vec<f64>],
@@ -781,7 +808,7 @@ impl Ddp {
             }
             let mut next = vec![0.0; n];
             dynamics
-                .step_near(&xn[i], &ui, &x[i], &u[i], &mut next)
+                .calc(&mut trial[i], Some(&data[i]), &xn[i], &ui, &mut next)
                 .map_err(|_| ())?;
             total += cost.running(i, &xn[i], &ui);
             if !(total.is_finite() && next.iter().all(|e| e.is_finite())) {
@@ -808,6 +835,18 @@ pub fn rollout<D: Dynamics, C: Cost>(
     x0: &[f64],
     u: &[Vec<f64>],
 ) -> Result<Rollout, (usize, String)> {
+    let mut data: Vec<D::Data> = (0..u.len()).map(|_| dynamics.create_data()).collect();
+    rollout_into(dynamics, cost, x0, u, &mut data)
+}
+
+/// [`rollout`], each knot's step computed in `data[i]`.
+fn rollout_into<D: Dynamics, C: Cost>(
+    dynamics: &mut D,
+    cost: &C,
+    x0: &[f64],
+    u: &[Vec<f64>],
+    data: &mut [D::Data],
+) -> Result<Rollout, (usize, String)> {
     let n = dynamics.state_dim();
     let mut x = Vec::with_capacity(u.len() + 1);
     x.push(x0.to_vec());
@@ -815,7 +854,7 @@ pub fn rollout<D: Dynamics, C: Cost>(
     for (i, ui) in u.iter().enumerate() {
         let mut next = vec![0.0; n];
         dynamics
-            .step(&x[i], ui, &mut next)
+            .calc(&mut data[i], None, &x[i], ui, &mut next)
             .map_err(|e| (i, e.to_string()))?;
         if !next.iter().all(|e| e.is_finite()) {
             return Err((i, "non-finite state".into()));

@@ -23,7 +23,7 @@ pub use evaluate::{
 };
 pub use file::{Library, MAGIC, VERSION};
 pub use policy::Policy;
-pub use task::{CONTROL_WEIGHT, FingerDynamics, TaskError, finger_cost};
+pub use task::{CONTROL_WEIGHT, FingerDynamics, StepData, TaskError, finger_cost};
 
 /// `Err` unless `v` has `len` finite entries.
 pub(crate) fn check(what: &'static str, v: &[f64], len: usize) -> Result<(), LibraryError> {

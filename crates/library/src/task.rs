@@ -1,9 +1,8 @@
 //! The simulator as [`ddp::Dynamics`] and the task's cost: `l(x, u) = -theta3 + c_u |u|^2` per step and
 //! `-theta3` at the end (SCENE.md, paper section V-A).
 
-use ddp::{Dynamics, QuadraticCost};
+use ddp::{Dynamics, QuadraticCost, SecondOrder};
 use dynamics::{DynamicsError, SecondOrderStep, Simulator};
-use std::collections::HashMap;
 use thiserror::Error;
 
 /// SCENE.md's control weight `c_u`.
@@ -28,36 +27,39 @@ pub enum TaskError {
     NotConverged(ncp::Status),
 }
 
-/// A [`Simulator`] as the optimiser's dynamics: `step` is [`Simulator::step`], `derivatives`
-/// [`Simulator::step_with_derivatives`], `second_derivatives` [`Simulator::step_with_hessian`].
+/// A [`Simulator`] as the optimiser's dynamics: [`Dynamics::calc`] is [`Simulator::step`],
+/// [`Dynamics::calc_diff`] [`Simulator::step_with_derivatives`] and the second-order capability
+/// [`Simulator::second_order_step`] (scenes of at most three joints and eight state-and-control entries).
 ///
-/// The optimiser retries a backward pass with more regularisation at the same trajectory, which changes
-/// only the vector the step's Hessian is contracted with: prepared steps ([`SecondOrderStep`]) are kept by
-/// the exact bits of `(x, u)`, so a retry costs the contraction alone.
+/// Each knot's [`StepData`] keeps its step's solution `[v'; lambda]`, from which the knot's linearisation
+/// and the next step computed near it start (they converge at once), and the step's second-order
+/// expansion once computed: a backward pass retried with more regularisation at the same trajectory
+/// changes only the vector the Hessian is contracted with, and costs the contraction alone.
 #[derive(Debug)]
 pub struct FingerDynamics {
     sim: Simulator,
-    prepared: HashMap<Vec<u64>, SecondOrderStep>,
-    /// Solutions `[v'; lambda]` of recent steps: the derivatives at a state the forward pass has stepped
-    /// from start their solve there and need no iteration.
-    solutions: HashMap<Vec<u64>, Vec<f64>>,
 }
 
-fn key(x: &[f64], u: &[f64]) -> Vec<u64> {
-    x.iter().chain(u).map(|e| e.to_bits()).collect()
+/// One knot's step, kept by [`FingerDynamics`] (see there).
+#[derive(Debug, Default)]
+pub struct StepData {
+    /// `[v'; lambda]` of the step last computed at the knot.
+    solution: Option<Vec<f64>>,
+    /// That step's second-order expansion, once asked for.
+    prepared: Option<SecondOrderStep>,
 }
 
-/// Prepared steps (and step solutions) kept at most: a few trajectories' worth.
-const PREPARED_CAPACITY: usize = 512;
+impl StepData {
+    /// `[v'; lambda]` of the step last computed at the knot, if any.
+    pub fn solution(&self) -> Option<&[f64]> {
+        self.solution.as_deref()
+    }
+}
 
 impl FingerDynamics {
     /// Wrap a simulator.
     pub fn new(sim: Simulator) -> Self {
-        FingerDynamics {
-            sim,
-            prepared: HashMap::new(),
-            solutions: HashMap::new(),
-        }
+        FingerDynamics { sim }
     }
 
     /// The simulator.
@@ -65,16 +67,14 @@ impl FingerDynamics {
         &self.sim
     }
 
-    /// The simulator, mutably (to change its covariance or reset its warm start); forgets prepared steps.
+    /// The simulator, mutably (to change its covariance or reset its warm start).
     pub fn simulator_mut(&mut self) -> &mut Simulator {
-        self.prepared.clear();
-        self.solutions.clear();
         &mut self.sim
     }
 
-    /// Warm-start the simulator from the stored solution of a step from `(x, u)`, if any.
-    fn resume(&mut self, x: &[f64], u: &[f64]) {
-        if let Some(z) = self.solutions.get(&key(x, u)) {
+    /// Start the simulator's next solve from `z`, if given.
+    fn resume(&mut self, z: Option<&[f64]>) {
+        if let Some(z) = z {
             self.sim
                 .set_warm_start(z)
                 .expect("a stored solution has the scene's size");
@@ -84,6 +84,7 @@ impl FingerDynamics {
 
 impl Dynamics for FingerDynamics {
     type Error = TaskError;
+    type Data = StepData;
 
     fn state_dim(&self) -> usize {
         self.sim.scene().n_state()
@@ -93,55 +94,65 @@ impl Dynamics for FingerDynamics {
         self.sim.scene().n_controls
     }
 
-    fn step(&mut self, x: &[f64], u: &[f64], next: &mut [f64]) -> Result<(), TaskError> {
+    fn create_data(&self) -> StepData {
+        StepData::default()
+    }
+
+    fn calc(
+        &mut self,
+        data: &mut StepData,
+        near: Option<&StepData>,
+        x: &[f64],
+        u: &[f64],
+        next: &mut [f64],
+    ) -> Result<(), TaskError> {
+        self.resume(near.and_then(StepData::solution));
+        data.prepared = None;
+        data.solution = None;
         let s = self.sim.step(x, u)?;
         if s.info.status != ncp::Status::Converged {
             return Err(TaskError::NotConverged(s.info.status));
         }
         next.copy_from_slice(&s.x_next);
-        if self.solutions.len() >= PREPARED_CAPACITY {
-            self.solutions.clear();
-        }
         let n = self.sim.scene().n_dof();
         let mut z = s.x_next[n..].to_vec();
         z.extend_from_slice(&s.lambda);
-        self.solutions.insert(key(x, u), z);
+        data.solution = Some(z);
         Ok(())
     }
 
-    fn step_near(
+    fn calc_diff(
         &mut self,
-        x: &[f64],
-        u: &[f64],
-        near_x: &[f64],
-        near_u: &[f64],
-        next: &mut [f64],
-    ) -> Result<(), TaskError> {
-        self.resume(near_x, near_u);
-        self.step(x, u, next)
-    }
-
-    fn derivatives(
-        &mut self,
+        data: &mut StepData,
         x: &[f64],
         u: &[f64],
         fx: &mut [f64],
         fu: &mut [f64],
     ) -> Result<(), TaskError> {
-        self.resume(x, u);
+        if let Some(so) = &data.prepared {
+            fx.copy_from_slice(&so.derivatives.fx);
+            fu.copy_from_slice(&so.derivatives.fu);
+            return Ok(());
+        }
+        self.resume(data.solution());
         let (_, d) = self.sim.step_with_derivatives(x, u)?;
         fx.copy_from_slice(&d.fx);
         fu.copy_from_slice(&d.fu);
         Ok(())
     }
 
-    fn has_second_derivatives(&self) -> bool {
+    fn second_order(&mut self) -> Option<&mut dyn SecondOrder<StepData, Error = TaskError>> {
         let s = self.sim.scene();
-        s.n_dof() <= 3 && s.n_state() + s.n_controls <= 8
+        (s.n_dof() <= 3 && s.n_state() + s.n_controls <= 8).then_some(self as _)
     }
+}
 
-    fn second_derivatives(
+impl SecondOrder<StepData> for FingerDynamics {
+    type Error = TaskError;
+
+    fn calc_diff_second(
         &mut self,
+        data: &mut StepData,
         x: &[f64],
         u: &[f64],
         c: &[f64],
@@ -149,19 +160,15 @@ impl Dynamics for FingerDynamics {
         fu: &mut [f64],
         hess: &mut [f64],
     ) -> Result<(), TaskError> {
-        let key = key(x, u);
-        if !self.prepared.contains_key(&key) {
-            if self.prepared.len() >= PREPARED_CAPACITY {
-                self.prepared.clear();
-            }
-            self.resume(x, u);
+        if data.prepared.is_none() {
+            self.resume(data.solution());
             let so = self.sim.second_order_step(x, u)?;
             if so.step.info.status != ncp::Status::Converged {
                 return Err(TaskError::NotConverged(so.step.info.status));
             }
-            self.prepared.insert(key.clone(), so);
+            data.prepared = Some(so);
         }
-        let so = &self.prepared[&key];
+        let so = data.prepared.as_ref().expect("prepared above");
         fx.copy_from_slice(&so.derivatives.fx);
         fu.copy_from_slice(&so.derivatives.fu);
         hess.copy_from_slice(&so.hessian(c)?);

@@ -114,9 +114,10 @@ impl OnlineMpc {
     pub fn seed_from_policy(&mut self, policy: &Policy, x: &[f64]) -> Result<(), ViewerError> {
         let mut x = x.to_vec();
         let mut next = vec![0.0; x.len()];
+        let mut data = ddp::Dynamics::create_data(&self.dynamics);
         for u in &mut self.plan {
             policy.control(&x, u)?;
-            ddp::Dynamics::step(&mut self.dynamics, &x, u, &mut next)
+            ddp::Dynamics::calc(&mut self.dynamics, &mut data, None, &x, u, &mut next)
                 .map_err(|e| ViewerError::Message(format!("seeding the plan: {e}")))?;
             std::mem::swap(&mut x, &mut next);
         }
