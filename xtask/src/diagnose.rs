@@ -222,7 +222,8 @@ fn measure(run: &Run) -> (f64, f64) {
     for &impulse in &run.impulses[from + 1..] {
         contacts.observe(impulse);
     }
-    let per_half_turn = if turned.abs() > 1e-6 {
+    // A ratio per half turn only where the ellipse turned at least half a turn.
+    let per_half_turn = if turned.abs() >= std::f64::consts::PI {
         contacts.events as f64 / (turned.abs() / std::f64::consts::PI)
     } else {
         f64::INFINITY
@@ -320,7 +321,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     for r in &rows {
         let per_half_turn = r
             .contacts_per_half_turn
-            .map_or("- (no turn)".into(), |c| format!("{c:.2}"));
+            .map_or("- (under half a turn)".into(), |c| format!("{c:.2}"));
         let _ = writeln!(
             md,
             "| {} | {} | {:.3} | {per_half_turn} | {:.2} |",

@@ -82,6 +82,10 @@ pub struct LibrarySettings {
     pub neighbours: usize,
     /// Rounds of growth on the policy's own stalls (see [`Exploration::Branches`]; 0: none).
     pub growth: usize,
+    /// The time steps of the growth rounds' closed loops, in turn, each for a round on the library's
+    /// model and one on hard contact (rounds 0 and 1 at the first, 2 and 3 at the second, ...; empty: the
+    /// library's `h`). The trajectories themselves are always optimised at `h`.
+    pub growth_time_steps: Vec<f64>,
 }
 
 /// How a library's trajectories explore the state space.
@@ -96,7 +100,8 @@ pub enum Exploration {
     /// trajectories, its velocities perturbed (variance [`LibrarySettings::kick_variance`]), and runs a
     /// chain of `length` trajectories warm-started from the trunk's plan there. Then
     /// [`LibrarySettings::growth`] rounds: the policy runs in closed loop from `x0` with a velocity kick
-    /// every 10 s, on the library's own model in even rounds and on hard contact in odd ones; wherever the free angle advances less than
+    /// every 10 s, on the library's own model in even rounds and on hard contact in odd ones, at the time
+    /// steps of [`LibrarySettings::growth_time_steps`] in turn (a pair of rounds each); wherever the free angle advances less than
     /// [`STALL_ADVANCE`] in [`STALL_WINDOW`] seconds, a branch of `length` trajectories starts from that
     /// state, warm-started from the plan of the controller the policy used there.
     Branches {
@@ -142,6 +147,7 @@ impl Default for LibrarySettings {
             keep: 4,
             neighbours: 8,
             growth: 4,
+            growth_time_steps: vec![0.05, 0.03],
         }
     }
 }
@@ -156,6 +162,7 @@ impl LibrarySettings {
             keep: 1,
             neighbours: 1,
             growth: 0,
+            growth_time_steps: Vec::new(),
             ..LibrarySettings::default()
         }
     }
@@ -222,6 +229,24 @@ impl LibrarySettings {
         }
         if self.growth > MAX_GROWTH {
             return bad("growth", self.growth as f64, "at most 100 rounds");
+        }
+        if self.growth_time_steps.len() > MAX_GROWTH {
+            return bad(
+                "growth_time_steps",
+                self.growth_time_steps.len() as f64,
+                "at most 100 time steps",
+            );
+        }
+        if let Some(&h) = self
+            .growth_time_steps
+            .iter()
+            .find(|h| !(h.is_finite() && **h > 0.0 && **h <= 1.0))
+        {
+            return bad(
+                "growth_time_steps",
+                h,
+                "each finite, positive and at most 1 s",
+            );
         }
         if let Exploration::Branches {
             trunk,
@@ -706,6 +731,12 @@ fn grow(
     };
     let mut policy = policy_of(built)?;
     // Odd rounds run on hard contact: the policy is meant for the smoothed and the hard world alike.
+    let steps_of = &s.growth_time_steps;
+    let h = if steps_of.is_empty() {
+        s.h
+    } else {
+        steps_of[(round / 2) % steps_of.len()]
+    };
     let mut world = Simulator::new(
         task.scene.clone(),
         StepSettings {
@@ -714,15 +745,15 @@ fn grow(
             } else {
                 s.model.complementarity()
             },
-            h: s.h,
+            h,
             ..StepSettings::default()
         },
     )?;
     let mut rng = ChaCha8Rng::seed_from_u64(s.seed);
     rng.set_stream(u64::MAX - round as u64);
-    let steps = (GROWTH_SECONDS / s.h).round() as usize;
-    let kick_steps = ((10.0 / s.h).round() as usize).max(1);
-    let window = ((STALL_WINDOW / s.h).round() as usize).max(1);
+    let steps = (GROWTH_SECONDS / h).round() as usize;
+    let kick_steps = ((10.0 / h).round() as usize).max(1);
+    let window = ((STALL_WINDOW / h).round() as usize).max(1);
     let mut recent = std::collections::VecDeque::with_capacity(window + 1);
     let mut x = s.x0.clone();
     let mut u = vec![0.0; task.scene.n_controls];
