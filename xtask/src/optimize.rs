@@ -76,6 +76,26 @@ pub struct Args {
     /// No per-pass lines.
     #[arg(long)]
     quiet: bool,
+    /// Exit with status 1 unless the optimiser converged (CostConverged or StepConverged).
+    #[arg(long)]
+    strict: bool,
+}
+
+/// What a status means, for the summary line.
+fn meaning(status: ddp::Status) -> &'static str {
+    match status {
+        ddp::Status::CostConverged => {
+            "converged: the last accepted pass changed the cost by less than the tolerance"
+        }
+        ddp::Status::StepConverged => "converged: the feedforward step fell below the tolerance",
+        ddp::Status::MaxIterations => "not converged: the pass limit (--iterations) was reached",
+        ddp::Status::NoDescent => {
+            "not converged: no step size reduced the cost up to the largest regularisation"
+        }
+        ddp::Status::RegularisationExceeded => {
+            "not converged: Q_uu stayed indefinite up to the largest regularisation"
+        }
+    }
 }
 
 #[derive(Serialize)]
@@ -185,6 +205,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         solution.cost,
         seconds * 1e3
     );
+    println!("status: {}", meaning(solution.status));
     if args.problem == Problem::Finger {
         let n = solution.states[0].len() / 2;
         let turned =
@@ -211,6 +232,9 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         std::fs::write(path, serde_json::to_string(&report)?)
             .with_context(|| format!("writing {}", path.display()))?;
         println!("wrote {}", path.display());
+    }
+    if args.strict && !solution.status.converged() {
+        anyhow::bail!("--strict: {}", meaning(solution.status));
     }
     Ok(())
 }

@@ -95,15 +95,20 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         tolerance: args.tolerance,
         ..base
     };
+    // One tick per optimised trajectory (each keeps `keep` controllers); growth adds trajectories beyond
+    // the budget, and the bar grows with them.
     let bar = ProgressBar::new(settings.trajectories as u64);
     bar.set_style(
         ProgressStyle::with_template(
-            "{bar:40} {pos}/{len} controllers  {elapsed_precise} (eta {eta})  {msg}",
+            "{bar:40} {pos}/{len} trajectories  {elapsed_precise} (eta {eta})  {msg}",
         )
         .expect("a valid template"),
     );
     let start = Instant::now();
     let library = Library::build(&scene, &settings, |_, e| {
+        if bar.position() >= bar.length().unwrap_or(0) {
+            bar.set_length(bar.position() + 1);
+        }
         bar.inc(1);
         bar.set_message(format!("{} passes, theta3 {:.2}", e.passes, e.x[2]));
     })?;

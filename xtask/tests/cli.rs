@@ -228,3 +228,45 @@ fn a_negative_number_is_read_as_a_value_and_range_checked() {
     assert!(err.contains("sigma") && err.contains("positive"), "{err}");
     assert!(!err.contains("unexpected argument"), "{err}");
 }
+
+#[test]
+fn optimize_explains_its_status_and_strict_fails_when_it_did_not_converge() {
+    let out = xtask()
+        .args([
+            "optimize",
+            "--problem",
+            "unicycle",
+            "--iterations",
+            "2",
+            "--quiet",
+        ])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "without --strict the exit code is 0");
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("status: not converged"), "{text}");
+    let out = xtask()
+        .args([
+            "optimize",
+            "--problem",
+            "unicycle",
+            "--iterations",
+            "2",
+            "--quiet",
+            "--strict",
+        ])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--strict"));
+    let out = xtask()
+        .args(["optimize", "--problem", "unicycle", "--quiet", "--strict"])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(String::from_utf8_lossy(&out.stdout).contains("status: converged"));
+}
