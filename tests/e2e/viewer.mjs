@@ -43,10 +43,15 @@ try {
   const spinning = await waitFor((f) => f.policy === "mpc" && f.spin_rate > 0.2, 40, "the controller spins the ellipse");
   result.spin_before = spinning.spin_rate;
 
-  // Grab the ellipse near the end of its long axis and pull that point clockwise, against the spin.
+  // Grab the ellipse off its hinge and pull that point clockwise, against the spin. The grabbed point
+  // lies inside the circle of the ellipse's minor semi-axis, so it is still on the ellipse however far
+  // the ellipse turns between this frame and the mouse press (a loaded machine once let it turn off a
+  // point near the end of the long axis, and the press grabbed nothing).
   const theta = spinning.x[2];
   const centre = spinning.bodies[2].centre;
-  const grab = [centre[0] + 0.55 * Math.cos(theta), centre[1] + 0.55 * Math.sin(theta)];
+  const minor = Math.min(...(await page.evaluate(() => shapes[2].semi_axes)));
+  const lever = 0.8 * minor;
+  const grab = [centre[0] + lever * Math.cos(theta), centre[1] + lever * Math.sin(theta)];
   const target = [grab[0] + 1.2 * Math.sin(theta), grab[1] - 1.2 * Math.cos(theta)];
   const [gx, gy] = await page.evaluate((p) => window.viewerToClient(p), grab);
   const [tx, ty] = await page.evaluate((p) => window.viewerToClient(p), target);
