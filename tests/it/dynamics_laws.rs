@@ -243,6 +243,54 @@ proptest! {
     }
 }
 
+proptest! {
+    #![proptest_config(ProptestConfig {
+        cases: std::env::var("PROPTEST_CASES").ok().and_then(|s| s.parse().ok()).unwrap_or(32),
+        ..ProptestConfig::default()
+    })]
+
+    /// `derivatives_of` and `second_order_of` linearise the step the caller holds, with no second solve:
+    /// they agree with the calls that solve the step again (to the solver's tolerance), leave the warm
+    /// start alone, and refuse a step whose rows do not fit the state.
+    #[test]
+    fn derivatives_of_a_stored_step_match_a_fresh_solve(
+        x in state(),
+        u in (-2.0f64..2.0, -2.0f64..2.0),
+        c in proptest::collection::vec(-1.0f64..1.0, 6),
+        which in 0usize..4,
+    ) {
+        let mut sim = smoothed_simulator(which);
+        let u = [u.0, u.1];
+        let step = sim.step(&x, &u).unwrap();
+        prop_assume!(step.d[4] > -0.2 && step.info.status == ncp::Status::Converged);
+        let Ok((_, fresh)) = sim.step_with_derivatives(&x, &u) else {
+            // Refused (a singular Jacobian at an active-set change): the stored step must be refused too.
+            prop_assert!(sim.derivatives_of(&x, &u, &step).is_err());
+            return Ok(());
+        };
+        let stored = sim.derivatives_of(&x, &u, &step).unwrap();
+        let scale = fresh.fx.iter().chain(&fresh.fu).fold(1.0f64, |m, v| m.max(v.abs()));
+        for (a, b) in stored.fx.iter().chain(&stored.fu).zip(fresh.fx.iter().chain(&fresh.fu)) {
+            prop_assert!((a - b).abs() <= 1e-6 * scale, "model {}: {} vs {}", which, a, b);
+        }
+        if which != 1 || !sim.has_state_covariance() {
+            let (so, again) = (sim.second_order_of(&x, &u, &step), sim.second_order_step(&x, &u));
+            if let (Ok(so), Ok(again)) = (so, again) {
+                prop_assert_eq!(&so.step.x_next, &step.x_next);
+                let (h1, h2) = (so.hessian(&c).unwrap(), again.hessian(&c).unwrap());
+                let hs = h2.iter().fold(1.0f64, |m, v| m.max(v.abs()));
+                for (a, b) in h1.iter().zip(&h2) {
+                    prop_assert!((a - b).abs() <= 1e-6 * hs, "model {}: {} vs {}", which, a, b);
+                }
+            }
+        }
+        // A step with other rows than this state's is refused, not linearised.
+        let mut wrong = step.clone();
+        wrong.lambda.pop();
+        prop_assert!(sim.derivatives_of(&x, &u, &wrong).is_err());
+    }
+}
+
 /// The finger without drag, limits or contact: a double pendulum and a free spinner.
 fn conservative_scene() -> Scene {
     let mut spec = Scene::flicking_finger().spec().clone();

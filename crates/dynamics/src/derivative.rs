@@ -509,6 +509,7 @@ impl Simulator {
         x: &[f64],
         u: &[f64],
         second: Option<&SecondOrder>,
+        given: Option<&Step>,
     ) -> Result<Linearised, DynamicsError> {
         let model = self.settings().model;
         if self.has_state_covariance() && matches!(model, Complementarity::Normal { .. }) {
@@ -535,8 +536,31 @@ impl Simulator {
             jacobian: values(&ing.jac),
             contacts: ing.contacts.clone(),
         };
-        let problem = self.assemble_problem(&x[n..], &values(&ing.M), &values(&ing.r), cons)?;
-        let (step, problem) = self.solve_step(x, problem)?;
+        let (step, problem) = match given {
+            // The step computed before at (x, u): linearise its solution, no second solve.
+            Some(step) => {
+                let m = cons.d.len();
+                if step.x_next.len() != 2 * n || step.lambda.len() != m {
+                    return Err(DynamicsError::Input {
+                        what: "step",
+                        problem: format!(
+                            "has {} state entries and {} impulses; a step from this x has {} and {m}",
+                            step.x_next.len(),
+                            step.lambda.len(),
+                            2 * n
+                        ),
+                    });
+                }
+                let (problem, _) =
+                    self.assemble_problem(&x[n..], &values(&ing.M), &values(&ing.r), cons)?;
+                (step.clone(), problem)
+            }
+            None => {
+                let problem =
+                    self.assemble_problem(&x[n..], &values(&ing.M), &values(&ing.r), cons)?;
+                self.solve_step(x, problem)?
+            }
+        };
         if step.info.status != ncp::Status::Converged {
             return Err(DynamicsError::Unsupported(
                 "derivatives of a step whose complementarity solve did not converge",
@@ -745,9 +769,25 @@ impl Simulator {
         x: &[f64],
         u: &[f64],
     ) -> Result<(Step, StepDerivatives), DynamicsError> {
-        let lin = self.linearise(x, u, None)?;
+        let lin = self.linearise(x, u, None, None)?;
         let der = self.first_derivatives(&lin);
         Ok((lin.step, der))
+    }
+
+    /// The exact derivatives of `step`, a step this simulator computed from `x` under `u` (by
+    /// [`Simulator::step`] or a derivative call): its solution is linearised as it is, without solving the
+    /// step again, so the derivatives belong to exactly the step the caller holds (and the warm start is
+    /// left alone). A step computed from another `(x, u)` gives the derivatives of a wrong point; one with
+    /// another number of rows is an error.
+    #[tracing::instrument(name = "dynamics.derivatives_of", level = "debug", skip_all)]
+    pub fn derivatives_of(
+        &mut self,
+        x: &[f64],
+        u: &[f64],
+        step: &Step,
+    ) -> Result<StepDerivatives, DynamicsError> {
+        let lin = self.linearise(x, u, None, Some(step))?;
+        Ok(self.first_derivatives(&lin))
     }
 
     fn first_derivatives(&self, lin: &Linearised) -> StepDerivatives {
@@ -800,6 +840,27 @@ impl Simulator {
         x: &[f64],
         u: &[f64],
     ) -> Result<SecondOrderStep, DynamicsError> {
+        self.second_order(x, u, None)
+    }
+
+    /// [`Simulator::second_order_step`] of `step`, a step this simulator computed from `x` under `u`: its
+    /// solution is linearised as it is, without a second solve (see [`Simulator::derivatives_of`]).
+    #[tracing::instrument(name = "dynamics.second_order_of", level = "debug", skip_all)]
+    pub fn second_order_of(
+        &mut self,
+        x: &[f64],
+        u: &[f64],
+        step: &Step,
+    ) -> Result<SecondOrderStep, DynamicsError> {
+        self.second_order(x, u, Some(step))
+    }
+
+    fn second_order(
+        &mut self,
+        x: &[f64],
+        u: &[f64],
+        given: Option<&Step>,
+    ) -> Result<SecondOrderStep, DynamicsError> {
         let (n, nu, h) = (
             self.scene().n_dof(),
             self.scene().n_controls,
@@ -814,7 +875,7 @@ impl Simulator {
         check("x", x, 2 * n)?;
         check("u", u, nu)?;
         let ing = self.second_order_ingredients(x, u)?;
-        let lin = self.linearise(x, u, Some(&ing))?;
+        let lin = self.linearise(x, u, Some(&ing), given)?;
         let derivatives = self.first_derivatives(&lin);
         let np = lin.p.len();
         let model = self.settings().model;

@@ -2,7 +2,7 @@
 //! `-theta3` at the end (SCENE.md, paper section V-A).
 
 use ddp::{Dynamics, QuadraticCost, SecondOrder};
-use dynamics::{DynamicsError, SecondOrderStep, Simulator};
+use dynamics::{DynamicsError, SecondOrderStep, Simulator, Step};
 use thiserror::Error;
 
 /// SCENE.md's control weight `c_u`.
@@ -28,13 +28,13 @@ pub enum TaskError {
 }
 
 /// A [`Simulator`] as the optimiser's dynamics: [`Dynamics::calc`] is [`Simulator::step`],
-/// [`Dynamics::calc_diff`] [`Simulator::step_with_derivatives`] and the second-order capability
-/// [`Simulator::second_order_step`] (scenes of at most three joints and eight state-and-control entries).
+/// [`Dynamics::calc_diff`] [`Simulator::derivatives_of`] that step and the second-order capability
+/// [`Simulator::second_order_of`] it (scenes of at most three joints and eight state-and-control entries).
 ///
-/// Each knot's [`StepData`] keeps its step's solution `[v'; lambda]`, from which the knot's linearisation
-/// and the next step computed near it start (they converge at once), and the step's second-order
-/// expansion once computed: a backward pass retried with more regularisation at the same trajectory
-/// changes only the vector the Hessian is contracted with, and costs the contraction alone.
+/// Each knot's [`StepData`] keeps its step, which the knot's linearisation differentiates as it is (no
+/// second solve), and whose solution `[v'; lambda]` starts the next step computed near it; and the step's
+/// second-order expansion once computed: a backward pass retried with more regularisation at the same
+/// trajectory changes only the vector the Hessian is contracted with, and costs the contraction alone.
 #[derive(Debug)]
 pub struct FingerDynamics {
     sim: Simulator,
@@ -43,7 +43,9 @@ pub struct FingerDynamics {
 /// One knot's step, kept by [`FingerDynamics`] (see there).
 #[derive(Debug, Default)]
 pub struct StepData {
-    /// `[v'; lambda]` of the step last computed at the knot.
+    /// The step last computed at the knot; its derivatives linearise it as it is.
+    step: Option<Step>,
+    /// `[v'; lambda]` of that step (the next solve's warm start).
     solution: Option<Vec<f64>>,
     /// That step's second-order expansion, once asked for.
     prepared: Option<SecondOrderStep>,
@@ -109,6 +111,7 @@ impl Dynamics for FingerDynamics {
         self.resume(near.and_then(StepData::solution));
         data.prepared = None;
         data.solution = None;
+        data.step = None;
         let s = self.sim.step(x, u)?;
         if s.info.status != ncp::Status::Converged {
             return Err(TaskError::NotConverged(s.info.status));
@@ -118,6 +121,7 @@ impl Dynamics for FingerDynamics {
         let mut z = s.x_next[n..].to_vec();
         z.extend_from_slice(&s.lambda);
         data.solution = Some(z);
+        data.step = Some(s);
         Ok(())
     }
 
@@ -134,8 +138,10 @@ impl Dynamics for FingerDynamics {
             fu.copy_from_slice(&so.derivatives.fu);
             return Ok(());
         }
-        self.resume(data.solution());
-        let (_, d) = self.sim.step_with_derivatives(x, u)?;
+        let d = match &data.step {
+            Some(step) => self.sim.derivatives_of(x, u, step)?,
+            None => self.sim.step_with_derivatives(x, u)?.1,
+        };
         fx.copy_from_slice(&d.fx);
         fu.copy_from_slice(&d.fu);
         Ok(())
@@ -161,8 +167,10 @@ impl SecondOrder<StepData> for FingerDynamics {
         hess: &mut [f64],
     ) -> Result<(), TaskError> {
         if data.prepared.is_none() {
-            self.resume(data.solution());
-            let so = self.sim.second_order_step(x, u)?;
+            let so = match &data.step {
+                Some(step) => self.sim.second_order_of(x, u, step)?,
+                None => self.sim.second_order_step(x, u)?,
+            };
             if so.step.info.status != ncp::Status::Converged {
                 return Err(TaskError::NotConverged(so.step.info.status));
             }
