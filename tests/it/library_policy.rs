@@ -85,7 +85,7 @@ fn the_default_recipe_spins_faster_than_the_papers_with_and_without_kicks() {
     let (paper, default) = (crate::support::paper_library(), library());
     assert_eq!(paper.entries.len(), 400);
     // Without kicks the paper's library is slower by the last quarter of the run (most seeds' stop; this
-    // one's keeps a slower cycle: `cargo xtask reproduce`'s seed sweep).
+    // one's keeps a slower cycle: `cargo xtask seeds`).
     let (p, d) = (
         run(paper, Model::Logistic(0.1), 0.05, 0.0),
         run(default, Model::Logistic(0.1), 0.05, 0.0),

@@ -14,6 +14,7 @@ mod jsonl;
 mod lcp;
 mod optimize;
 mod reproduce;
+mod seeds;
 mod step;
 mod train;
 mod view;
@@ -63,6 +64,9 @@ enum Command {
     /// The paper's experiments end to end with default settings: summary, libraries and JSON under one
     /// folder (default results/).
     Reproduce(reproduce::Args),
+    /// The claim over library seeds: the paper's recipe, the default and two ablations for library
+    /// seeds 1-8, each on four worlds with and without kicks (minutes: sixteen library builds).
+    Seeds(seeds::Args),
     /// Where the paper's limit cycle is won or lost: the optimiser as MPC (N = 75 and 90), online MPC
     /// and the libraries' policies from rest without kicks; a table and a picture per run.
     Diagnose(diagnose::Args),
@@ -114,6 +118,7 @@ fn main() -> anyhow::Result<()> {
         Command::Train(args) => train::run(&args),
         Command::Evaluate(args) => evaluate::run(&args),
         Command::Reproduce(args) => reproduce::run(&args),
+        Command::Seeds(args) => seeds::run(&args),
         Command::Figures(args) => figures::run(&args),
         Command::Diagnose(args) => diagnose::run(&args),
         Command::Benchmarks(args) => benchmarks::run(&args),

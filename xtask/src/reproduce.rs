@@ -25,9 +25,6 @@ pub struct Args {
     /// Simulated seconds per closed-loop run.
     #[arg(long, default_value_t = SECONDS)]
     seconds: f64,
-    /// Library seeds (kick seeds of the build) of the seed sweep: 1 to this.
-    #[arg(long, default_value_t = SEEDS, value_parser = clap::value_parser!(u64).range(1..=64))]
-    seeds: u64,
     /// The documentation folder whose results.md and figures/ a run with the default settings rewrites
     /// (its generated section and the figures).
     #[arg(long, default_value = "docs")]
@@ -37,8 +34,8 @@ pub struct Args {
     no_docs: bool,
 }
 
-const SEEDS: u64 = 8;
-const SECONDS: f64 = 200.0;
+/// Simulated seconds per closed-loop run of the documented results.
+pub(crate) const SECONDS: f64 = 200.0;
 
 /// A short fingerprint of everything the documented results depend on that a code change can alter
 /// without anyone rerunning `reproduce`: the default and the paper's library settings, the evaluation's
@@ -50,7 +47,7 @@ pub(crate) fn stamp() -> String {
         "paper": LibrarySettings::paper(),
         "evaluation": EvaluationSettings::default(),
         "format": library::VERSION,
-        "seeds": SEEDS,
+        "seeds": crate::seeds::SEEDS,
         "seconds": SECONDS,
     });
     format!("{:08x}", crc32fast::hash(inputs.to_string().as_bytes()))
@@ -100,31 +97,11 @@ pub(crate) fn write_docs(
     Ok(())
 }
 
-/// One closed-loop run of the seed sweep.
-#[derive(Serialize)]
-struct SeedRun {
-    seed: u64,
-    /// Which recipe built the library (see the report's table).
-    recipe: String,
-    world: String,
-    h: f64,
-    kicks: bool,
-    evaluation: Evaluation,
-}
-
-/// The recipes of the seed sweep, each a library built with that seed, or one derived from it.
-const RECIPES: [&str; 4] = [
-    "paper (N = 75, kicked chain, first controllers, nearest)",
-    "default without growth",
-    "default, nearest controller only",
-    "default (N = 90, cycle first, 4 per trajectory, 8 ranked by value, 4 growth rounds)",
-];
-
 /// The library's policy on the worlds of `cargo xtask evaluate` (its own model and the hard one, at its
 /// time step and at 0.03), without and with kicks: `(world, h, kicks, evaluation)`.
-fn on_four_worlds(
+pub(crate) fn on_four_worlds(
     lib: &Library,
-    args: &Args,
+    seconds: f64,
 ) -> anyhow::Result<Vec<(String, f64, bool, Evaluation)>> {
     let policy = lib.policy()?;
     let mut runs = Vec::new();
@@ -133,77 +110,12 @@ fn on_four_worlds(
             let settings = EvaluationSettings {
                 model,
                 h,
-                seconds: args.seconds,
+                seconds,
                 kick_every: if kicks { 10.0 } else { 0.0 },
                 ..EvaluationSettings::default()
             };
             runs.push((world.clone(), h, kicks, evaluate(lib, &policy, &settings)?));
         }
-    }
-    Ok(runs)
-}
-
-/// The seed sweep: for each seed the paper's recipe and the default, and two libraries derived from the
-/// default (its entries before growth; its nearest controller alone), each on the four worlds with and
-/// without kicks. Builds run on two threads; `seed1` is the default library of seed 1, built already.
-fn seed_sweep(args: &Args, bars: &MultiProgress, seed1: &Library) -> anyhow::Result<Vec<SeedRun>> {
-    let jobs: Vec<(u64, bool)> = (1..=args.seeds)
-        .flat_map(|seed| [(seed, false), (seed, true)])
-        .collect();
-    let bar = bars.add(ProgressBar::new(jobs.len() as u64));
-    bar.set_style(
-        ProgressStyle::with_template(
-            "seed sweep: {bar:40} {pos}/{len} libraries {elapsed_precise} (eta {eta})",
-        )
-        .expect("a valid template"),
-    );
-    let run_job = |&(seed, paper): &(u64, bool)| -> anyhow::Result<Vec<SeedRun>> {
-        let base = if paper {
-            LibrarySettings::paper()
-        } else {
-            LibrarySettings::default()
-        };
-        let settings = LibrarySettings { seed, ..base };
-        let lib = if seed1.settings == settings {
-            seed1.clone()
-        } else {
-            Library::build(&Scene::flicking_finger(), &settings, |_, _| {})?
-        };
-        let mut variants = Vec::new();
-        if paper {
-            variants.push((RECIPES[0], lib));
-        } else {
-            let mut ungrown = lib.clone();
-            ungrown
-                .entries
-                .truncate(settings.trajectories * settings.keep);
-            let mut nearest = lib.clone();
-            nearest.settings.neighbours = 1;
-            variants.push((RECIPES[1], ungrown));
-            variants.push((RECIPES[2], nearest));
-            variants.push((RECIPES[3], lib));
-        }
-        let mut runs = Vec::new();
-        for (recipe, lib) in variants {
-            for (world, h, kicks, evaluation) in on_four_worlds(&lib, args)? {
-                runs.push(SeedRun {
-                    seed,
-                    recipe: recipe.into(),
-                    world,
-                    h,
-                    kicks,
-                    evaluation,
-                });
-            }
-        }
-        bar.inc(1);
-        Ok(runs)
-    };
-    let results = crate::on_two_threads(&jobs, run_job);
-    bar.finish_and_clear();
-    let mut runs = Vec::new();
-    for r in results {
-        runs.extend(r?);
     }
     Ok(runs)
 }
@@ -261,8 +173,6 @@ struct Summary {
     mismatched: Vec<Mismatched>,
     libraries: Vec<(String, f64, usize)>,
     closed_loop: Vec<ClosedLoop>,
-    /// The seed sweep: every recipe's library for every seed on every world.
-    seeds: Vec<SeedRun>,
     /// Simulated seconds per closed-loop run.
     run_seconds: f64,
     seconds: f64,
@@ -383,18 +293,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             .into_iter()
             .map(|b| b.join().expect("a library build does not panic"))
             .collect();
-        let (rest, built) = (rest?, built?);
-        let _ = bars.println(format!(
-            "seed sweep: {} seeds x (paper recipe, default) ...",
-            args.seeds
-        ));
-        let seed1 = built
-            .iter()
-            .map(|(lib, _)| lib)
-            .find(|lib| lib.settings == LibrarySettings::default())
-            .expect("the default library is among the built ones");
-        let seeds = seed_sweep(args, &bars, seed1)?;
-        finish(args, start, rest, built, seeds)
+        finish(args, start, rest?, built?)
     })
 }
 
@@ -431,7 +330,6 @@ fn finish(
     start: Instant,
     (optimised, annealing): (Vec<Optimised>, Vec<Annealed>),
     built: Vec<(Library, f64)>,
-    seeds: Vec<SeedRun>,
 ) -> anyhow::Result<()> {
     let mut larger_kicks = Vec::new();
     let mut mismatched = Vec::new();
@@ -483,7 +381,7 @@ fn finish(
                 }
             }
         }
-        for (world, h, kicks, evaluation) in on_four_worlds(&lib, args)? {
+        for (world, h, kicks, evaluation) in on_four_worlds(&lib, args.seconds)? {
             closed_loop.push(ClosedLoop {
                 library: format!("sigma {sigma}, default recipe"),
                 world,
@@ -501,7 +399,6 @@ fn finish(
         mismatched,
         libraries,
         closed_loop,
-        seeds,
         run_seconds: args.seconds,
         seconds,
     };
@@ -519,9 +416,9 @@ fn finish(
     if args.no_docs {
         return Ok(());
     }
-    if args.seeds != SEEDS || args.seconds != SECONDS {
+    if args.seconds != SECONDS {
         println!(
-            "{}/results.md left alone: it documents the default run ({SEEDS} seeds, {SECONDS} s)",
+            "{}/results.md left alone: it documents the default run ({SECONDS} s per closed loop)",
             args.docs.display()
         );
         return Ok(());
@@ -669,63 +566,15 @@ fn report(s: &Summary) -> String {
             }
         );
     }
-    seed_table(&mut t, s);
+    let _ = writeln!(
+        t,
+        "\n## Over library seeds\n\nThe same recipe over library seeds 1-8, against the paper's recipe and two ablations: `cargo xtask seeds` (its section below)."
+    );
     let _ = writeln!(
         t,
         "\n## Figures (the default library at sigma = 0.1, seed 1)\n\n![Fig. 2: the contact surface](figures/fig2_contact_surface.png)\n\n![Fig. 3: the library's states](figures/fig3_library_states.png)\n\n![Fig. 4: the limit cycle in configuration space](figures/fig4_limit_cycle.png)\n\n![Fig. 5: one cycle in frames](figures/fig5_frames.png)"
     );
     t
-}
-
-/// The seed sweep, one row per recipe, world and time step, with and without kicks.
-fn seed_table(t: &mut String, s: &Summary) {
-    let seeds: std::collections::BTreeSet<u64> = s.seeds.iter().map(|r| r.seed).collect();
-    let _ = writeln!(
-        t,
-        "\n## The seed sweep: libraries of seeds {}-{} from rest, {:.0} s per run\n\nLast quarter: the mean spin over the last quarter of the run (the paper's Fig. 5: about 0.67 rad/s, our reading); steady: seeds whose last quarter spins at 0.5 rad/s or more. With kicks (std 2 every 10 s): resumed = kicks after which the ellipse turned a further quarter turn before the next.\n\n| recipe | world | h | last quarter, no kicks: mean (min-max) rad/s | steady | with kicks: last quarter | resumed (mean) | seeds resuming after all but one kick |\n|---|---|---:|---:|---:|---:|---:|---:|",
-        seeds.first().copied().unwrap_or(0),
-        seeds.last().copied().unwrap_or(0),
-        s.run_seconds
-    );
-    for recipe in RECIPES {
-        let mut keys: Vec<(String, f64)> = Vec::new();
-        for r in s.seeds.iter().filter(|r| r.recipe == recipe) {
-            if !keys.iter().any(|(w, h)| *w == r.world && *h == r.h) {
-                keys.push((r.world.clone(), r.h));
-            }
-        }
-        for (world, h) in keys {
-            let runs = |kicks: bool| -> Vec<&Evaluation> {
-                s.seeds
-                    .iter()
-                    .filter(|r| {
-                        r.recipe == recipe && r.world == world && r.h == h && r.kicks == kicks
-                    })
-                    .map(|r| &r.evaluation)
-                    .collect()
-            };
-            let (calm, kicked) = (runs(false), runs(true));
-            let stats = |v: &[&Evaluation]| {
-                let rates: Vec<f64> = v.iter().map(|e| e.final_spin_rate).collect();
-                let mean = rates.iter().sum::<f64>() / rates.len().max(1) as f64;
-                let lo = rates.iter().copied().fold(f64::INFINITY, f64::min);
-                let hi = rates.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-                (mean, lo, hi, rates.iter().filter(|&&r| r >= 0.5).count())
-            };
-            let (mean, lo, hi, steady) = stats(&calm);
-            let (kmean, _, _, _) = stats(&kicked);
-            let resumed =
-                kicked.iter().map(|e| e.resumed as f64).sum::<f64>() / kicked.len().max(1) as f64;
-            let kicks = kicked.first().map_or(0, |e| e.kicks);
-            let all_but_one = kicked.iter().filter(|e| e.resumed + 1 >= e.kicks).count();
-            let _ = writeln!(
-                t,
-                "| {recipe} | {world} | {h} | {mean:.3} ({lo:.3}-{hi:.3}) | {steady}/{} | {kmean:.3} | {resumed:.1}/{kicks} | {all_but_one}/{} |",
-                calm.len(),
-                kicked.len()
-            );
-        }
-    }
 }
 
 #[cfg(test)]
@@ -735,7 +584,7 @@ mod tests {
         let text =
             std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../docs/results.md"))
                 .expect("docs/results.md");
-        for section in ["reproduce", "diagnose"] {
+        for section in ["reproduce", "seeds", "diagnose"] {
             let begin = format!("<!-- BEGIN {section} (generated by `cargo xtask {section}`) -->");
             let at = text
                 .find(&begin)

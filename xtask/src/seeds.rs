@@ -1,0 +1,230 @@
+//! `cargo xtask seeds`: the claim of docs/results.md over library seeds. For seeds 1-8 (the kick seeds of
+//! the build) it builds the paper's recipe and the default, derives two ablations from the default (its
+//! entries before growth; its nearest controller alone), and runs each policy from rest for 200 s on the
+//! four worlds of `cargo xtask evaluate` with and without kicks. Its table says how many seeds keep a
+//! steady cycle, the spread of the spin, and how many kicks each recovers from. About sixteen library
+//! builds: minutes, where `cargo xtask reproduce` (one seed) takes about one.
+
+use dynamics::Scene;
+use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
+use library::{Evaluation, Library, LibrarySettings};
+use serde::Serialize;
+use std::fmt::Write as _;
+use std::path::PathBuf;
+use std::time::Instant;
+
+/// Options of `cargo xtask seeds`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Library seeds (kick seeds of the build): 1 to this.
+    #[arg(long, default_value_t = SEEDS, value_parser = clap::value_parser!(u64).range(1..=64))]
+    seeds: u64,
+    /// Simulated seconds per closed-loop run.
+    #[arg(long, default_value_t = crate::reproduce::SECONDS)]
+    seconds: f64,
+    /// Output folder (seeds.md, seeds.json).
+    #[arg(long, default_value = "results")]
+    out: PathBuf,
+    /// The documentation folder whose results.md a run with the default settings rewrites (its section
+    /// "seeds").
+    #[arg(long, default_value = "docs")]
+    docs: PathBuf,
+    /// Leave the documentation alone.
+    #[arg(long)]
+    no_docs: bool,
+}
+
+/// Library seeds of the documented sweep.
+pub(crate) const SEEDS: u64 = 8;
+
+#[derive(Serialize)]
+struct Summary {
+    runs: Vec<SeedRun>,
+    /// Simulated seconds per closed-loop run.
+    run_seconds: f64,
+    /// Wall time of the sweep.
+    seconds: f64,
+}
+
+pub fn run(args: &Args) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        args.seconds.is_finite() && args.seconds > 0.0 && args.seconds <= 1e5,
+        "--seconds must be in (0, 1e5], not {}",
+        args.seconds
+    );
+    let start = Instant::now();
+    std::fs::create_dir_all(&args.out)?;
+    let bars = MultiProgress::new();
+    let runs = seed_sweep(args, &bars)?;
+    let summary = Summary {
+        runs,
+        run_seconds: args.seconds,
+        seconds: start.elapsed().as_secs_f64(),
+    };
+    let mut text = String::new();
+    seed_table(&mut text, &summary);
+    println!("{text}");
+    std::fs::write(args.out.join("seeds.md"), &text)?;
+    std::fs::write(
+        args.out.join("seeds.json"),
+        serde_json::to_string_pretty(&summary)?,
+    )?;
+    println!(
+        "wrote {}/seeds.md and seeds.json in {:.1} s",
+        args.out.display(),
+        summary.seconds
+    );
+    if args.no_docs {
+        return Ok(());
+    }
+    if args.seeds != SEEDS || args.seconds != crate::reproduce::SECONDS {
+        println!(
+            "{}/results.md left alone: it documents the default sweep ({SEEDS} seeds, {} s per run)",
+            args.docs.display(),
+            crate::reproduce::SECONDS
+        );
+        return Ok(());
+    }
+    crate::reproduce::write_docs(&args.docs, "seeds", "cargo xtask seeds", &text, &[])?;
+    println!(
+        "rewrote the section \"seeds\" of {}/results.md",
+        args.docs.display()
+    );
+    Ok(())
+}
+
+/// One closed-loop run of the seed sweep.
+#[derive(Serialize)]
+struct SeedRun {
+    seed: u64,
+    /// Which recipe built the library (see the report's table).
+    recipe: String,
+    world: String,
+    h: f64,
+    kicks: bool,
+    evaluation: Evaluation,
+}
+
+/// The recipes of the seed sweep, each a library built with that seed, or one derived from it.
+const RECIPES: [&str; 4] = [
+    "paper (N = 75, kicked chain, first controllers, nearest)",
+    "default without growth",
+    "default, nearest controller only",
+    "default (N = 90, cycle first, 4 per trajectory, 8 ranked by value, 4 growth rounds)",
+];
+
+/// The seed sweep: for each seed the paper's recipe and the default, and two libraries derived from the
+/// default (its entries before growth; its nearest controller alone), each on the four worlds with and
+/// without kicks. Builds run on two threads, the longest (the default recipe's) first.
+fn seed_sweep(args: &Args, bars: &MultiProgress) -> anyhow::Result<Vec<SeedRun>> {
+    let jobs: Vec<(u64, bool)> = [false, true]
+        .into_iter()
+        .flat_map(|paper| (1..=args.seeds).map(move |seed| (seed, paper)))
+        .collect();
+    let bar = bars.add(ProgressBar::new(jobs.len() as u64));
+    bar.set_style(
+        ProgressStyle::with_template(
+            "seed sweep: {bar:40} {pos}/{len} libraries {elapsed_precise} (eta {eta})",
+        )
+        .expect("a valid template"),
+    );
+    let run_job = |&(seed, paper): &(u64, bool)| -> anyhow::Result<Vec<SeedRun>> {
+        let base = if paper {
+            LibrarySettings::paper()
+        } else {
+            LibrarySettings::default()
+        };
+        let settings = LibrarySettings { seed, ..base };
+        let lib = Library::build(&Scene::flicking_finger(), &settings, |_, _| {})?;
+        let mut variants = Vec::new();
+        if paper {
+            variants.push((RECIPES[0], lib));
+        } else {
+            let mut ungrown = lib.clone();
+            ungrown
+                .entries
+                .truncate(settings.trajectories * settings.keep);
+            let mut nearest = lib.clone();
+            nearest.settings.neighbours = 1;
+            variants.push((RECIPES[1], ungrown));
+            variants.push((RECIPES[2], nearest));
+            variants.push((RECIPES[3], lib));
+        }
+        let mut runs = Vec::new();
+        for (recipe, lib) in variants {
+            for (world, h, kicks, evaluation) in
+                crate::reproduce::on_four_worlds(&lib, args.seconds)?
+            {
+                runs.push(SeedRun {
+                    seed,
+                    recipe: recipe.into(),
+                    world,
+                    h,
+                    kicks,
+                    evaluation,
+                });
+            }
+        }
+        bar.inc(1);
+        Ok(runs)
+    };
+    let results = crate::on_two_threads(&jobs, run_job);
+    bar.finish_and_clear();
+    let mut runs = Vec::new();
+    for r in results {
+        runs.extend(r?);
+    }
+    Ok(runs)
+}
+
+/// The seed sweep, one row per recipe, world and time step, with and without kicks.
+fn seed_table(t: &mut String, s: &Summary) {
+    let seeds: std::collections::BTreeSet<u64> = s.runs.iter().map(|r| r.seed).collect();
+    let _ = writeln!(
+        t,
+        "# The seed sweep (`cargo xtask seeds`, {:.0} s): libraries of seeds {}-{} from rest, {:.0} s per run\n\nLast quarter: the mean spin over the last quarter of the run (the paper's Fig. 5: about 0.67 rad/s, our reading); steady: seeds whose last quarter spins at 0.5 rad/s or more. With kicks (std 2 every 10 s): resumed = kicks after which the ellipse turned a further quarter turn before the next.\n\n| recipe | world | h | last quarter, no kicks: mean (min-max) rad/s | steady | with kicks: last quarter | resumed (mean) | seeds resuming after all but one kick |\n|---|---|---:|---:|---:|---:|---:|---:|",
+        s.seconds,
+        seeds.first().copied().unwrap_or(0),
+        seeds.last().copied().unwrap_or(0),
+        s.run_seconds
+    );
+    for recipe in RECIPES {
+        let mut keys: Vec<(String, f64)> = Vec::new();
+        for r in s.runs.iter().filter(|r| r.recipe == recipe) {
+            if !keys.iter().any(|(w, h)| *w == r.world && *h == r.h) {
+                keys.push((r.world.clone(), r.h));
+            }
+        }
+        for (world, h) in keys {
+            let runs = |kicks: bool| -> Vec<&Evaluation> {
+                s.runs
+                    .iter()
+                    .filter(|r| {
+                        r.recipe == recipe && r.world == world && r.h == h && r.kicks == kicks
+                    })
+                    .map(|r| &r.evaluation)
+                    .collect()
+            };
+            let (calm, kicked) = (runs(false), runs(true));
+            let stats = |v: &[&Evaluation]| {
+                let rates: Vec<f64> = v.iter().map(|e| e.final_spin_rate).collect();
+                let mean = rates.iter().sum::<f64>() / rates.len().max(1) as f64;
+                let lo = rates.iter().copied().fold(f64::INFINITY, f64::min);
+                let hi = rates.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+                (mean, lo, hi, rates.iter().filter(|&&r| r >= 0.5).count())
+            };
+            let (mean, lo, hi, steady) = stats(&calm);
+            let (kmean, _, _, _) = stats(&kicked);
+            let resumed =
+                kicked.iter().map(|e| e.resumed as f64).sum::<f64>() / kicked.len().max(1) as f64;
+            let kicks = kicked.first().map_or(0, |e| e.kicks);
+            let all_but_one = kicked.iter().filter(|e| e.resumed + 1 >= e.kicks).count();
+            let _ = writeln!(
+                t,
+                "| {recipe} | {world} | {h} | {mean:.3} ({lo:.3}-{hi:.3}) | {steady}/{} | {kmean:.3} | {resumed:.1}/{kicks} | {all_but_one}/{} |",
+                calm.len(),
+                kicked.len()
+            );
+        }
+    }
+}
