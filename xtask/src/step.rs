@@ -32,6 +32,32 @@ pub struct SimArgs {
     /// Scene file (TOML); default: the flicking finger of SCENE.md (scenes/finger.toml).
     #[arg(long)]
     scene: Option<PathBuf>,
+    /// How the joints' drag is integrated: explicit (SCENE.md; a step where it would be unstable, a light
+    /// body on a draggy joint, is an error) or implicit (dissipative at any h).
+    #[arg(long, value_enum, default_value = "explicit")]
+    drag: DragArg,
+    /// The most penetration one step pushes out (default: all of it, SCENE.md's d / h); 0 keeps
+    /// penetration from deepening without pushing it out, so that contact never creates energy.
+    #[arg(long, allow_negative_numbers = true)]
+    recovery: Option<f64>,
+}
+
+/// `--drag`.
+#[derive(Debug, Clone, Copy, clap::ValueEnum)]
+pub enum DragArg {
+    /// At the start of the step (SCENE.md).
+    Explicit,
+    /// At the end of the step.
+    Implicit,
+}
+
+impl From<DragArg> for dynamics::Drag {
+    fn from(d: DragArg) -> Self {
+        match d {
+            DragArg::Explicit => dynamics::Drag::Explicit,
+            DragArg::Implicit => dynamics::Drag::Implicit,
+        }
+    }
 }
 
 impl SimArgs {
@@ -54,6 +80,8 @@ impl SimArgs {
             StepSettings {
                 model,
                 h: self.h,
+                drag: self.drag.into(),
+                recovery: self.recovery,
                 ..StepSettings::default()
             },
         )?)
@@ -347,6 +375,8 @@ mod tests {
             sigma: 0.1,
             h: 0.05,
             scene: None,
+            drag: DragArg::Explicit,
+            recovery: None,
         }
         .simulator()
         .unwrap()

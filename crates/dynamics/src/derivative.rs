@@ -37,7 +37,8 @@ pub struct StepDerivatives {
 }
 
 /// The step's equations at `(x, u)` for a given `z = [v'; lambda]`: the equation-of-motion residual
-/// `M (v' - v) - h (r + B u) - J^T lambda` and the constraint velocities `w = d / h + J v'`.
+/// `M (v' - v) - h (r + B u) - J^T lambda` and the constraint velocities `w = d / h + J v'` (explicit drag,
+/// SCENE.md's).
 pub fn step_residual<T: Scalar>(
     scene: &Scene,
     h: f64,
@@ -119,6 +120,9 @@ type R2 = Jet<6>;
 /// The step's ingredients at `(x, u)` in some scalar type: `M`, `r + B u`, `J`, `d` and each row's noise.
 struct Ingredients<T> {
     contacts: Vec<ContactFrame>,
+    /// Each row's distance `d(q)` (the step reports it; `d` below is what the rows see,
+    /// [`crate::StepSettings::recovery`]).
+    distance: Vec<f64>,
     M: Vec<T>,
     r: Vec<T>,
     jac: Vec<T>,
@@ -131,6 +135,7 @@ struct Ingredients<T> {
 struct SecondOrder {
     n: usize,
     contacts: Vec<ContactFrame>,
+    distance: Vec<f64>,
     /// `(joint, direction of its control in y)`.
     actuated: Vec<(usize, usize)>,
     M: Vec<Q2>,
@@ -156,6 +161,7 @@ impl SecondOrder {
         }
         Ingredients {
             contacts: self.contacts.clone(),
+            distance: self.distance.clone(),
             M: map(&self.M),
             r: forces,
             jac: map(&self.jac),
@@ -463,12 +469,19 @@ impl Simulator {
         let cons = Constraints::new(scene, &kin, &xs[..n])?;
         let sigma = self.noise(&cons.jacobian, cons.d.len());
         let dual = |v: &[F1]| v.iter().map(jet1_dual).collect::<Vec<_>>();
+        let mut M = kin.mass_matrix(scene);
+        self.check_drag(&M.iter().map(|e| e.re).collect::<Vec<_>>())?;
+        self.with_drag(&mut M);
+        let distance = cons.d.iter().map(|e| e.re).collect();
+        let mut d = cons.d;
+        self.recovered_all(&mut d);
         Ok(Ingredients {
             contacts: cons.contacts,
-            M: dual(&kin.mass_matrix(scene)),
+            distance,
+            M: dual(&M),
             r: dual(&r),
             jac: dual(&cons.jacobian),
-            d: dual(&cons.d),
+            d: dual(&d),
             sigma: dual(&sigma),
         })
     }
@@ -485,18 +498,25 @@ impl Simulator {
         let u6: Vec<R2> = u.iter().map(|&e| R2::from(e)).collect();
         let r = Kinematics::new(scene, &qv[..n]).applied_forces(scene, &qv[n..], &u6);
         let sigma = self.noise(&cons.jacobian, cons.d.len());
+        let mut M = kin3.mass_matrix(scene);
+        self.check_drag(&M.iter().map(|e| e.re).collect::<Vec<_>>())?;
+        self.with_drag(&mut M);
+        let distance = cons.d.iter().map(|e| e.re).collect();
+        let mut d = cons.d;
+        self.recovered_all(&mut d);
         Ok(SecondOrder {
             n,
             contacts: cons.contacts.clone(),
+            distance,
             actuated: scene
                 .bodies
                 .iter()
                 .enumerate()
                 .filter_map(|(j, b)| b.actuator.map(|k| (j, 2 * n + k)))
                 .collect(),
-            M: kin3.mass_matrix(scene),
+            M,
             jac: cons.jacobian,
-            d: cons.d,
+            d,
             sigma,
             r,
         })
@@ -532,7 +552,7 @@ impl Simulator {
         let values = |v: &[D1]| v.iter().map(|e| e.re).collect::<Vec<f64>>();
         let ing = &passes[0];
         let cons = Constraints {
-            d: values(&ing.d),
+            d: ing.distance.clone(),
             jacobian: values(&ing.jac),
             contacts: ing.contacts.clone(),
         };

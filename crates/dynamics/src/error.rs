@@ -43,6 +43,18 @@ pub enum DynamicsError {
         /// The admissible range.
         expected: &'static str,
     },
+    /// Explicit drag would create energy at this state ([`crate::Drag`]): `h lambda_max(M^-1 D) > 2`.
+    #[error(
+        "explicit drag is unstable here: h lambda_max(M^-1 D) = {rate:.3e} > 2, mostly joint `{joint}` (a light body on a draggy joint); use implicit drag (StepSettings::drag, --drag implicit) or h below {h_max:.3e}"
+    )]
+    UnstableDrag {
+        /// The body whose joint dominates the unstable mode.
+        joint: String,
+        /// `h lambda_max(M^-1 D)`.
+        rate: f64,
+        /// The largest stable time step at this state.
+        h_max: f64,
+    },
     /// A capability this model does not have (yet), or a degenerate state it cannot differentiate at.
     #[error("unsupported: {0}")]
     Unsupported(&'static str),

@@ -38,4 +38,4 @@ pub use kinematics::{Kinematics, Ring, Scalar};
 pub use scene::{
     Body, BodySpec, ContactPair, ContactSpec, FLICKING_FINGER_X0, JointSpec, Scene, SceneSpec,
 };
-pub use step::{Complementarity, Simulator, StateCovariance, Step, StepSettings};
+pub use step::{Complementarity, Drag, Simulator, StateCovariance, Step, StepSettings};

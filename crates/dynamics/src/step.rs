@@ -37,6 +37,24 @@ pub enum Complementarity {
     },
 }
 
+/// How a step integrates the joints' viscous drag `-c_j v_j`.
+///
+/// Explicit drag (SCENE.md: "drag, like the rest of r, uses the velocity at the start of the step") is
+/// stable only while `h lambda_max(M^-1 D) <= 2`, `D = diag(c)`: a light body on a draggy joint (a thin
+/// ellipse, whose inertia falls with its minor axis) breaks that at the finger's h, and each step would
+/// then multiply its velocity by `|1 - h c / I| > 1`, creating energy from nothing. The step refuses such a
+/// state ([`DynamicsError::UnstableDrag`]) instead. Implicit drag uses the velocity at the end of the step
+/// (`M` becomes `M + h D` in the step's equations): it only ever removes energy, at any h.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Drag {
+    /// At the start of the step (SCENE.md, the default; refused where it would be unstable).
+    #[default]
+    Explicit,
+    /// At the end of the step: unconditionally dissipative.
+    Implicit,
+}
+
 /// Settings of a step.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct StepSettings {
@@ -44,6 +62,17 @@ pub struct StepSettings {
     pub model: Complementarity,
     /// Time step (SCENE.md: 0.05).
     pub h: f64,
+    /// How the joints' drag is integrated (SCENE.md: explicitly).
+    #[serde(default)]
+    pub drag: Drag,
+    /// The most penetration one step pushes out: each row's constraint velocity is
+    /// `max(d, -recovery) / h + J v'` instead of SCENE.md's `d / h + J v'` (`None`, the default: all of it).
+    /// Pushing a penetration of depth `p` out within one step gives the bodies a separating velocity `p / h`,
+    /// kinetic energy the step creates; a linearised step can let a thin body deep into another (a needle
+    /// turning a radian per step), which then flies off faster than anything hit it. With `Some(0.0)`
+    /// penetration is only kept from deepening, never pushed out, and contact only ever removes energy.
+    #[serde(default)]
+    pub recovery: Option<f64>,
     /// Newton settings for the logistic model.
     pub newton: NewtonSettings,
     /// ERM settings for the normal model.
@@ -55,6 +84,8 @@ impl Default for StepSettings {
         StepSettings {
             model: Complementarity::Logistic { sigma: 0.1 },
             h: 0.05,
+            drag: Drag::Explicit,
+            recovery: None,
             newton: NewtonSettings::default(),
             erm: ErmSettings::default(),
         }
@@ -78,6 +109,15 @@ impl StepSettings {
                 name: "sigma",
                 value: sigma,
                 expected: "finite and positive",
+            });
+        }
+        if let Some(depth) = self.recovery
+            && !(depth.is_finite() && depth >= 0.0)
+        {
+            return Err(DynamicsError::Setting {
+                name: "recovery",
+                value: depth,
+                expected: "finite and non-negative (None: no limit)",
             });
         }
         self.newton.validate()?;
@@ -253,13 +293,91 @@ impl Simulator {
         check("u", u, scene.n_controls)?;
         let (q, v) = x.split_at(n);
         let kin = Kinematics::new(scene, q);
-        let M = kin.mass_matrix(scene);
+        let mut M = kin.mass_matrix(scene);
+        self.check_drag(&M)?;
+        self.with_drag(&mut M);
         let mut r = kin.applied_forces(scene, v, u);
         for (r, f) in r.iter_mut().zip(forces.unwrap_or_default()) {
             *r += f;
         }
         let cons = Constraints::new(scene, &kin, q)?;
         self.assemble_problem(v, &M, &r, cons)
+    }
+
+    /// A row's distance as the step's constraint velocity sees it: `max(d, -recovery)`
+    /// ([`StepSettings::recovery`]).
+    pub(crate) fn recovered(&self, d: f64) -> f64 {
+        match self.settings.recovery {
+            Some(depth) => d.max(-depth),
+            None => d,
+        }
+    }
+
+    /// [`Simulator::recovered`] on distances in a dual type: a clamped row's distance is the constant
+    /// `-recovery`, with no derivatives.
+    pub(crate) fn recovered_all<T: Ring>(&self, d: &mut [T]) {
+        if let Some(depth) = self.settings.recovery {
+            for e in d.iter_mut() {
+                if e.value() < -depth {
+                    *e = T::from(-depth);
+                }
+            }
+        }
+    }
+
+    /// Implicit drag ([`Drag::Implicit`]): `M + h D` in place of `M` in the step's equations (with `r`
+    /// keeping its `-D v`, `(M + h D) v' = M v + h (r + D v) + ...`). Nothing for explicit drag.
+    pub(crate) fn with_drag<T: Ring>(&self, M: &mut [T]) {
+        if self.settings.drag == Drag::Implicit {
+            let n = self.scene.n_dof();
+            for (j, b) in self.scene.bodies.iter().enumerate() {
+                M[j * n + j] += T::from(self.settings.h * b.damping);
+            }
+        }
+    }
+
+    /// Explicit drag ([`Drag::Explicit`]) is stable while `h lambda_max(M^-1 D) <= 2`; an error naming the
+    /// joint that breaks it otherwise. A cheap bound (Gershgorin's, on `D^1/2 M^-1 D^1/2`) settles the usual
+    /// case; the eigenvalue itself only when the bound is above 2.
+    pub(crate) fn check_drag(&self, M: &[f64]) -> Result<(), DynamicsError> {
+        let h = self.settings.h;
+        let scene = &self.scene;
+        if self.settings.drag == Drag::Implicit || scene.bodies.iter().all(|b| b.damping == 0.0) {
+            return Ok(());
+        }
+        let n = scene.n_dof();
+        let mass = nalgebra::DMatrix::from_row_slice(n, n, M);
+        let Some(chol) = mass.cholesky() else {
+            return Err(DynamicsError::Unsupported(
+                "the mass matrix is not positive definite at this state",
+            ));
+        };
+        let inverse = chol.inverse();
+        let root: Vec<f64> = scene.bodies.iter().map(|b| b.damping.sqrt()).collect();
+        let s = nalgebra::DMatrix::from_fn(n, n, |i, j| root[i] * inverse[(i, j)] * root[j]);
+        let bound = (0..n)
+            .map(|i| (0..n).map(|j| s[(i, j)].abs()).sum::<f64>())
+            .fold(0.0, f64::max);
+        if h * bound <= 2.0 {
+            return Ok(());
+        }
+        let eigen = s.clone().symmetric_eigen();
+        let (k, lambda) = eigen.eigenvalues.iter().copied().enumerate().fold(
+            (0, f64::NEG_INFINITY),
+            |a, (k, l)| if l > a.1 { (k, l) } else { a },
+        );
+        if h * lambda <= 2.0 {
+            return Ok(());
+        }
+        let mode = eigen.eigenvectors.column(k);
+        let joint = (0..n)
+            .max_by(|&a, &b| mode[a].abs().total_cmp(&mode[b].abs()))
+            .unwrap_or(0);
+        Err(DynamicsError::UnstableDrag {
+            joint: scene.bodies[joint].name.clone(),
+            rate: h * lambda,
+            h_max: 2.0 / lambda,
+        })
     }
 
     /// The mixed LCP from its ingredients at the start of the step (`r` holding `B u`).
@@ -289,7 +407,7 @@ impl Simulator {
             for j in 0..n {
                 a[(n + k) * dim + j] = cons.jacobian[k * n + j];
             }
-            b[n + k] = cons.d[k] / h;
+            b[n + k] = self.recovered(cons.d[k]) / h;
         }
         Ok((LinearMcp::from_row_major(n, a, b)?, cons))
     }
