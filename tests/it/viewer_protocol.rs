@@ -208,3 +208,85 @@ async fn a_port_in_use_and_a_library_for_another_scene_are_errors_at_start() {
         "{err}"
     );
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_flood_of_refused_messages_and_a_silent_connection_change_nothing_for_other_clients() {
+    let viewer = Viewer::bind(config(0))
+        .await
+        .unwrap()
+        .with_idle_timeout(Duration::from_secs(1));
+    let addr = viewer.local_addr().unwrap();
+    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
+    let server = tokio::spawn(viewer.run(async {
+        let _ = stopped.await;
+    }));
+    let url = format!("ws://{addr}/ws");
+    // A half-open connection: TCP only, never a request. The server closes it after the idle timeout.
+    let mut silent = TcpStream::connect(addr).await.unwrap();
+    // Flooders: refused messages (a kick out of range), never reading the replies, for 2 s.
+    let mut flooders = Vec::new();
+    for _ in 0..4 {
+        let (mut f, _) = tokio_tungstenite::connect_async(&url).await.unwrap();
+        flooders.push(tokio::spawn(async move {
+            let bad = json!({"type": "kick", "std": 1e9}).to_string();
+            let until = tokio::time::Instant::now() + Duration::from_secs(2);
+            let mut sent = 0u64;
+            // A send blocks once the server stops reading this client (it is busy writing replies the
+            // flooder never reads): that is the flood's backpressure, and the flood ends at its deadline.
+            while let Ok(Ok(())) =
+                tokio::time::timeout_at(until, f.send(Message::Text(bad.clone().into()))).await
+            {
+                sent += 1;
+            }
+            (f, sent)
+        }));
+    }
+    // A well-behaved client meanwhile, reading all along: it gets the answer to its own bad message,
+    // sees simulated time advance, and stays connected past several idle timeouts without sending.
+    let (mut watcher, _) = tokio_tungstenite::connect_async(&url).await.unwrap();
+    let watching = tokio::spawn(async move {
+        let first = next_of(&mut watcher, "frame").await["t"].as_f64().unwrap();
+        send(&mut watcher, json!({"type": "sigma", "sigma": -1.0})).await;
+        let error = next_of(&mut watcher, "error").await;
+        assert!(
+            error["message"].as_str().unwrap().contains("sigma"),
+            "{error}"
+        );
+        let until = tokio::time::Instant::now() + Duration::from_secs(5);
+        let mut last = first;
+        while tokio::time::Instant::now() < until {
+            last = next_of(&mut watcher, "frame").await["t"].as_f64().unwrap();
+        }
+        (first, last)
+    });
+    let mut total = 0;
+    for f in flooders {
+        // (A flooder that neither sends nor reads for the idle timeout is closed like any silent
+        // connection; it does not answer pings.)
+        let (_, sent) = f.await.unwrap();
+        total += sent;
+    }
+    println!("the flood sent {total} messages");
+    assert!(total > 200, "the flood sent only {total} messages");
+    // The silent connection was closed by the server (EOF or reset), not held.
+    let mut buf = [0u8; 16];
+    let read = tokio::time::timeout(
+        Duration::from_secs(10),
+        tokio::io::AsyncReadExt::read(&mut silent, &mut buf),
+    )
+    .await
+    .expect("the server closes a silent connection within its idle timeout");
+    assert!(matches!(read, Ok(0) | Err(_)), "{read:?}");
+    let (first, last) = watching.await.unwrap();
+    // At speed 4, 5 s of reading is 20 simulated seconds; the flood must not have held the clock back.
+    assert!(
+        last - first > 10.0,
+        "simulated time went from {first} to {last}"
+    );
+    stop.send(()).unwrap();
+    tokio::time::timeout(Duration::from_secs(10), server)
+        .await
+        .expect("the server stops")
+        .unwrap()
+        .unwrap();
+}

@@ -197,3 +197,49 @@ proptest::proptest! {
         let _ = ClientMessage::parse(&text);
     }
 }
+
+#[test]
+fn switching_to_online_mpc_never_stalls_the_world_and_spreads_its_first_solve_over_steps() {
+    let mut world = World::new(
+        dynamics::Scene::flicking_finger(),
+        Some(crate::support::finger_library().clone()),
+        WorldSettings {
+            policy: PolicyKind::Off,
+            ..WorldSettings::default()
+        },
+    )
+    .unwrap();
+    // Two hundred switches (and resets and sigma changes in MPC mode) run no optimiser pass at all.
+    for k in 0..200 {
+        let policy = if k % 2 == 0 {
+            PolicyKind::Mpc
+        } else {
+            PolicyKind::Off
+        };
+        world.apply(ClientMessage::Policy { policy }).unwrap();
+        if k % 50 == 0 {
+            world.apply(ClientMessage::Reset).unwrap();
+            world.apply(ClientMessage::Sigma { sigma: 0.1 }).unwrap();
+        }
+    }
+    world
+        .apply(ClientMessage::Policy {
+            policy: PolicyKind::Mpc,
+        })
+        .unwrap();
+    assert_eq!(world.frame().mpc_passes, 0);
+    // Then each control step runs its pass plus at most WARMUP_PER_STEP of the first solve's.
+    let bound = (WorldSettings::default().mpc_passes + viewer::WARMUP_PER_STEP) as u64;
+    let mut last = 0;
+    for _ in 0..40 {
+        world.advance().unwrap();
+        let passes = world.frame().mpc_passes;
+        assert!(
+            passes - last <= bound,
+            "{} passes in one step",
+            passes - last
+        );
+        last = passes;
+    }
+    assert!(last > bound, "the warm-up ran: {last} passes in 40 steps");
+}

@@ -15,6 +15,9 @@ mod server;
 mod world;
 
 pub use error::ViewerError;
-pub use mpc::{MAX_MPC_HORIZON, MAX_MPC_PASSES, MpcSettings, OnlineMpc};
-pub use server::{Viewer, ViewerConfig};
+pub use mpc::{MAX_MPC_HORIZON, MAX_MPC_PASSES, MpcSettings, OnlineMpc, WARMUP_PER_STEP};
+pub use server::{
+    CLIENT_INPUT_CAPACITY, DEFAULT_IDLE_TIMEOUT, INPUT_CAPACITY, REPLY_CAPACITY, Viewer,
+    ViewerConfig,
+};
 pub use world::{SPRING_DAMPING, SPRING_MAX_FORCE, SPRING_STIFFNESS, World, WorldSettings};

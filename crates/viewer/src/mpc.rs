@@ -11,6 +11,9 @@ use library::{FingerDynamics, Policy, finger_cost, free_joint};
 /// The largest regularisation carried from one control step to the next (a solve that gave up at a
 /// huge `mu` should not freeze the next ones).
 const MU_CARRIED_MAX: f64 = 1e3;
+/// Passes of a warm-up ([`OnlineMpc::warm_up`]) spent per control step at most, on top of the usual ones:
+/// a fresh plan converges over a few dozen steps instead of stalling the world for one long solve.
+pub const WARMUP_PER_STEP: usize = 10;
 
 /// How the online optimiser runs.
 #[derive(Debug, Clone, PartialEq)]
@@ -49,6 +52,10 @@ pub struct OnlineMpc {
     /// How far the last plan turns the free body over the horizon.
     planned_turn: f64,
     free: usize,
+    /// Extra passes still owed to a fresh plan.
+    warmup: usize,
+    /// Optimiser passes run so far.
+    passes_run: u64,
 }
 
 impl OnlineMpc {
@@ -83,6 +90,8 @@ impl OnlineMpc {
             mu: DdpSettings::default().mu_init,
             planned_turn: 0.0,
             free,
+            warmup: 0,
+            passes_run: 0,
         })
     }
 
@@ -124,9 +133,27 @@ impl OnlineMpc {
         Ok(())
     }
 
+    /// Owe the plan up to `passes` extra passes, spent [`WARMUP_PER_STEP`] per control step on top of the
+    /// usual ones until a solve converges: what [`OnlineMpc::converge`] does in one long solve, spread over
+    /// the next control steps so that no step waits for it (the world's clock keeps running).
+    pub fn warm_up(&mut self, passes: usize) {
+        self.warmup = passes;
+    }
+
+    /// Extra passes still owed to a warm-up.
+    pub fn warmup_left(&self) -> usize {
+        self.warmup
+    }
+
+    /// Optimiser passes run so far by [`OnlineMpc::control`] and [`OnlineMpc::converge`].
+    pub fn passes_run(&self) -> u64 {
+        self.passes_run
+    }
+
     /// Optimise the plan from `x` to convergence (at most `max_passes`; the first solve from rest takes
     /// about 100 passes, some 150 ms), so that the per-step re-solves start from a flick rather than from
-    /// rest. Returns the passes taken.
+    /// rest. Returns the passes taken. Blocks for the whole solve; a running world uses
+    /// [`OnlineMpc::warm_up`].
     pub fn converge(&mut self, x: &[f64], max_passes: usize) -> Result<usize, ViewerError> {
         let sol = self.solve(
             DdpSettings {
@@ -135,6 +162,7 @@ impl OnlineMpc {
             },
             x,
         )?;
+        self.passes_run += sol.iterations.len() as u64;
         self.plan = sol.controls;
         Ok(sol.iterations.len())
     }
@@ -155,9 +183,10 @@ impl OnlineMpc {
 
     /// Re-solve from `x` and return the first control; the plan moves on by one step.
     pub fn control(&mut self, x: &[f64]) -> Result<Vec<f64>, ViewerError> {
+        let extra = self.warmup.min(WARMUP_PER_STEP);
         let sol = self.solve(
             DdpSettings {
-                max_iterations: self.settings.passes,
+                max_iterations: self.settings.passes + extra,
                 mu_init: self.mu,
                 // Step sizes 1, 0.1, 0.01, 0.001: a control step's worst case stays a few rollouts.
                 line_search_steps: 4,
@@ -165,6 +194,13 @@ impl OnlineMpc {
             },
             x,
         )?;
+        self.passes_run += sol.iterations.len() as u64;
+        // A warm-up ends early once a solve stops short of its budget (converged).
+        self.warmup = if sol.iterations.len() < self.settings.passes + extra {
+            0
+        } else {
+            self.warmup - extra
+        };
         self.mu = sol
             .iterations
             .last()

@@ -176,6 +176,8 @@ pub struct Frame {
     pub warning: Option<String>,
     /// Times the online optimiser's stalled plan was re-seeded from the library's policy.
     pub mpc_reseeds: u64,
+    /// Passes the online optimiser has run since it last started (0 while it is off).
+    pub mpc_passes: u64,
 }
 
 /// One body's shape, sent once.

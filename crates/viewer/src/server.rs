@@ -2,6 +2,14 @@
 //! own thread at real time (times the speed), takes the clients' messages from a channel, and publishes
 //! each frame on a watch channel, so that every client sees the latest frame and a slow one skips frames
 //! instead of holding the simulation back.
+//!
+//! Under load nothing grows without bound and nothing stalls the world's clock: the input channel holds
+//! [`INPUT_CAPACITY`] messages and each client's share of it [`CLIENT_INPUT_CAPACITY`] (a message past
+//! either is dropped and its client told so, so a flooding client cannot crowd out the others), each
+//! client's replies [`REPLY_CAPACITY`], warnings about refused or malformed messages are
+//! logged at most once a second with a count, and a connection that sends nothing for the idle timeout
+//! ([`DEFAULT_IDLE_TIMEOUT`]; WebSocket clients answer the server's pings, so only dead, silent and
+//! half-open connections are idle) is closed.
 
 use crate::error::ViewerError;
 use crate::protocol::{ClientMessage, ServerMessage};
@@ -17,10 +25,20 @@ use futures_util::{SinkExt, StreamExt};
 use library::Library;
 use std::net::SocketAddr;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 use tokio::sync::{mpsc as async_mpsc, watch};
+
+/// Messages waiting for the world at most, from all clients; more are refused with a reply, not queued.
+pub const INPUT_CAPACITY: usize = 1024;
+/// Messages waiting for the world at most from one client: a flooding client's excess is refused, and
+/// the others' messages still get through.
+pub const CLIENT_INPUT_CAPACITY: usize = 32;
+/// Replies waiting for one client at most; more are dropped.
+pub const REPLY_CAPACITY: usize = 64;
+/// A connection that sends nothing for this long is closed (see [`Viewer::with_idle_timeout`]).
+pub const DEFAULT_IDLE_TIMEOUT: Duration = Duration::from_secs(30);
 
 const INDEX: &str = include_str!("../assets/index.html");
 const SCRIPT: &str = include_str!("../assets/viewer.js");
@@ -39,14 +57,47 @@ pub struct ViewerConfig {
     pub world: WorldSettings,
 }
 
-/// A message from a client, with the way back to it for an error reply.
-type Input = (ClientMessage, async_mpsc::UnboundedSender<String>);
+/// A message from a client, with the way back to it for an error reply, and the client's count of
+/// messages waiting.
+type Input = (ClientMessage, async_mpsc::Sender<String>, Arc<AtomicUsize>);
 
 #[derive(Clone)]
 struct AppState {
-    inputs: mpsc::Sender<Input>,
+    inputs: mpsc::SyncSender<Input>,
     frames: watch::Receiver<Arc<str>>,
     hello: Arc<str>,
+    idle_timeout: Duration,
+}
+
+/// A warning logged at most once a second, with the number of times it happened since the last.
+#[derive(Debug)]
+struct Throttled {
+    what: &'static str,
+    since: usize,
+    last: Option<Instant>,
+}
+
+impl Throttled {
+    const fn new(what: &'static str) -> Self {
+        Throttled {
+            what,
+            since: 0,
+            last: None,
+        }
+    }
+
+    fn warn(&mut self, error: &dyn std::fmt::Display) {
+        self.since += 1;
+        let now = Instant::now();
+        if self
+            .last
+            .is_none_or(|t| now.duration_since(t) >= Duration::from_secs(1))
+        {
+            tracing::warn!(count = self.since, error = %error, "{}", self.what);
+            self.since = 0;
+            self.last = Some(now);
+        }
+    }
 }
 
 /// A bound, not yet running viewer: binding checks the address and the library, so that a port in use
@@ -55,6 +106,7 @@ struct AppState {
 pub struct Viewer {
     listener: tokio::net::TcpListener,
     world: World,
+    idle_timeout: Duration,
 }
 
 fn json(message: &ServerMessage) -> String {
@@ -76,7 +128,19 @@ impl Viewer {
                 addr: config.addr,
                 source,
             })?;
-        Ok(Viewer { listener, world })
+        Ok(Viewer {
+            listener,
+            world,
+            idle_timeout: DEFAULT_IDLE_TIMEOUT,
+        })
+    }
+
+    /// Close connections that send nothing for `timeout` (default [`DEFAULT_IDLE_TIMEOUT`], at least
+    /// 30 ms). WebSocket clients are pinged three times per timeout, and a client that reads its frames
+    /// answers, so only dead, silent and half-open connections time out.
+    pub fn with_idle_timeout(mut self, timeout: Duration) -> Self {
+        self.idle_timeout = timeout.max(Duration::from_millis(30));
+        self
     }
 
     /// The address it listens on (the actual port when 0 was asked for).
@@ -89,7 +153,7 @@ impl Viewer {
         self,
         shutdown: impl std::future::Future<Output = ()> + Send + 'static,
     ) -> Result<(), ViewerError> {
-        let (inputs, input_rx) = mpsc::channel::<Input>();
+        let (inputs, input_rx) = mpsc::sync_channel::<Input>(INPUT_CAPACITY);
         let first = frame_json(&self.world);
         let (frame_tx, frames) = watch::channel::<Arc<str>>(first.into());
         let hello: Arc<str> = json(&self.world.hello()).into();
@@ -109,9 +173,14 @@ impl Viewer {
                 inputs,
                 frames,
                 hello,
+                idle_timeout: self.idle_timeout,
             });
         let stop_server = stop.clone();
-        let served = axum::serve(self.listener, app)
+        let listener = IdleListener {
+            inner: self.listener,
+            timeout: self.idle_timeout,
+        };
+        let served = axum::serve(listener, app)
             .with_graceful_shutdown(async move {
                 shutdown.await;
                 // Stopping the world drops the frame channel, which ends every client's connection.
@@ -132,11 +201,14 @@ fn simulate(
     stop: &AtomicBool,
 ) {
     let mut next = Instant::now();
-    let apply = |world: &mut World, (message, reply): Input| {
+    let mut refused = Throttled::new("refused messages");
+    let mut apply = |world: &mut World, (message, reply, waiting): Input| {
         tracing::debug!(?message, "input");
+        waiting.fetch_sub(1, Ordering::Relaxed);
         if let Err(e) = world.apply(message) {
-            tracing::warn!(error = %e, "refused a message");
-            let _ = reply.send(json(&ServerMessage::Error {
+            refused.warn(&e);
+            // A client that does not read its replies loses them, not the server its memory.
+            let _ = reply.try_send(json(&ServerMessage::Error {
                 message: e.to_string(),
             }));
         }
@@ -208,8 +280,13 @@ async fn upgrade(ws: WebSocketUpgrade, State(state): State<AppState>) -> Respons
 /// One client: the hello, then every new frame out and every message in, until either side closes.
 async fn client(socket: WebSocket, state: AppState) {
     let (mut sink, mut stream) = socket.split();
-    let (reply_tx, mut replies) = async_mpsc::unbounded_channel::<String>();
+    let (reply_tx, mut replies) = async_mpsc::channel::<String>(REPLY_CAPACITY);
     let mut frames = state.frames.clone();
+    let mut malformed = Throttled::new("malformed messages");
+    let waiting = Arc::new(AtomicUsize::new(0));
+    // Pings three times per idle timeout: the client's pongs keep a live connection from being idle.
+    let mut ping = tokio::time::interval(state.idle_timeout / 3);
+    ping.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     if sink
         .send(Message::Text(state.hello.to_string().into()))
         .await
@@ -234,16 +311,28 @@ async fn client(socket: WebSocket, state: AppState) {
                     break;
                 }
             }
+            _ = ping.tick() => {
+                if sink.send(Message::Ping(Vec::new().into())).await.is_err() {
+                    break;
+                }
+            }
             message = stream.next() => match message {
                 None | Some(Err(_)) | Some(Ok(Message::Close(_))) => break,
                 Some(Ok(Message::Text(text))) => match ClientMessage::parse(text.as_str()) {
-                    Ok(message) => {
-                        if state.inputs.send((message, reply_tx.clone())).is_err() {
-                            break;
+                    Ok(message) => match enqueue(&state.inputs, message, &reply_tx, &waiting) {
+                        Ok(()) => {}
+                        Err(mpsc::TrySendError::Full(())) => {
+                            let e = "the world is busy: message dropped (too many waiting); send fewer";
+                            malformed.warn(&e);
+                            let reply = json(&ServerMessage::Error { message: e.into() });
+                            if sink.send(Message::Text(reply.into())).await.is_err() {
+                                break;
+                            }
                         }
-                    }
+                        Err(mpsc::TrySendError::Disconnected(_)) => break,
+                    },
                     Err(e) => {
-                        tracing::warn!(error = %e, "malformed message");
+                        malformed.warn(&e);
                         let reply = json(&ServerMessage::Error { message: e.to_string() });
                         if sink.send(Message::Text(reply.into())).await.is_err() {
                             break;
@@ -251,7 +340,7 @@ async fn client(socket: WebSocket, state: AppState) {
                     }
                 },
                 Some(Ok(Message::Binary(_))) => {
-                    tracing::warn!("binary message");
+                    malformed.warn(&"binary message");
                     let reply = json(&ServerMessage::Error {
                         message: "malformed message: binary messages are not part of the protocol".into(),
                     });
@@ -262,5 +351,114 @@ async fn client(socket: WebSocket, state: AppState) {
                 Some(Ok(_)) => {}
             }
         }
+    }
+}
+
+/// Queue a client's message for the world unless the client or everyone has too many waiting.
+fn enqueue(
+    inputs: &mpsc::SyncSender<Input>,
+    message: ClientMessage,
+    reply: &async_mpsc::Sender<String>,
+    waiting: &Arc<AtomicUsize>,
+) -> Result<(), mpsc::TrySendError<()>> {
+    if waiting.fetch_add(1, Ordering::Relaxed) >= CLIENT_INPUT_CAPACITY {
+        waiting.fetch_sub(1, Ordering::Relaxed);
+        return Err(mpsc::TrySendError::Full(()));
+    }
+    inputs
+        .try_send((message, reply.clone(), waiting.clone()))
+        .map_err(|e| {
+            waiting.fetch_sub(1, Ordering::Relaxed);
+            match e {
+                mpsc::TrySendError::Full(_) => mpsc::TrySendError::Full(()),
+                mpsc::TrySendError::Disconnected(_) => mpsc::TrySendError::Disconnected(()),
+            }
+        })
+}
+
+/// The TCP listener with an idle timeout on every connection ([`IdleStream`]).
+struct IdleListener {
+    inner: tokio::net::TcpListener,
+    timeout: Duration,
+}
+
+impl axum::serve::Listener for IdleListener {
+    type Io = IdleStream;
+    type Addr = SocketAddr;
+
+    async fn accept(&mut self) -> (Self::Io, Self::Addr) {
+        let (stream, addr) = axum::serve::Listener::accept(&mut self.inner).await;
+        let _ = stream.set_nodelay(true);
+        (
+            IdleStream {
+                inner: stream,
+                timeout: self.timeout,
+                deadline: Box::pin(tokio::time::sleep(self.timeout)),
+            },
+            addr,
+        )
+    }
+
+    fn local_addr(&self) -> std::io::Result<Self::Addr> {
+        self.inner.local_addr()
+    }
+}
+
+/// A connection whose reads fail with `TimedOut` once it has sent nothing for the timeout: a half-open or
+/// silent connection (a request never finished, a peer gone without a word) is closed instead of held.
+struct IdleStream {
+    inner: tokio::net::TcpStream,
+    timeout: Duration,
+    deadline: std::pin::Pin<Box<tokio::time::Sleep>>,
+}
+
+impl tokio::io::AsyncRead for IdleStream {
+    fn poll_read(
+        mut self: std::pin::Pin<&mut Self>,
+        cx: &mut std::task::Context<'_>,
+        buf: &mut tokio::io::ReadBuf<'_>,
+    ) -> std::task::Poll<std::io::Result<()>> {
+        use std::task::Poll;
+        let before = buf.filled().len();
+        match std::pin::Pin::new(&mut self.inner).poll_read(cx, buf) {
+            Poll::Ready(result) => {
+                if buf.filled().len() > before {
+                    let at = tokio::time::Instant::now() + self.timeout;
+                    self.deadline.as_mut().reset(at);
+                }
+                Poll::Ready(result)
+            }
+            Poll::Pending => match self.deadline.as_mut().poll(cx) {
+                Poll::Ready(()) => Poll::Ready(Err(std::io::Error::new(
+                    std::io::ErrorKind::TimedOut,
+                    "the connection sent nothing for the idle timeout",
+                ))),
+                Poll::Pending => Poll::Pending,
+            },
+        }
+    }
+}
+
+impl tokio::io::AsyncWrite for IdleStream {
+    fn poll_write(
+        mut self: std::pin::Pin<&mut Self>,
+        cx: &mut std::task::Context<'_>,
+        buf: &[u8],
+    ) -> std::task::Poll<std::io::Result<usize>> {
+        std::pin::Pin::new(&mut self.inner).poll_write(cx, buf)
+    }
+
+    fn poll_flush(
+        mut self: std::pin::Pin<&mut Self>,
+        cx: &mut std::task::Context<'_>,
+    ) -> std::task::Poll<std::io::Result<()>> {
+        std::pin::Pin::new(&mut self.inner).poll_flush(cx)
+    }
+
+    fn poll_shutdown(
+        mut self: std::pin::Pin<&mut Self>,
+        cx: &mut std::task::Context<'_>,
+    ) -> std::task::Poll<std::io::Result<()>> {
+        std::pin::Pin::new(&mut self.inner).poll_shutdown(cx)
     }
 }

@@ -245,8 +245,10 @@ impl World {
                 mpc.clear();
             }
         }
-        // One converged solve (a brief pause, once), then one pass per control step.
-        mpc.converge(&self.x, MPC_FIRST_PASSES)?;
+        // The first solve's passes spread over the next control steps (a few more passes per step until it
+        // converges), then the usual passes per step: starting never stalls the world's clock, however
+        // often the page switches the policy, sigma or resets.
+        mpc.warm_up(MPC_FIRST_PASSES);
         self.mpc = Some(mpc);
         Ok(())
     }
@@ -601,6 +603,7 @@ impl World {
             unconverged: self.unconverged,
             warning: self.warning.clone(),
             mpc_reseeds: self.reseeds,
+            mpc_passes: self.mpc.as_ref().map_or(0, OnlineMpc::passes_run),
         }
     }
 }
