@@ -43,6 +43,8 @@ pub enum Section {
     LibraryTolerance,
     /// The viewer's online MPC: control-step time against spin.
     Viewer,
+    /// The viewer's server under load on 127.0.0.1: floods, policy switches, silent connections.
+    ViewerLoad,
 }
 
 pub fn run(args: &Args) -> anyhow::Result<()> {
@@ -65,6 +67,9 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     }
     if wanted(Section::Viewer) {
         sections.push(("viewer", crate::bench_viewer::section()?));
+    }
+    if wanted(Section::ViewerLoad) {
+        sections.push(("viewer-load", crate::bench_viewer::load_section()?));
     }
     if wanted(Section::LibraryTolerance) {
         sections.push((
