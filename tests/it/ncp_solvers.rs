@@ -172,6 +172,26 @@ fn lemke_reports_an_infeasible_lcp_as_an_error() {
 }
 
 #[test]
+fn erm_refuses_an_lcp_without_a_solution_and_still_solves_feasible_ones() {
+    // No z >= 0 with w >= 0 (see lemke_reports_an_infeasible_lcp_as_an_error), and a one-row one.
+    let erm = ErmSolver::new(ErmSettings::default()).unwrap();
+    let skew = LinearMcp::from_rows(0, &[vec![0.0, 1.0], vec![-1.0, 0.0]], &[-1.0, -1.0]).unwrap();
+    let negative = LinearMcp::from_rows(0, &[vec![-1.0]], &[-1.0]).unwrap();
+    for (p, n) in [(&skew, 2), (&negative, 1)] {
+        for sigma in [1e-3, 0.1] {
+            match erm.solve(p, &vec![sigma; n], &vec![0.0; n]) {
+                Err(NcpError::NoSolution { objective, bound }) => assert!(objective > bound),
+                other => panic!("sigma {sigma}: expected NoSolution, got {other:?}"),
+            }
+        }
+    }
+    // A feasible problem next to it still converges.
+    let fine = LinearMcp::from_rows(0, &[vec![2.0, 1.0], vec![1.0, 2.0]], &[-1.0, 1.0]).unwrap();
+    let s = erm.solve(&fine, &[0.01, 0.01], &[0.0, 0.0]).unwrap();
+    assert_eq!(s.info.status, Status::Converged);
+}
+
+#[test]
 fn scene_sized_problems_agree_across_lemke_enumeration_and_hard_newton() {
     let mut solver = newton(NewtonSettings::default());
     for seed in 0..200 {

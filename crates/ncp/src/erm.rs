@@ -115,16 +115,31 @@ impl ErmSolver {
         // tends to the hard solution as sigma -> 0, so a second descent from Lemke's exact solution finds
         // its basin; the lower objective wins.
         if self.settings.hard_start {
-            let hard = crate::lemke::lemke(&reduced.lcp(), &crate::lemke::LemkeSettings::default());
-            if let Ok(hard) = hard {
-                let (l2, f2, i2) = self.minimise(&reduced, sigma, &hard.z);
-                let better =
-                    (i2.status == Status::Converged, -f2) > (info.status == Status::Converged, -f);
-                info.iterations += i2.iterations;
-                info.evaluations += i2.evaluations;
-                if better {
-                    (lambda, info.status, info.residual) = (l2, i2.status, i2.residual);
+            match crate::lemke::lemke(&reduced.lcp(), &crate::lemke::LemkeSettings::default()) {
+                Ok(hard) => {
+                    let (l2, f2, i2) = self.minimise(&reduced, sigma, &hard.z);
+                    let better = (i2.status == Status::Converged, -f2)
+                        > (info.status == Status::Converged, -f);
+                    info.iterations += i2.iterations;
+                    info.evaluations += i2.evaluations;
+                    if better {
+                        (lambda, info.status, info.residual) = (l2, i2.status, i2.residual);
+                    }
                 }
+                // No solution (certain for the positive semi-definite matrices of a step): at any solution
+                // each row's expected residual is at most sigma^2 (E[min(0, w + sigma xi)^2] <= sigma^2 / 2
+                // where lambda = 0, E[min(lambda, sigma xi)^2] <= sigma^2 where w = 0), so a minimum above
+                // their sum confirms it, and the minimiser is no answer to report as converged.
+                Err(NcpError::Infeasible { .. }) => {
+                    let bound: f64 = sigma.iter().map(|s| s * s).sum();
+                    if f > bound {
+                        return Err(NcpError::NoSolution {
+                            objective: f,
+                            bound,
+                        });
+                    }
+                }
+                Err(_) => {}
             }
         }
         let z = reduced.expand(&lambda);

@@ -53,6 +53,18 @@ pub enum NcpError {
         /// Pivots performed.
         pivots: usize,
     },
+    /// Expected residual minimisation on an LCP without a solution: Lemke's method ended on a ray, and the
+    /// smallest expected residual found is above what any solution of the LCP would give (each row's
+    /// `sigma^2`), so the minimiser is no smoothed solution of anything.
+    #[error(
+        "the LCP has no solution: Lemke's method ended on a ray and the expected residual's minimum {objective:e} is above {bound:e}, the most any solution would leave"
+    )]
+    NoSolution {
+        /// The expected residual at the minimiser found.
+        objective: f64,
+        /// `sum_i sigma_i^2`, an upper bound of the expected residual at any solution of the LCP.
+        bound: f64,
+    },
     /// A method that only handles one kind of problem was given another.
     #[error("{0}")]
     Unsupported(&'static str),
