@@ -14,10 +14,16 @@ pub struct Args {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct Query {
-    a: [f64; 2],
-    pose_a: [f64; 3],
-    b: [f64; 2],
-    pose_b: [f64; 3],
+    a: Vec<f64>,
+    pose_a: Vec<f64>,
+    b: Vec<f64>,
+    pose_b: Vec<f64>,
+}
+
+/// A field of a fixed length, or a message naming it and what it holds.
+fn exactly<const N: usize>(name: &str, holds: &str, v: &[f64]) -> Result<[f64; N], String> {
+    v.try_into()
+        .map_err(|_| format!("{name} needs {N} numbers ({holds}), got {}", v.len()))
 }
 
 #[derive(Debug, Serialize)]
@@ -36,9 +42,13 @@ struct Answer {
 /// Answers one input line: the JSON answer or the error message.
 pub fn answer_line(line: &str, derivatives: bool) -> Result<String, String> {
     let q: Query = serde_json::from_str(line).map_err(|e| format!("bad input line: {e}"))?;
-    let a = Ellipse::new(q.a[0], q.a[1]).map_err(|e| format!("shape a: {e}"))?;
-    let b = Ellipse::new(q.b[0], q.b[1]).map_err(|e| format!("shape b: {e}"))?;
-    let c = signed_distance_coords(&a, q.pose_a, &b, q.pose_b).map_err(|e| e.to_string())?;
+    let [a1, b1] = exactly("a", "semi-axes", &q.a)?;
+    let [a2, b2] = exactly("b", "semi-axes", &q.b)?;
+    let pose_a = exactly("pose_a", "x, y, theta", &q.pose_a)?;
+    let pose_b = exactly("pose_b", "x, y, theta", &q.pose_b)?;
+    let a = Ellipse::new(a1, b1).map_err(|e| format!("shape a: {e}"))?;
+    let b = Ellipse::new(a2, b2).map_err(|e| format!("shape b: {e}"))?;
+    let c = signed_distance_coords(&a, pose_a, &b, pose_b).map_err(|e| e.to_string())?;
     let d = derivatives.then(|| c.derivatives());
     let answer = Answer {
         distance: c.distance,
@@ -78,5 +88,14 @@ mod tests {
         ] {
             assert!(answer_line(bad, false).is_err(), "accepted {bad}");
         }
+        // The message names the field and what it holds, and refuses semi-axes out of the safe range.
+        let three = r#"{"a":[1,0.5,2],"pose_a":[0,0,0],"b":[0.7,0.5],"pose_b":[3,0,0]}"#;
+        assert_eq!(
+            answer_line(three, false).unwrap_err(),
+            "a needs 2 numbers (semi-axes), got 3"
+        );
+        let huge = r#"{"a":[1e200,0.5],"pose_a":[0,0,0],"b":[0.7,0.5],"pose_b":[3,0,0]}"#;
+        let e = answer_line(huge, false).unwrap_err();
+        assert!(e.contains("between 1e-6 and 1e6"), "{e}");
     }
 }

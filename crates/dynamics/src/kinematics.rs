@@ -19,7 +19,7 @@ pub trait Scalar: DualNum<Primitive = f64> + Copy {}
 impl<T: DualNum<Primitive = f64> + Copy> Scalar for T {}
 
 /// The arithmetic the kinematics, the mass matrix, the forces and the contact geometry need (geometry's
-/// [`Forward`]): every [`Scalar`], and the crate's fused second-order [`Jet`](crate::Jet).
+/// [`Forward`](geometry::Forward)): every [`Scalar`], and the crate's fused second-order [`Jet`](crate::Jet).
 pub use geometry::Forward as Ring;
 
 /// `(-x_y, x_x)`.

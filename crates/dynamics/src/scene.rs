@@ -165,7 +165,10 @@ impl Scene {
             let shape = match Ellipse::new(b.semi_axes[0], b.semi_axes[1]) {
                 Ok(s) => Some(s),
                 Err(_) => {
-                    bad(f("semi_axes"), "must be finite and positive");
+                    bad(
+                        f("semi_axes"),
+                        "must be between 1e-6 and 1e6 (geometry::SEMI_AXIS_RANGE)",
+                    );
                     None
                 }
             };

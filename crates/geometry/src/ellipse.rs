@@ -13,11 +13,16 @@ pub struct Ellipse {
     b: f64,
 }
 
+/// The semi-axes an [`Ellipse`] may have: the range in which every query of this crate stays finite and
+/// keeps its accuracy (squares, products and support functions of lengths from 1e-6 to 1e6, and aspect
+/// ratios up to 1e12, are far from overflow and underflow). Outside it [`Ellipse::new`] refuses the value.
+pub const SEMI_AXIS_RANGE: [f64; 2] = [1e-6, 1e6];
+
 impl Ellipse {
     /// An ellipse with semi-axes `a` (body x) and `b` (body y); both must be finite and positive.
     pub fn new(a: f64, b: f64) -> Result<Self, GeometryError> {
         for (axis, value) in [("a", a), ("b", b)] {
-            if !(value.is_finite() && value > 0.0) {
+            if !(SEMI_AXIS_RANGE[0]..=SEMI_AXIS_RANGE[1]).contains(&value) {
                 return Err(GeometryError::SemiAxis {
                     shape: "ellipse",
                     axis,
@@ -113,16 +118,33 @@ mod tests {
     use super::*;
 
     #[test]
-    fn rejects_non_positive_and_non_finite_axes() {
+    fn rejects_axes_outside_the_safe_range() {
         for (a, b) in [
             (0.0, 1.0),
             (1.0, -1.0),
             (f64::NAN, 1.0),
             (1.0, f64::INFINITY),
+            (1e-300, 1e300),
+            (1.0, 0.99e-6),
+            (1.01e6, 1.0),
         ] {
             assert!(Ellipse::new(a, b).is_err(), "accepted ({a}, {b})");
         }
-        assert!(Ellipse::new(1e-300, 1e300).is_ok());
+        // The range's ends are in it, and every distance between such shapes is finite.
+        let (lo, hi) = (SEMI_AXIS_RANGE[0], SEMI_AXIS_RANGE[1]);
+        let shapes = [(lo, lo), (lo, hi), (hi, lo), (hi, hi), (1.0, lo)];
+        for &(a1, b1) in &shapes {
+            for &(a2, b2) in &shapes {
+                let (a, b) = (Ellipse::new(a1, b1).unwrap(), Ellipse::new(a2, b2).unwrap());
+                for pose_b in [[0.0, 0.0, 0.7], [3.0 * hi, -hi, 2.0], [3.0 * lo, lo, -1.0]] {
+                    let c = crate::signed_distance_coords(&a, [0.0, 0.0, 0.3], &b, pose_b).unwrap();
+                    assert!(
+                        c.distance.is_finite() && c.point_a.x.is_finite() && c.normal.y.is_finite(),
+                        "({a1}, {b1}) vs ({a2}, {b2}) at {pose_b:?}: {c:?}"
+                    );
+                }
+            }
+        }
     }
 
     #[test]

@@ -3,8 +3,9 @@
 /// Why a geometric query could not be posed.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum GeometryError {
-    /// A semi-axis was zero, negative, infinite or NaN.
-    #[error("semi-axis `{axis}` of {shape} is {value}; it must be finite and positive")]
+    /// A semi-axis was outside [`crate::SEMI_AXIS_RANGE`] (zero, negative, infinite, NaN, or too small or
+    /// large to compute with reliably).
+    #[error("semi-axis `{axis}` of {shape} is {value:e}; it must be between 1e-6 and 1e6")]
     SemiAxis {
         /// Which shape (`"ellipse"`, `"A"`, `"B"`).
         shape: &'static str,

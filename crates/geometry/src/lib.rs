@@ -29,7 +29,7 @@ mod parry_shape;
 mod scalar;
 mod signed_distance;
 
-pub use ellipse::Ellipse;
+pub use ellipse::{Ellipse, SEMI_AXIS_RANGE};
 pub use error::GeometryError;
 pub use parry_shape::{ParryEstimate, parry_estimate};
 pub use parry2d_f64;

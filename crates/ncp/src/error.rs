@@ -14,8 +14,11 @@ pub enum NcpError {
         /// The size the problem needs.
         expected: usize,
     },
-    /// An input held NaN or an infinity.
-    #[error("{what}[{index}] is {value}; inputs must be finite")]
+    /// An input held NaN or an infinity (given so, or overflowed where a caller assembled it from finite
+    /// but extreme values).
+    #[error(
+        "{what}[{index}] is {value}: the problem's data must be finite (given so, or overflowed while it was assembled from extreme values)"
+    )]
     NonFinite {
         /// Which input (`"M"`, `"q"`, `"z0"`, `"F(z0)"`).
         what: &'static str,
@@ -65,6 +68,9 @@ pub enum NcpError {
         /// `sum_i sigma_i^2`, an upper bound of the expected residual at any solution of the LCP.
         bound: f64,
     },
+    /// The matrix and the vector of a problem do not fit together (the message says how).
+    #[error("{0}")]
+    Shape(String),
     /// A method that only handles one kind of problem was given another.
     #[error("{0}")]
     Unsupported(&'static str),

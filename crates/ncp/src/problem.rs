@@ -60,10 +60,20 @@ impl LinearMcp {
     /// From rows of `M` (as read from JSON, say); every row must have `q.len()` entries.
     pub fn from_rows(n_free: usize, rows: &[Vec<f64>], q: &[f64]) -> Result<Self, NcpError> {
         let n = q.len();
-        check_len("M", rows.len(), n)?;
+        if rows.len() != n {
+            return Err(NcpError::Shape(format!(
+                "M has {} rows but q has {n} entries: M must be {n}x{n}",
+                rows.len()
+            )));
+        }
         let mut m = Vec::with_capacity(n * n);
-        for row in rows {
-            check_len("a row of M", row.len(), n)?;
+        for (i, row) in rows.iter().enumerate() {
+            if row.len() != n {
+                return Err(NcpError::Shape(format!(
+                    "row {i} of M has {} entries but q has {n}: M must be {n}x{n}",
+                    row.len()
+                )));
+            }
             m.extend_from_slice(row);
         }
         Self::from_row_major(n_free, m, q.to_vec())
@@ -256,14 +266,18 @@ mod tests {
     #[test]
     fn malformed_problems_are_rejected_with_the_offending_input_named() {
         let rows = vec![vec![1.0, 0.0], vec![0.0]];
-        assert!(matches!(
-            LinearMcp::from_rows(0, &rows, &[1.0, 2.0]),
-            Err(NcpError::Dimension {
-                what: "a row of M",
-                got: 1,
-                expected: 2
-            })
-        ));
+        assert_eq!(
+            LinearMcp::from_rows(0, &rows, &[1.0, 2.0])
+                .unwrap_err()
+                .to_string(),
+            "row 1 of M has 1 entries but q has 2: M must be 2x2"
+        );
+        assert_eq!(
+            LinearMcp::from_rows(0, &rows, &[1.0, 2.0, 3.0])
+                .unwrap_err()
+                .to_string(),
+            "M has 2 rows but q has 3 entries: M must be 3x3"
+        );
         let rows = vec![vec![1.0, f64::NAN], vec![0.0, 1.0]];
         assert!(matches!(
             LinearMcp::from_rows(0, &rows, &[1.0, 2.0]),
