@@ -39,3 +39,8 @@ pub use scene::{
     Body, BodySpec, ContactPair, ContactSpec, FLICKING_FINGER_X0, JointSpec, Scene, SceneSpec,
 };
 pub use step::{Complementarity, Drag, Simulator, StateCovariance, Step, StepSettings};
+
+/// The README's examples, compiled and run as doctests so that they cannot go stale.
+#[doc = include_str!("../README.md")]
+#[cfg(doctest)]
+pub struct ReadmeDoctests;

@@ -39,3 +39,8 @@ pub use signed_distance::{
     Contact, ContactDerivatives, DualContact, POSE_COORDINATES, PoseCoords, pose_coords,
     pose_from_coords, signed_distance, signed_distance_coords, signed_distance_dual,
 };
+
+/// The README's examples, compiled and run as doctests so that they cannot go stale.
+#[doc = include_str!("../README.md")]
+#[cfg(doctest)]
+pub struct ReadmeDoctests;

@@ -41,3 +41,8 @@ pub(crate) fn check(what: &'static str, v: &[f64], len: usize) -> Result<(), Lib
     }
     Ok(())
 }
+
+/// The README's examples, compiled and run as doctests so that they cannot go stale.
+#[doc = include_str!("../README.md")]
+#[cfg(doctest)]
+pub struct ReadmeDoctests;

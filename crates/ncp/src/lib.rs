@@ -53,3 +53,8 @@ pub use lemke::{LemkeSettings, complementarity_residual, enumerate_solutions, le
 pub use newton::{NewtonSettings, NewtonSolver};
 pub use problem::{LinearMcp, Mcp, Reduced};
 pub use solution::{Info, Solution, Status};
+
+/// The README's examples, compiled and run as doctests so that they cannot go stale.
+#[doc = include_str!("../README.md")]
+#[cfg(doctest)]
+pub struct ReadmeDoctests;
