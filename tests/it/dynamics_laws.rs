@@ -559,3 +559,18 @@ fn noise_from_a_state_covariance_follows_eq_18() {
     };
     assert!(sim.set_state_covariance(Some(short)).is_err());
 }
+
+#[test]
+fn a_scene_file_with_extra_or_missing_array_entries_is_refused() {
+    let finger = include_str!("../../scenes/finger.toml");
+    for (from, to) in [
+        ("gravity = [0.0, -4.0]", "gravity = [0.0, -4.0, 99.0]"),
+        ("semi_axes = [0.7, 0.5]", "semi_axes = [0.7]"),
+    ] {
+        assert!(finger.contains(from), "scenes/finger.toml has {from}");
+        let text = finger.replacen(from, to, 1);
+        let e = Scene::from_toml_str(&text).unwrap_err().to_string();
+        assert!(e.contains("needs exactly 2 numbers"), "{to}: {e}");
+    }
+    assert!(Scene::from_toml_str(finger).is_ok());
+}

@@ -467,3 +467,35 @@ fn a_concave_value_model_does_not_win_the_ranking_by_extrapolating() {
     assert_eq!(policy.nearest_n(&x, 2).unwrap().len(), 2);
     assert_eq!(policy.select(&x).unwrap().0, 1);
 }
+
+#[test]
+fn saving_never_touches_another_file_and_a_bad_destination_is_found_before_a_build() {
+    let dir = std::env::temp_dir().join(format!("slcp-save-test-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let lib = small(3);
+    // A file that the old fixed temporary name (`X.partial`) would have overwritten and deleted.
+    let target = dir.join("x.lib");
+    let bystander = dir.join("x.partial");
+    std::fs::write(&bystander, b"someone else's").unwrap();
+    Library::check_destination(&target).unwrap();
+    lib.save(&target).unwrap();
+    assert_eq!(std::fs::read(&bystander).unwrap(), b"someone else's");
+    assert_eq!(
+        Library::load(&target).unwrap().entries.len(),
+        lib.entries.len()
+    );
+    // A directory as the destination: refused up front, and a save there fails without leftovers.
+    let sub = dir.join("sub.lib");
+    std::fs::create_dir_all(&sub).unwrap();
+    assert!(Library::check_destination(&sub).is_err());
+    assert!(lib.save(&sub).is_err());
+    let left: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.ends_with(".partial") && n != "x.partial")
+        .collect();
+    assert!(left.is_empty(), "temporary files left: {left:?}");
+    // A folder that does not exist cannot take the file either.
+    assert!(Library::check_destination(&dir.join("missing/x.lib")).is_err());
+    std::fs::remove_dir_all(&dir).unwrap();
+}

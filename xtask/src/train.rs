@@ -64,6 +64,14 @@ pub struct Args {
 
 /// Run `cargo xtask train`.
 pub fn run(args: &Args) -> anyhow::Result<()> {
+    // The destination first: a build of minutes must not end on a directory or an unwritable folder.
+    if let Some(dir) = args.out.parent()
+        && !dir.as_os_str().is_empty()
+    {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    Library::check_destination(&args.out)
+        .with_context(|| format!("--out {} cannot be written", args.out.display()))?;
     let scene = match &args.scene {
         None => Scene::flicking_finger(),
         Some(path) => {
@@ -126,11 +134,6 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         library.entries[0].passes,
         passes as f64 / firsts.len() as f64
     );
-    if let Some(dir) = args.out.parent()
-        && !dir.as_os_str().is_empty()
-    {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    }
     library.save(&args.out)?;
     println!("wrote {}", args.out.display());
     Ok(())

@@ -28,7 +28,7 @@ pub const FLICKING_FINGER_X0: [f64; 6] = [
 #[serde(deny_unknown_fields)]
 pub struct JointSpec {
     /// `[lower, upper]` on the joint angle (two unilateral constraints), or none.
-    #[serde(default)]
+    #[serde(default, deserialize_with = "strict_pair_option")]
     pub limits: Option<[f64; 2]>,
     /// Viscous drag coefficient: the joint feels `-damping * dtheta`.
     #[serde(default)]
@@ -45,6 +45,7 @@ pub struct BodySpec {
     /// Unique name.
     pub name: String,
     /// Ellipse semi-axes `[a, b]` along the body's x and y axes.
+    #[serde(deserialize_with = "strict_pair")]
     pub semi_axes: [f64; 2],
     /// Mass density (per unit area); mass `pi a b density`, inertia `mass (a^2 + b^2) / 4` (SCENE.md).
     #[serde(default = "one")]
@@ -52,8 +53,10 @@ pub struct BodySpec {
     /// `"world"` or the name of an earlier body.
     pub parent: String,
     /// Hinge position in the parent's joint frame.
+    #[serde(deserialize_with = "strict_pair")]
     pub anchor: [f64; 2],
     /// Centre of the ellipse in the body's own joint frame.
+    #[serde(deserialize_with = "strict_pair")]
     pub centre: [f64; 2],
     /// The hinge joint to the parent.
     pub joint: JointSpec,
@@ -80,6 +83,7 @@ pub struct ContactSpec {
 #[serde(deny_unknown_fields)]
 pub struct SceneSpec {
     /// Gravitational acceleration `[gx, gy]`.
+    #[serde(deserialize_with = "strict_pair")]
     pub gravity: [f64; 2],
     /// Bodies, parents before children.
     #[serde(rename = "body")]
@@ -349,4 +353,24 @@ impl Scene {
         }
         false
     }
+}
+
+/// A pair read strictly: exactly two numbers (a plain `[f64; 2]` lets a TOML reader drop extra entries).
+fn strict_pair<'de, D: serde::Deserializer<'de>>(d: D) -> Result<[f64; 2], D::Error> {
+    let v = Vec::<f64>::deserialize(d)?;
+    <[f64; 2]>::try_from(v.as_slice())
+        .map_err(|_| serde::de::Error::custom(format!("needs exactly 2 numbers, got {}", v.len())))
+}
+
+/// [`strict_pair`] for an optional field.
+fn strict_pair_option<'de, D: serde::Deserializer<'de>>(
+    d: D,
+) -> Result<Option<[f64; 2]>, D::Error> {
+    let v = Option::<Vec<f64>>::deserialize(d)?;
+    v.map(|v| {
+        <[f64; 2]>::try_from(v.as_slice()).map_err(|_| {
+            serde::de::Error::custom(format!("needs exactly 2 numbers, got {}", v.len()))
+        })
+    })
+    .transpose()
 }

@@ -167,18 +167,64 @@ impl Library {
         Ok(library)
     }
 
-    /// Write the library to `path` (through a temporary file renamed into place, so that a crash never
-    /// leaves half a library under the name).
+    /// Write the library to `path` (through a temporary file of a fresh name beside it, renamed into place,
+    /// so that a crash never leaves half a library under the name and no other file is touched; the
+    /// temporary file is removed if anything fails).
     pub fn save(&self, path: &Path) -> Result<(), LibraryError> {
         let bytes = self.to_bytes()?;
-        let tmp = path.with_extension("partial");
-        std::fs::write(&tmp, &bytes).map_err(io(&tmp))?;
-        std::fs::rename(&tmp, path).map_err(io(path))
+        let (tmp, mut file) = temporary_beside(path)?;
+        let written = std::io::Write::write_all(&mut file, &bytes)
+            .and_then(|()| file.sync_all())
+            .map_err(io(&tmp))
+            .and_then(|()| std::fs::rename(&tmp, path).map_err(io(path)));
+        if written.is_err() {
+            let _ = std::fs::remove_file(&tmp);
+        }
+        written
+    }
+
+    /// Check, before a long build, that [`Library::save`] could write `path`: not a directory, and a file
+    /// can be created beside it (it is removed again).
+    pub fn check_destination(path: &Path) -> Result<(), LibraryError> {
+        if path.is_dir() {
+            return Err(LibraryError::Io {
+                path: path.display().to_string(),
+                source: std::io::Error::new(std::io::ErrorKind::IsADirectory, "is a directory"),
+            });
+        }
+        let (tmp, file) = temporary_beside(path)?;
+        drop(file);
+        std::fs::remove_file(&tmp).map_err(io(&tmp))
     }
 
     /// Read and check a library file.
     pub fn load(path: &Path) -> Result<Self, LibraryError> {
         let bytes = std::fs::read(path).map_err(io(path))?;
         Library::from_bytes(&bytes)
+    }
+}
+
+/// A new file beside `path` with a name no other file has (`.NAME.PID-N.partial`, created exclusively).
+fn temporary_beside(path: &Path) -> Result<(std::path::PathBuf, std::fs::File), LibraryError> {
+    static COUNTER: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => std::path::PathBuf::from("."),
+    };
+    let name = path
+        .file_name()
+        .map_or("library".into(), |n| n.to_string_lossy().into_owned());
+    loop {
+        let k = COUNTER.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let tmp = dir.join(format!(".{name}.{}-{k}.partial", std::process::id()));
+        match std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(&tmp)
+        {
+            Ok(file) => return Ok((tmp, file)),
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
+            Err(e) => return Err(io(&tmp)(e)),
+        }
     }
 }
