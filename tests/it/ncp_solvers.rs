@@ -112,7 +112,14 @@ fn lemke_walks_murtys_exponential_family_and_still_lands_on_the_unique_solution(
         }
     }
     // With a pivot limit, the method reports that it stopped early rather than a wrong answer.
-    let s = lemke(&murty(12), &LemkeSettings { max_pivots: 100 }).unwrap();
+    let s = lemke(
+        &murty(12),
+        &LemkeSettings {
+            max_pivots: 100,
+            ..LemkeSettings::default()
+        },
+    )
+    .unwrap();
     assert_eq!(s.info.status, Status::MaxIterations);
 }
 
@@ -424,4 +431,41 @@ fn smoothed_solves_survive_tiny_and_huge_sigma() {
             }
         }
     }
+}
+
+#[test]
+fn lemke_and_erm_refuse_problems_past_their_size_at_once() {
+    // An identity LCP of 2000 rows: trivial data, but the methods' work grows as rows^3 per pivot or
+    // iteration; they answer at once with the limit instead of running for minutes.
+    let n = 2000;
+    let mut m = vec![0.0; n * n];
+    for i in 0..n {
+        m[i * n + i] = 1.0;
+    }
+    let p = LinearMcp::from_row_major(0, m, vec![-1.0; n]).unwrap();
+    let start = std::time::Instant::now();
+    match lemke(&p, &LemkeSettings::default()) {
+        Err(NcpError::TooLarge { rows, max, .. }) => assert_eq!((rows, max), (n, 500)),
+        other => panic!("expected TooLarge, got {:?}", other.map(|s| s.info)),
+    }
+    let erm = ErmSolver::new(ErmSettings::default()).unwrap();
+    assert!(matches!(
+        erm.solve(&p, &vec![0.1; n], &vec![0.0; n]),
+        Err(NcpError::TooLarge {
+            rows: 2000,
+            max: 300,
+            ..
+        })
+    ));
+    // Not a timing test: refusing must not even factor the problem (seconds for 2000 rows).
+    assert!(start.elapsed().as_secs_f64() < 30.0);
+    // Below the limit they still solve: 200 rows.
+    let n = 200;
+    let mut m = vec![0.0; n * n];
+    for i in 0..n {
+        m[i * n + i] = 2.0;
+    }
+    let p = LinearMcp::from_row_major(0, m, vec![-1.0; n]).unwrap();
+    let s = lemke(&p, &LemkeSettings::default()).unwrap();
+    assert!(s.z.iter().all(|z| (z - 0.5).abs() < 1e-12));
 }

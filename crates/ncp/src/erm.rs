@@ -30,6 +30,15 @@ pub struct ErmSettings {
     pub max_iter: usize,
     /// Armijo constant of the search along the projection arc.
     pub armijo: f64,
+    /// Complementarity rows at most: each iteration factors a dense Hessian (`O(n^3)`, up to `max_iter`
+    /// of them and a Lemke start), so a problem past this is refused ([`NcpError::TooLarge`]) rather than
+    /// left to run for minutes (1000 rows took three).
+    #[serde(default = "default_max_size")]
+    pub max_size: usize,
+}
+
+fn default_max_size() -> usize {
+    ErmSettings::default().max_size
 }
 
 impl Default for ErmSettings {
@@ -39,6 +48,7 @@ impl Default for ErmSettings {
             tol: 1e-13,
             max_iter: 200,
             armijo: 1e-4,
+            max_size: 300,
         }
     }
 }
@@ -107,6 +117,13 @@ impl ErmSolver {
         check_finite("z0", z0)?;
         if let Some(&s) = sigma.iter().find(|s| !(s.is_finite() && **s > 0.0)) {
             return Err(NcpError::Sigma(s));
+        }
+        if n - nf > self.settings.max_size {
+            return Err(NcpError::TooLarge {
+                method: "expected residual minimisation",
+                rows: n - nf,
+                max: self.settings.max_size,
+            });
         }
         let reduced = problem.reduce()?;
         let start: Vec<f64> = z0[nf..].to_vec();

@@ -68,6 +68,18 @@ pub enum NcpError {
         /// `sum_i sigma_i^2`, an upper bound of the expected residual at any solution of the LCP.
         bound: f64,
     },
+    /// A problem too large for a method's bounded work (its settings' `max_size`).
+    #[error(
+        "{method} is limited to {max} complementarity rows (its max_size setting) and this problem has {rows}: its work grows as rows^3 per pivot"
+    )]
+    TooLarge {
+        /// Which method.
+        method: &'static str,
+        /// The problem's complementarity rows.
+        rows: usize,
+        /// The limit.
+        max: usize,
+    },
     /// The matrix and the vector of a problem do not fit together (the message says how).
     #[error("{0}")]
     Shape(String),

@@ -19,12 +19,22 @@ use serde::{Deserialize, Serialize};
 pub struct LemkeSettings {
     /// Pivots at most (Murty's family needs `2^n`).
     pub max_pivots: usize,
+    /// Complementarity rows at most: the revised form refactors the basis at every pivot (`O(n^3)` each,
+    /// some `n` pivots), so a problem past this is refused ([`NcpError::TooLarge`]) rather than left to
+    /// run for minutes (400 rows take about a second, 2000 would take many minutes).
+    #[serde(default = "default_max_size")]
+    pub max_size: usize,
+}
+
+fn default_max_size() -> usize {
+    LemkeSettings::default().max_size
 }
 
 impl Default for LemkeSettings {
     fn default() -> Self {
         LemkeSettings {
             max_pivots: 1 << 20,
+            max_size: 500,
         }
     }
 }
@@ -38,6 +48,14 @@ pub fn lemke(problem: &LinearMcp, settings: &LemkeSettings) -> Result<Solution, 
             name: "max_pivots",
             value: 0.0,
             expected: "at least 1",
+        });
+    }
+    let rows = problem.dim() - problem.n_free();
+    if rows > settings.max_size {
+        return Err(NcpError::TooLarge {
+            method: "Lemke's method",
+            rows,
+            max: settings.max_size,
         });
     }
     let reduced = problem.reduce()?;
