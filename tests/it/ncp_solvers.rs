@@ -469,3 +469,22 @@ fn lemke_and_erm_refuse_problems_past_their_size_at_once() {
     let s = lemke(&p, &LemkeSettings::default()).unwrap();
     assert!(s.z.iter().all(|z| (z - 0.5).abs() < 1e-12));
 }
+
+#[test]
+fn lemke_finds_tiny_entries_on_rows_of_tiny_scale() {
+    // Row 2's own scale is 1e-11 and its solution entry 1e-12: a ratio test that took ratios 1e-12 apart
+    // (relative) for a tie once ended on w_2 = -1e-23 with z_2 = 0, a 100% error on that row, reported
+    // "converged". Each row is judged in its own units.
+    for (m22, q2) in [(1e-11, -1e-23), (1e-6, -1e-13), (1.0, -1e-12)] {
+        let p = LinearMcp::from_rows(0, &[vec![1.0, 0.0], vec![0.0, m22]], &[-1.0, q2]).unwrap();
+        let s = lemke(&p, &LemkeSettings::default()).unwrap();
+        let exact = -q2 / m22;
+        assert_eq!(s.info.status, Status::Converged);
+        assert!(
+            (s.z[1] - exact).abs() <= 1e-12 * exact,
+            "M22 = {m22}: z2 = {} vs {exact}",
+            s.z[1]
+        );
+        assert!((s.z[0] - 1.0).abs() < 1e-15);
+    }
+}

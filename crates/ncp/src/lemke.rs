@@ -235,7 +235,7 @@ fn lemke_lcp(m: &[f64], q: &[f64], max_pivots: usize, covering: &[f64]) -> Attem
             .iter()
             .map(|&i| ratio(i))
             .fold(f64::INFINITY, f64::min);
-        let near = |v: f64| (v - best).abs() <= 1e-11 * best.abs().max(1e-300);
+        let near = |v: f64| (v - best).abs() <= 1e-13 * best.abs().max(1e-300);
         let mut ties: Vec<usize> = eligible
             .iter()
             .copied()
