@@ -308,25 +308,6 @@ fn thin_ellipse(ratio: f64, drag: bool) -> Scene {
     Scene::new(spec).unwrap()
 }
 
-/// Kinetic plus potential energy (gravity on every centre).
-fn energy(scene: &Scene, x: &[f64]) -> f64 {
-    let n = scene.n_dof();
-    let (q, v) = x.split_at(n);
-    let kin = dynamics::Kinematics::new(scene, q);
-    let m = kin.mass_matrix(scene);
-    let kinetic: f64 = (0..n)
-        .flat_map(|i| (0..n).map(move |j| (i, j)))
-        .map(|(i, j)| 0.5 * v[i] * m[i * n + j] * v[j])
-        .sum();
-    let potential: f64 = scene
-        .bodies
-        .iter()
-        .zip(&kin.centre)
-        .map(|(b, c)| -b.mass * (scene.gravity[0] * c[0] + scene.gravity[1] * c[1]))
-        .sum();
-    kinetic + potential
-}
-
 #[test]
 fn explicit_drag_that_would_create_energy_is_refused_and_implicit_drag_only_dissipates() {
     // A 100:1 ellipse has inertia 1.9e-3 on a joint with drag 0.7: explicit drag at h = 0.05 would multiply
@@ -396,10 +377,10 @@ fn thin_ellipses_up_to_1000_to_1_keep_their_energy_bounded_over_long_rollouts() 
                 };
                 let mut sim = Simulator::new(scene.clone(), settings).unwrap();
                 let mut x = vec![-0.9, -0.3, 0.2, -1.0, -1.0, 1.0];
-                let e0 = energy(&scene, &x);
+                let e0 = crate::support::energy(&scene, &x);
                 for k in 0..(20.0 / h) as usize {
                     x = sim.step(&x, &[0.0, 0.0]).unwrap().x_next;
-                    let e = energy(&scene, &x);
+                    let e = crate::support::energy(&scene, &x);
                     assert!(
                         e.is_finite() && e <= e0 + 0.1,
                         "{ratio}:1, h {h}, {model:?}, recovery {recovery:?}: energy {e} above {e0} at step {k}"

@@ -318,31 +318,11 @@ fn conservative_scene() -> Scene {
     Scene::new(spec).unwrap()
 }
 
-fn energy(scene: &Scene, x: &[f64]) -> f64 {
-    let (q, v) = x.split_at(3);
-    let kin = Kinematics::new(scene, q);
-    let m = kin.mass_matrix(scene);
-    let kinetic: f64 = (0..3)
-        .map(|i| {
-            (0..3)
-                .map(|j| 0.5 * v[i] * m[i * 3 + j] * v[j])
-                .sum::<f64>()
-        })
-        .sum();
-    let potential: f64 = scene
-        .bodies
-        .iter()
-        .zip(&kin.centre)
-        .map(|(b, c)| -b.mass * (scene.gravity[0] * c[0] + scene.gravity[1] * c[1]))
-        .sum();
-    kinetic + potential
-}
-
 #[test]
 fn energy_is_conserved_to_first_order_in_h_without_drag_or_contact() {
     let scene = conservative_scene();
     let x0 = [-0.7, -0.4, 0.3, 1.0, -0.5, 2.0];
-    let e0 = energy(&scene, &x0);
+    let e0 = crate::support::energy(&scene, &x0);
     let mut drift = Vec::new();
     for h in [0.004, 0.002, 0.001] {
         let settings = StepSettings {
@@ -356,7 +336,7 @@ fn energy_is_conserved_to_first_order_in_h_without_drag_or_contact() {
         let mut worst = 0.0f64;
         for _ in 0..steps {
             x = sim.step(&x, &[0.0, 0.0]).unwrap().x_next;
-            worst = worst.max((energy(&scene, &x) - e0).abs());
+            worst = worst.max((crate::support::energy(&scene, &x) - e0).abs());
         }
         drift.push(worst);
     }
@@ -384,7 +364,7 @@ fn contact_never_creates_energy_in_a_drag_free_scene() {
     let mut sim = Simulator::new(scene.clone(), settings).unwrap();
     // Start apart, falling onto the ellipse and the joint limits.
     let mut x = vec![-0.9, -0.3, 0.2, -1.0, -1.0, 0.0];
-    let e0 = energy(&scene, &x);
+    let e0 = crate::support::energy(&scene, &x);
     let mut contacts = 0;
     for _ in 0..300 {
         let s = sim.step(&x, &[0.0, 0.0]).unwrap();
@@ -394,9 +374,9 @@ fn contact_never_creates_energy_in_a_drag_free_scene() {
         x = s.x_next;
         // Symplectic-Euler-like drift is bounded; contact and limits only remove energy.
         assert!(
-            energy(&scene, &x) <= e0 + 0.05,
+            crate::support::energy(&scene, &x) <= e0 + 0.05,
             "energy {} rose above {e0}",
-            energy(&scene, &x)
+            crate::support::energy(&scene, &x)
         );
     }
     assert!(contacts > 0, "the scenario must touch something");

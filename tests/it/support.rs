@@ -55,3 +55,22 @@ pub fn paper_library() -> &'static library::Library {
     static LIB: std::sync::OnceLock<library::Library> = std::sync::OnceLock::new();
     built_once(&LIB, library::LibrarySettings::paper)
 }
+
+/// Kinetic plus potential energy (gravity on every centre).
+pub fn energy(scene: &dynamics::Scene, x: &[f64]) -> f64 {
+    let n = scene.n_dof();
+    let (q, v) = x.split_at(n);
+    let kin = dynamics::Kinematics::new(scene, q);
+    let m = kin.mass_matrix(scene);
+    let kinetic: f64 = (0..n)
+        .flat_map(|i| (0..n).map(move |j| (i, j)))
+        .map(|(i, j)| 0.5 * v[i] * m[i * n + j] * v[j])
+        .sum();
+    let potential: f64 = scene
+        .bodies
+        .iter()
+        .zip(&kin.centre)
+        .map(|(b, c)| -b.mass * (scene.gravity[0] * c[0] + scene.gravity[1] * c[1]))
+        .sum();
+    kinetic + potential
+}

@@ -470,11 +470,8 @@ impl Simulator {
         let sigma = self.noise(&cons.jacobian, cons.d.len());
         let dual = |v: &[F1]| v.iter().map(jet1_dual).collect::<Vec<_>>();
         let mut M = kin.mass_matrix(scene);
-        self.check_drag(&M.iter().map(|e| e.re).collect::<Vec<_>>())?;
-        self.with_drag(&mut M);
-        let distance = cons.d.iter().map(|e| e.re).collect();
         let mut d = cons.d;
-        self.recovered_all(&mut d);
+        let distance = self.prepare_ingredients(&mut M, &mut d)?;
         Ok(Ingredients {
             contacts: cons.contacts,
             distance,
@@ -499,11 +496,8 @@ impl Simulator {
         let r = Kinematics::new(scene, &qv[..n]).applied_forces(scene, &qv[n..], &u6);
         let sigma = self.noise(&cons.jacobian, cons.d.len());
         let mut M = kin3.mass_matrix(scene);
-        self.check_drag(&M.iter().map(|e| e.re).collect::<Vec<_>>())?;
-        self.with_drag(&mut M);
-        let distance = cons.d.iter().map(|e| e.re).collect();
         let mut d = cons.d;
-        self.recovered_all(&mut d);
+        let distance = self.prepare_ingredients(&mut M, &mut d)?;
         Ok(SecondOrder {
             n,
             contacts: cons.contacts.clone(),

@@ -325,6 +325,22 @@ impl Simulator {
         }
     }
 
+    /// The derivative passes' ingredients as the step sees them, in place: explicit drag checked
+    /// ([`Simulator::check_drag`]), implicit drag added to `M` ([`Simulator::with_drag`]), the rows'
+    /// distances limited by the recovery ([`Simulator::recovered_all`]). Returns the distances as they
+    /// were, which the step reports.
+    pub(crate) fn prepare_ingredients<T: Ring>(
+        &self,
+        M: &mut [T],
+        d: &mut [T],
+    ) -> Result<Vec<f64>, DynamicsError> {
+        self.check_drag(M)?;
+        self.with_drag(M);
+        let distance = d.iter().map(Ring::value).collect();
+        self.recovered_all(d);
+        Ok(distance)
+    }
+
     /// Implicit drag ([`Drag::Implicit`]): `M + h D` in place of `M` in the step's equations (with `r`
     /// keeping its `-D v`, `(M + h D) v' = M v + h (r + D v) + ...`). Nothing for explicit drag.
     pub(crate) fn with_drag<T: Ring>(&self, M: &mut [T]) {
@@ -340,7 +356,7 @@ impl Simulator {
     /// joint that breaks it otherwise. With `M = L L^T` and `W = L^-1 D^1/2`, `lambda_max(M^-1 D)` is that of
     /// `S = W^T W`, at most its trace `|W|_F^2`: that bound settles the usual case in a few flops, and the
     /// eigenvalue itself is computed only when the bound is above `2 / h`.
-    pub(crate) fn check_drag(&self, M: &[f64]) -> Result<(), DynamicsError> {
+    pub(crate) fn check_drag<T: Ring>(&self, M: &[T]) -> Result<(), DynamicsError> {
         let h = self.settings.h;
         let scene = &self.scene;
         if self.settings.drag == Drag::Implicit || scene.bodies.iter().all(|b| b.damping == 0.0) {
@@ -348,7 +364,7 @@ impl Simulator {
         }
         let n = scene.n_dof();
         // Cholesky in place (lower), then W = L^-1 D^1/2 column by column.
-        let mut l = M.to_vec();
+        let mut l: Vec<f64> = M.iter().map(Ring::value).collect();
         for j in 0..n {
             let mut diag = l[j * n + j];
             for k in 0..j {

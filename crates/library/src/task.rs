@@ -43,18 +43,17 @@ pub struct FingerDynamics {
 /// One knot's step, kept by [`FingerDynamics`] (see there).
 #[derive(Debug, Default)]
 pub struct StepData {
-    /// The step last computed at the knot; its derivatives linearise it as it is.
+    /// The step last computed at the knot; its derivatives linearise it as it is, and its solution
+    /// `[v'; lambda]` starts the next solve near it.
     step: Option<Step>,
-    /// `[v'; lambda]` of that step (the next solve's warm start).
-    solution: Option<Vec<f64>>,
     /// That step's second-order expansion, once asked for.
     prepared: Option<SecondOrderStep>,
 }
 
 impl StepData {
-    /// `[v'; lambda]` of the step last computed at the knot, if any.
-    pub fn solution(&self) -> Option<&[f64]> {
-        self.solution.as_deref()
+    /// The step last computed at the knot, if any.
+    pub fn step(&self) -> Option<&Step> {
+        self.step.as_ref()
     }
 }
 
@@ -74,11 +73,14 @@ impl FingerDynamics {
         &mut self.sim
     }
 
-    /// Start the simulator's next solve from `z`, if given.
-    fn resume(&mut self, z: Option<&[f64]>) {
-        if let Some(z) = z {
+    /// Start the simulator's next solve from the solution `[v'; lambda]` of `step`, if given.
+    fn resume(&mut self, step: Option<&Step>) {
+        if let Some(step) = step {
+            let n = self.sim.scene().n_dof();
+            let mut z = step.x_next[n..].to_vec();
+            z.extend_from_slice(&step.lambda);
             self.sim
-                .set_warm_start(z)
+                .set_warm_start(&z)
                 .expect("a stored solution has the scene's size");
         }
     }
@@ -108,19 +110,14 @@ impl Dynamics for FingerDynamics {
         u: &[f64],
         next: &mut [f64],
     ) -> Result<(), TaskError> {
-        self.resume(near.and_then(StepData::solution));
+        self.resume(near.and_then(StepData::step));
         data.prepared = None;
-        data.solution = None;
         data.step = None;
         let s = self.sim.step(x, u)?;
         if s.info.status != ncp::Status::Converged {
             return Err(TaskError::NotConverged(s.info.status));
         }
         next.copy_from_slice(&s.x_next);
-        let n = self.sim.scene().n_dof();
-        let mut z = s.x_next[n..].to_vec();
-        z.extend_from_slice(&s.lambda);
-        data.solution = Some(z);
         data.step = Some(s);
         Ok(())
     }

@@ -69,8 +69,8 @@ impl OnlineMpc {
                 expected: "finite and positive",
             });
         }
-        check_count("horizon", settings.horizon, MAX_MPC_HORIZON)?;
-        check_count("passes", settings.passes, MAX_MPC_PASSES)?;
+        check_count("horizon", settings.horizon, HORIZON_LIMIT)?;
+        check_count("passes", settings.passes, PASSES_LIMIT)?;
         let sim = Simulator::new(
             scene.clone(),
             StepSettings {
@@ -219,18 +219,23 @@ pub const MAX_MPC_HORIZON: usize = 2000;
 /// The online optimiser's passes per control step at most.
 pub const MAX_MPC_PASSES: usize = 100;
 
-/// `Err` unless `1 <= value <= max`.
-pub(crate) fn check_count(name: &'static str, value: usize, max: usize) -> Result<(), ViewerError> {
+/// `Err` unless `1 <= value <= max`, saying `expected` (a limit and its wording, [`HORIZON_LIMIT`]).
+pub(crate) fn check_count(
+    name: &'static str,
+    value: usize,
+    (max, expected): (usize, &'static str),
+) -> Result<(), ViewerError> {
     if value == 0 || value > max {
         return Err(ViewerError::Setting {
             name,
             value: value as f64,
-            expected: if max == MAX_MPC_HORIZON {
-                "between 1 and 2000 steps"
-            } else {
-                "between 1 and 100"
-            },
+            expected,
         });
     }
     Ok(())
 }
+
+/// [`MAX_MPC_HORIZON`] and how an error states it.
+pub(crate) const HORIZON_LIMIT: (usize, &str) = (MAX_MPC_HORIZON, "between 1 and 2000 steps");
+/// [`MAX_MPC_PASSES`] and how an error states it.
+pub(crate) const PASSES_LIMIT: (usize, &str) = (MAX_MPC_PASSES, "between 1 and 100");

@@ -152,8 +152,12 @@ impl World {
         check_positive("h", settings.h)?;
         check_positive("sigma", settings.sigma)?;
         check_speed(settings.speed)?;
-        crate::mpc::check_count("mpc_horizon", settings.mpc_horizon, crate::MAX_MPC_HORIZON)?;
-        crate::mpc::check_count("mpc_passes", settings.mpc_passes, crate::MAX_MPC_PASSES)?;
+        crate::mpc::check_count(
+            "mpc_horizon",
+            settings.mpc_horizon,
+            crate::mpc::HORIZON_LIMIT,
+        )?;
+        crate::mpc::check_count("mpc_passes", settings.mpc_passes, crate::mpc::PASSES_LIMIT)?;
         if settings.x0.len() != scene.n_state() || !settings.x0.iter().all(|e| e.is_finite()) {
             return Err(ViewerError::Message(format!(
                 "x0 must have {} finite entries",
