@@ -1,6 +1,6 @@
 //! A second-order forward-mode number over `N` directions with plain arrays: value, gradient and the full
 //! Hessian, each product fused into one pass (no temporaries). The Hessians of the forces `r(q, v)` run on
-//! it (`Jet<6>` over `(q, v)` for three joints): a few times cheaper than the general-purpose dual types
+//! it (`Jet<6>` over `(q, v)` for three joints; larger scenes take several passes): a few times cheaper than the general-purpose dual types
 //! for the one place where second derivatives of many operations are needed.
 
 use crate::kinematics::Ring;

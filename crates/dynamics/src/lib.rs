@@ -31,7 +31,7 @@ mod scene;
 mod step;
 
 pub use constraint::{Constraints, ContactFrame};
-pub use derivative::{SecondOrderStep, StepDerivatives, step_residual};
+pub use derivative::{SecondOrderStep, StepDerivatives, step_residual, step_residual_at};
 pub use error::{DynamicsError, SceneProblem};
 pub use jet::{Jet, Jet1};
 pub use kinematics::{Kinematics, Ring, Scalar};

@@ -29,7 +29,7 @@ pub enum TaskError {
 
 /// A [`Simulator`] as the optimiser's dynamics: [`Dynamics::calc`] is [`Simulator::step`],
 /// [`Dynamics::calc_diff`] [`Simulator::derivatives_of`] that step and the second-order capability
-/// [`Simulator::second_order_of`] it (scenes of at most three joints and eight state-and-control entries).
+/// [`Simulator::second_order_of`] it (any scene).
 ///
 /// Each knot's [`StepData`] keeps its step, which the knot's linearisation differentiates as it is (no
 /// second solve), and whose solution `[v'; lambda]` starts the next step computed near it; and the step's
@@ -145,8 +145,7 @@ impl Dynamics for FingerDynamics {
     }
 
     fn second_order(&mut self) -> Option<&mut dyn SecondOrder<StepData, Error = TaskError>> {
-        let s = self.sim.scene();
-        (s.n_dof() <= 3 && s.n_state() + s.n_controls <= 8).then_some(self as _)
+        Some(self)
     }
 }
 

@@ -1,0 +1,399 @@
+//! Stage 1 of the derivatives: the step's ingredients (`M`, `r + B u`, `J`, `d` and each row's noise) with
+//! their derivatives in `y = (x, u)`.
+//!
+//! First derivatives run in vector duals over eight entries of `y` per pass ([`Ingredients`]). Second
+//! derivatives ([`Expansion`]) exploit the ingredients' structure: `M`, `J`, `d` and the noise are functions
+//! of `q` alone, the forces of `(q, v)` (affine in `u`); each group is expanded to second order over its own
+//! arguments in fused jets ([`Jet`]), in one pass where they fit the jet's directions and otherwise in one
+//! pass per pair of blocks of directions, so a scene of any size gets its exact Hessians.
+
+#![allow(non_snake_case)]
+
+use crate::constraint::{Constraints, ContactFrame};
+use crate::error::DynamicsError;
+use crate::jet::{Jet, Jet1};
+use crate::kinematics::Kinematics;
+use crate::step::Simulator;
+use nalgebra::{SMatrix, SVector};
+use num_dual::{Derivative, Dual2SVec64, DualSVec64};
+
+/// Directions of a vector-dual pass over `y = (x, u)`: the finger's 6 state and 2 control entries at once.
+pub(super) const DIRECTIONS: usize = 8;
+
+pub(super) type D1 = DualSVec64<DIRECTIONS>;
+pub(super) type D2 = Dual2SVec64<DIRECTIONS>;
+/// The first derivatives' ingredients, all of one chunk of `y` at once.
+type F1 = Jet1<DIRECTIONS>;
+
+/// The step's ingredients at `(x, u)` in some scalar type: `M`, `r + B u`, `J`, `d` and each row's noise.
+pub(super) struct Ingredients<T> {
+    pub(super) contacts: Vec<ContactFrame>,
+    /// Each row's distance `d(q)` (the step reports it; `d` below is what the rows see,
+    /// [`crate::StepSettings::recovery`]).
+    pub(super) distance: Vec<f64>,
+    pub(super) M: Vec<T>,
+    pub(super) r: Vec<T>,
+    pub(super) jac: Vec<T>,
+    pub(super) d: Vec<T>,
+    pub(super) sigma: Vec<T>,
+}
+
+/// Values, gradients and Hessians of a list of functions of `dim` arguments, stored flat: function `i`'s
+/// gradient is `g[i dim..(i + 1) dim]`, its Hessian the row-major `dim x dim` block after `i dim^2` of `h`.
+pub(super) struct Taylor {
+    dim: usize,
+    re: Vec<f64>,
+    g: Vec<f64>,
+    h: Vec<f64>,
+}
+
+impl Taylor {
+    /// The number of arguments.
+    pub(super) fn dim(&self) -> usize {
+        self.dim
+    }
+
+    /// Function `i`'s value.
+    pub(super) fn re(&self, i: usize) -> f64 {
+        self.re[i]
+    }
+
+    /// Function `i`'s gradient (`dim`).
+    pub(super) fn g(&self, i: usize) -> &[f64] {
+        &self.g[i * self.dim..(i + 1) * self.dim]
+    }
+
+    /// Function `i`'s Hessian (row-major `dim x dim`).
+    pub(super) fn h(&self, i: usize) -> &[f64] {
+        let dd = self.dim * self.dim;
+        &self.h[i * dd..(i + 1) * dd]
+    }
+
+    /// The functions `f` of `dim` arguments at `at`, to second order, evaluated in `K`-direction jets: in
+    /// one pass when `dim <= K`; otherwise the arguments are cut into blocks of `K / 2` and each pair of
+    /// blocks takes one pass (its jets carry both blocks' directions), which together cover every
+    /// gradient entry and every block of the Hessian.
+    fn expand<const K: usize>(
+        at: &[f64],
+        mut f: impl FnMut(&[Jet<K>]) -> Result<Vec<Jet<K>>, DynamicsError>,
+    ) -> Result<Taylor, DynamicsError> {
+        let dim = at.len();
+        if dim <= K {
+            // One pass: the jets' leading blocks are the expansion.
+            let args: Vec<Jet<K>> = at
+                .iter()
+                .enumerate()
+                .map(|(i, &a)| Jet::variable(a, i))
+                .collect();
+            let values = f(&args)?;
+            let len = values.len();
+            let mut t = Taylor {
+                dim,
+                re: Vec::with_capacity(len),
+                g: Vec::with_capacity(len * dim),
+                h: Vec::with_capacity(len * dim * dim),
+            };
+            for v in &values {
+                t.re.push(v.re);
+                t.g.extend_from_slice(&v.g[..dim]);
+                for row in &v.h[..dim] {
+                    t.h.extend_from_slice(&row[..dim]);
+                }
+            }
+            return Ok(t);
+        }
+        let passes: Vec<Vec<usize>> = {
+            let half = (K / 2).max(1);
+            let blocks: Vec<Vec<usize>> = (0..dim)
+                .step_by(half)
+                .map(|s| (s..(s + half).min(dim)).collect())
+                .collect();
+            let mut passes = Vec::new();
+            for a in 0..blocks.len() {
+                for b in a + 1..blocks.len() {
+                    passes.push([blocks[a].as_slice(), blocks[b].as_slice()].concat());
+                }
+            }
+            passes
+        };
+        let mut out: Option<Taylor> = None;
+        let mut local = vec![usize::MAX; dim];
+        for dirs in &passes {
+            local.iter_mut().for_each(|l| *l = usize::MAX);
+            for (l, &i) in dirs.iter().enumerate() {
+                local[i] = l;
+            }
+            let args: Vec<Jet<K>> = at
+                .iter()
+                .zip(&local)
+                .map(|(&a, &l)| {
+                    if l == usize::MAX {
+                        Jet::from(a)
+                    } else {
+                        Jet::variable(a, l)
+                    }
+                })
+                .collect();
+            let values = f(&args)?;
+            let t = out.get_or_insert_with(|| Taylor {
+                dim,
+                re: values.iter().map(|v| v.re).collect(),
+                g: vec![0.0; values.len() * dim],
+                h: vec![0.0; values.len() * dim * dim],
+            });
+            for (o, v) in values.iter().enumerate() {
+                for (l, &i) in dirs.iter().enumerate() {
+                    t.g[o * dim + i] = v.g[l];
+                    let row = o * dim * dim + i * dim;
+                    for (l2, &j) in dirs.iter().enumerate() {
+                        t.h[row + j] = v.h[l][l2];
+                    }
+                }
+            }
+        }
+        Ok(out.unwrap_or(Taylor {
+            dim,
+            re: Vec::new(),
+            g: Vec::new(),
+            h: Vec::new(),
+        }))
+    }
+}
+
+/// The second-order ingredients before lifting: functions of `q` (the geometry: `M`, `J`, `d` and the
+/// noise, one [`Taylor`] over `n` arguments) and the forces, a function of `(q, v)` (over `2n`); the forces
+/// hold `B u` in value only (they are affine in `u`, whose directions are added on lifting).
+pub(super) struct Expansion {
+    pub(super) n: usize,
+    /// Complementarity rows.
+    pub(super) m: usize,
+    pub(super) contacts: Vec<ContactFrame>,
+    pub(super) distance: Vec<f64>,
+    /// `(joint, direction of its control in y)`.
+    pub(super) actuated: Vec<(usize, usize)>,
+    /// `M` (`n x n`), then `J` (`m x n`), then `d` (`m`), then the noise (`m`), over `q`.
+    pub(super) geometry: Taylor,
+    /// `r(q, v)` with `B u` (`n`), over `(q, v)`.
+    pub(super) forces: Taylor,
+}
+
+impl Expansion {
+    /// Index of `M_ij` in [`Expansion::geometry`].
+    pub(super) fn mass(&self, i: usize, j: usize) -> usize {
+        i * self.n + j
+    }
+
+    /// Index of `J_kj`.
+    pub(super) fn jac(&self, k: usize, j: usize) -> usize {
+        self.n * self.n + k * self.n + j
+    }
+
+    /// Index of `d_k`.
+    pub(super) fn dist(&self, k: usize) -> usize {
+        self.n * (self.n + self.m) + k
+    }
+
+    /// Index of row `k`'s noise.
+    pub(super) fn noise(&self, k: usize) -> usize {
+        self.n * (self.n + self.m) + self.m + k
+    }
+
+    /// The ingredients as numbers over the directions `dirs` of `y`, from each function's value, its
+    /// gradient entry `grad(t, i, y)` and Hessian entry `hess(t, i, y, y')` (zero where `y`, `y'` are not
+    /// among the function's arguments), and the controls' directions `unit(l)` (for `B u`).
+    fn convert<T: std::ops::AddAssign + Copy>(
+        &self,
+        dirs: &[usize],
+        lift: impl Fn(&Taylor, usize, &[usize]) -> T,
+        unit: impl Fn(usize) -> T,
+    ) -> Ingredients<T> {
+        let n = self.n;
+        let m = self.m;
+        let map = |range: std::ops::Range<usize>| {
+            range
+                .map(|i| lift(&self.geometry, i, dirs))
+                .collect::<Vec<T>>()
+        };
+        let mut forces: Vec<T> = (0..n).map(|i| lift(&self.forces, i, dirs)).collect();
+        for &(j, k) in &self.actuated {
+            if let Some(l) = dirs.iter().position(|&y| y == k) {
+                forces[j] += unit(l);
+            }
+        }
+        Ingredients {
+            contacts: self.contacts.clone(),
+            distance: self.distance.clone(),
+            M: map(0..n * n),
+            r: forces,
+            jac: map(n * n..n * n + m * n),
+            d: map(self.dist(0)..self.dist(m)),
+            sigma: map(self.noise(0)..self.noise(m)),
+        }
+    }
+
+    /// The first-order ingredients over `y[first..first + 8]`.
+    pub(super) fn first_order(&self, first: usize, cols: usize) -> Ingredients<D1> {
+        let dirs: Vec<usize> = (first..(first + DIRECTIONS).min(cols)).collect();
+        self.convert(&dirs, lift_first, |l| D1::from_re(0.0).derivative(l))
+    }
+
+    /// The ingredients lifted to second-order duals over the directions `dirs` of `y` (at most 8).
+    pub(super) fn lifted(&self, dirs: &[usize]) -> Ingredients<D2> {
+        self.convert(dirs, lift_second, |l| D2::from_re(0.0).derivative(l))
+    }
+}
+
+/// Function `i` of `t` as a first-order dual over the directions `dirs` of `y` (`t`'s arguments are the
+/// leading entries of `y`).
+fn lift_first(t: &Taylor, i: usize, dirs: &[usize]) -> D1 {
+    let mut grad = SVector::<f64, DIRECTIONS>::zeros();
+    let g = t.g(i);
+    for (l, &y) in dirs.iter().enumerate() {
+        if y < t.dim {
+            grad[l] = g[y];
+        }
+    }
+    D1::new(t.re(i), Derivative::some(grad))
+}
+
+/// Function `i` of `t` as a second-order dual over the directions `dirs` of `y`.
+fn lift_second(t: &Taylor, i: usize, dirs: &[usize]) -> D2 {
+    let mut grad = SMatrix::<f64, 1, DIRECTIONS>::zeros();
+    let mut hess = SMatrix::<f64, DIRECTIONS, DIRECTIONS>::zeros();
+    let (g, h, dim) = (t.g(i), t.h(i), t.dim);
+    for (l, &a) in dirs.iter().enumerate() {
+        if a >= dim {
+            continue;
+        }
+        grad[(0, l)] = g[a];
+        for (l2, &b) in dirs.iter().enumerate() {
+            if b < dim {
+                hess[(l, l2)] = h[a * dim + b];
+            }
+        }
+    }
+    D2::new(t.re(i), Derivative::some(grad), Derivative::some(hess))
+}
+
+/// A first-order jet over `y` (or a chunk of it) as the vector dual of the step's equations.
+fn jet1_dual(d: &F1) -> D1 {
+    D1::new(d.re, Derivative::some(SVector::from(d.g)))
+}
+
+impl Simulator {
+    /// Each row's noise in the scalar type of `jac`: the model's constant, or eq. (18) through `J(q)`.
+    pub(super) fn noise<T: crate::kinematics::Ring>(&self, jac: &[T], m: usize) -> Vec<T> {
+        use crate::step::{Complementarity, row_sigmas};
+        let sigma = match self.settings().model {
+            Complementarity::Hard => 0.0,
+            Complementarity::Logistic { sigma } | Complementarity::Normal { sigma } => sigma,
+        };
+        match self.state_covariance() {
+            Some(cov) => row_sigmas(cov, jac, self.scene().n_dof(), self.settings().h, sigma),
+            None => vec![T::from(sigma); m],
+        }
+    }
+
+    /// The ingredients in first-order duals over `y[first..first + 8]`.
+    pub(super) fn first_order_ingredients(
+        &self,
+        x: &[f64],
+        u: &[f64],
+        first: usize,
+    ) -> Result<Ingredients<D1>, DynamicsError> {
+        let scene = self.scene();
+        let n = scene.n_dof();
+        let ys: Vec<F1> = x
+            .iter()
+            .chain(u)
+            .enumerate()
+            .map(|(j, &e)| {
+                if (first..first + DIRECTIONS).contains(&j) {
+                    F1::variable(e, j - first)
+                } else {
+                    F1::from(e)
+                }
+            })
+            .collect();
+        let (xs, us) = ys.split_at(2 * n);
+        let kin = Kinematics::new(scene, &xs[..n]);
+        let r = kin.applied_forces(scene, &xs[n..], us);
+        let cons = Constraints::new(scene, &kin, &xs[..n])?;
+        let sigma = self.noise(&cons.jacobian, cons.d.len());
+        let dual = |v: &[F1]| v.iter().map(jet1_dual).collect::<Vec<_>>();
+        let mut M = kin.mass_matrix(scene);
+        let mut d = cons.d;
+        let distance = self.prepare_ingredients(&mut M, &mut d)?;
+        Ok(Ingredients {
+            contacts: cons.contacts,
+            distance,
+            M: dual(&M),
+            r: dual(&r),
+            jac: dual(&cons.jacobian),
+            d: dual(&d),
+            sigma: dual(&sigma),
+        })
+    }
+
+    /// The geometry `[M; J; d; noise]` of `q` in any jet, with the contact frames and true distances.
+    fn geometry<const K: usize>(
+        &self,
+        q: &[Jet<K>],
+        side: &mut Option<(Vec<ContactFrame>, Vec<f64>)>,
+    ) -> Result<Vec<Jet<K>>, DynamicsError> {
+        let scene = self.scene();
+        let kin = Kinematics::new(scene, q);
+        let cons = Constraints::new(scene, &kin, q)?;
+        let sigma = self.noise(&cons.jacobian, cons.d.len());
+        let mut M = kin.mass_matrix(scene);
+        let mut d = cons.d;
+        let distance = self.prepare_ingredients(&mut M, &mut d)?;
+        if side.is_none() {
+            *side = Some((cons.contacts, distance));
+        }
+        let mut out = Vec::with_capacity(M.len() + cons.jacobian.len() + 2 * d.len());
+        out.extend(M);
+        out.extend(cons.jacobian);
+        out.extend(d);
+        out.extend(sigma);
+        Ok(out)
+    }
+
+    /// The forces `r(q, v) + B u` of `(q, v)` in any jet, `u` held constant.
+    fn forces<const K: usize>(&self, qv: &[Jet<K>], u: &[f64]) -> Vec<Jet<K>> {
+        let scene = self.scene();
+        let n = scene.n_dof();
+        let u: Vec<Jet<K>> = u.iter().map(|&e| Jet::from(e)).collect();
+        Kinematics::new(scene, &qv[..n]).applied_forces(scene, &qv[n..], &u)
+    }
+
+    /// The second-order ingredients at `(x, u)`, any number of joints: the geometry over the joint angles
+    /// and the forces over `(q, v)`, to be lifted to `y`. Three joints (the finger) take one pass of
+    /// three-direction jets for the geometry and one of six for the forces.
+    pub(super) fn expansion(&self, x: &[f64], u: &[f64]) -> Result<Expansion, DynamicsError> {
+        let scene = self.scene();
+        let n = scene.n_dof();
+        let mut side = None;
+        let geometry = if n <= 3 {
+            Taylor::expand::<3>(&x[..n], |q| self.geometry(q, &mut side))?
+        } else {
+            Taylor::expand::<6>(&x[..n], |q| self.geometry(q, &mut side))?
+        };
+        let forces = Taylor::expand::<6>(&x[..2 * n], |qv| Ok(self.forces(qv, u)))?;
+        let (contacts, distance) = side.expect("the geometry ran at least once");
+        Ok(Expansion {
+            n,
+            m: distance.len(),
+            contacts,
+            distance,
+            actuated: scene
+                .bodies
+                .iter()
+                .enumerate()
+                .filter_map(|(j, b)| b.actuator.map(|k| (j, 2 * n + k)))
+                .collect(),
+            geometry,
+            forces,
+        })
+    }
+}
