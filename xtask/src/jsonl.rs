@@ -238,7 +238,9 @@ mod tests {
             let mut answers: Vec<Box<Answer<'_>>> = vec![
                 Box::new(|l| crate::distance::answer_line(l, true)),
                 Box::new(|l| crate::lcp::answer_line(l, &lcp)),
-                Box::new(|l| crate::step::answer_line(&mut sim, l, true)),
+                Box::new(|l| {
+                    crate::step::answer_line(&mut sim, l, crate::step::Answers::Derivatives)
+                }),
             ];
             for answer in &mut answers {
                 let mut out = Vec::new();

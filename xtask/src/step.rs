@@ -92,9 +92,24 @@ impl SimArgs {
 pub struct StepArgs {
     #[command(flatten)]
     sim: SimArgs,
-    /// Also write fx = dx'/dx and fu = dx'/du (logistic and hard models).
+    /// Also write fx = dx'/dx and fu = dx'/du.
     #[arg(long)]
     derivatives: bool,
+    /// Also write fx, fu and "hessian": the Hessian of c^T f(x, u) over (x, u), (n_x + n_u) square,
+    /// row-major as nested arrays, for the "c" (length n_x) each line then carries. Any scene.
+    #[arg(long)]
+    hessian: bool,
+}
+
+/// What a `step` line is answered with.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Answers {
+    /// The step.
+    Step,
+    /// The step, `fx` and `fu`.
+    Derivatives,
+    /// The step, `fx`, `fu` and the Hessian of `c^T f`.
+    Hessian,
 }
 
 #[derive(Debug, Deserialize)]
@@ -102,6 +117,8 @@ pub struct StepArgs {
 struct Query {
     x: Vec<f64>,
     u: Vec<f64>,
+    /// The vector the Hessian is contracted with (`--hessian` only).
+    c: Option<Vec<f64>>,
 }
 
 #[derive(Debug, Serialize)]
@@ -114,6 +131,8 @@ struct Answer {
     fx: Option<Vec<Vec<f64>>>,
     #[serde(skip_serializing_if = "Option::is_none")]
     fu: Option<Vec<Vec<f64>>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    hessian: Option<Vec<Vec<f64>>>,
 }
 
 fn rows(flat: &[f64], cols: usize) -> Vec<Vec<f64>> {
@@ -121,16 +140,30 @@ fn rows(flat: &[f64], cols: usize) -> Vec<Vec<f64>> {
 }
 
 /// Answers one line; each line is a fresh step (no warm start carried between lines).
-pub fn answer_line(sim: &mut Simulator, line: &str, derivatives: bool) -> Result<String, String> {
+pub fn answer_line(sim: &mut Simulator, line: &str, answers: Answers) -> Result<String, String> {
     let q: Query = serde_json::from_str(line).map_err(|e| format!("bad input line: {e}"))?;
     sim.reset_warm_start();
-    let (step, der) = if derivatives {
-        let (s, d) = sim
-            .step_with_derivatives(&q.x, &q.u)
-            .map_err(|e| e.to_string())?;
-        (s, Some(d))
-    } else {
-        (sim.step(&q.x, &q.u).map_err(|e| e.to_string())?, None)
+    let (step, der, hessian) = match (answers, &q.c) {
+        (Answers::Hessian, None) => {
+            return Err(format!(
+                "--hessian needs \"c\" on each line: the {} entries the Hessian of c^T f is taken for",
+                2 * sim.scene().n_dof()
+            ));
+        }
+        (Answers::Hessian, Some(c)) => {
+            let (s, d, h) = sim
+                .step_with_hessian(&q.x, &q.u, c)
+                .map_err(|e| e.to_string())?;
+            (s, Some(d), Some(h))
+        }
+        (_, Some(_)) => return Err("\"c\" is read only with --hessian".into()),
+        (Answers::Derivatives, None) => {
+            let (s, d) = sim
+                .step_with_derivatives(&q.x, &q.u)
+                .map_err(|e| e.to_string())?;
+            (s, Some(d), None)
+        }
+        (Answers::Step, None) => (sim.step(&q.x, &q.u).map_err(|e| e.to_string())?, None, None),
     };
     let nx = step.x_next.len();
     let nu = q.u.len();
@@ -141,13 +174,19 @@ pub fn answer_line(sim: &mut Simulator, line: &str, derivatives: bool) -> Result
         status: step.info.status,
         fx: der.as_ref().map(|d| rows(&d.fx, nx)),
         fu: der.as_ref().map(|d| rows(&d.fu, nu.max(1))),
+        hessian: hessian.as_ref().map(|h| rows(h, nx + nu)),
     };
     crate::jsonl::finite_line(&answer)
 }
 
 pub fn run_step(args: &StepArgs) -> anyhow::Result<()> {
     let mut sim = args.sim.simulator()?;
-    crate::jsonl::filter(|line| answer_line(&mut sim, line, args.derivatives))
+    let answers = match (args.hessian, args.derivatives) {
+        (true, _) => Answers::Hessian,
+        (false, true) => Answers::Derivatives,
+        (false, false) => Answers::Step,
+    };
+    crate::jsonl::filter(|line| answer_line(&mut sim, line, answers))
 }
 
 /// Steps at most in one `simulate` run (about 3 minutes of the finger at 20 us a step).
@@ -386,7 +425,12 @@ mod tests {
     fn a_step_line_gives_the_next_state_and_derivatives() {
         let mut s = sim(Model::Logistic);
         let out: serde_json::Value = serde_json::from_str(
-            &answer_line(&mut s, r#"{"x":[-0.7,-0.5,0,0,0,0],"u":[0,0]}"#, true).unwrap(),
+            &answer_line(
+                &mut s,
+                r#"{"x":[-0.7,-0.5,0,0,0,0],"u":[0,0]}"#,
+                Answers::Derivatives,
+            )
+            .unwrap(),
         )
         .unwrap();
         assert_eq!(out["x_next"].as_array().unwrap().len(), 6);
@@ -405,13 +449,64 @@ mod tests {
             r#"{"x":[0,0,0,0,0,0],"u":[0]}"#,
             r#"{"x":[0,0,0,0,0,0],"u":[0,0],"y":1}"#,
         ] {
-            assert!(answer_line(&mut s, bad, false).is_err(), "{bad}");
+            assert!(answer_line(&mut s, bad, Answers::Step).is_err(), "{bad}");
         }
         let mut n = sim(Model::Normal);
         let nan = r#"{"x":[-0.7,-0.5,0,0,0,0],"u":[0,"NaN"]}"#;
-        assert!(answer_line(&mut n, nan, true).is_err());
+        assert!(answer_line(&mut n, nan, Answers::Derivatives).is_err());
         // The normal model has derivatives too.
-        let out = answer_line(&mut n, r#"{"x":[-0.7,-0.5,0,0,0,0],"u":[0,0]}"#, true).unwrap();
+        let out = answer_line(
+            &mut n,
+            r#"{"x":[-0.7,-0.5,0,0,0,0],"u":[0,0]}"#,
+            Answers::Derivatives,
+        )
+        .unwrap();
         assert!(out.contains("\"fx\""), "{out}");
+        // "c" without --hessian, --hessian without "c" or with the wrong length: errors that say so.
+        let with_c = r#"{"x":[-0.7,-0.5,0,0,0,0],"u":[0,0],"c":[0,0,1,0,0,0]}"#;
+        let e = answer_line(&mut s, with_c, Answers::Derivatives).unwrap_err();
+        assert!(e.contains("--hessian"), "{e}");
+        let no_c = r#"{"x":[-0.7,-0.5,0,0,0,0],"u":[0,0]}"#;
+        let e = answer_line(&mut s, no_c, Answers::Hessian).unwrap_err();
+        assert!(e.contains("\"c\"") && e.contains('6'), "{e}");
+        let short = r#"{"x":[-0.7,-0.5,0,0,0,0],"u":[0,0],"c":[1,2]}"#;
+        let e = answer_line(&mut s, short, Answers::Hessian).unwrap_err();
+        assert!(e.contains("needs 6"), "{e}");
+    }
+
+    /// `--hessian` on a scene of four joints and three controls: the (8 + 3) square Hessian of the
+    /// simulator, and first derivatives with it.
+    #[test]
+    fn a_hessian_line_answers_any_scene() {
+        let mut spec = Scene::flicking_finger().spec().clone();
+        let mut link = spec.bodies[1].clone();
+        link.name = "link3".into();
+        link.parent = "link2".into();
+        link.joint.limits = None;
+        spec.bodies.insert(2, link);
+        let scene = Scene::new(spec).unwrap();
+        let mut sim = Simulator::new(scene, StepSettings::default()).unwrap();
+        let (x, u, c) = (
+            [-1.0, -0.9, -0.6, 0.5, 0.3, -0.2, 0.1, 1.0],
+            [0.2, -0.1, 0.3],
+            [0.1, 0.2, -0.3, 0.4, 1.0, -0.5, 0.2, 0.3],
+        );
+        let line = serde_json::json!({"x": x, "u": u, "c": c}).to_string();
+        let out: serde_json::Value =
+            serde_json::from_str(&answer_line(&mut sim, &line, Answers::Hessian).unwrap()).unwrap();
+        let hess = out["hessian"].as_array().unwrap();
+        assert_eq!(hess.len(), 11);
+        assert!(hess.iter().all(|r| r.as_array().unwrap().len() == 11));
+        assert_eq!(out["fx"].as_array().unwrap().len(), 8);
+        let (_, _, exact) = sim.step_with_hessian(&x, &u, &c).unwrap();
+        for (i, row) in hess.iter().enumerate() {
+            for (j, v) in row.as_array().unwrap().iter().enumerate() {
+                assert_eq!(v.as_f64().unwrap(), exact[i * 11 + j]);
+            }
+        }
+        assert!(
+            exact.iter().any(|v| v.abs() > 1e-6),
+            "a Hessian of zeros tests nothing"
+        );
     }
 }
