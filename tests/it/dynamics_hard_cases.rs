@@ -613,3 +613,59 @@ fn with_a_recovery_limit_the_derivatives_still_match_differences_in_deep_penetra
         }
     }
 }
+
+/// Rows describe themselves: on the two-finger scene (four limited joints, two contact pairs) each row's
+/// label names the constraint its value is, and each pair's impulse is its two rows' (inside the
+/// friction cone, `|tangent| <= mu normal`), so no caller decodes row positions.
+#[test]
+fn constraint_rows_name_their_owner_and_steps_give_each_pairs_impulse() {
+    use dynamics::ConstraintRow;
+    let scene = Scene::from_toml_str(TWO_FINGERS).unwrap();
+    assert_eq!(scene.rows().len(), 12);
+    assert_eq!(scene.rows().len(), scene.n_constraints());
+    let settings = StepSettings {
+        model: Complementarity::Hard,
+        ..StepSettings::default()
+    };
+    let mut sim = Simulator::new(scene.clone(), settings).unwrap();
+    let mut touched = [false; 2];
+    for i in 0..8 {
+        let t = i as f64 * 0.4;
+        let x = [-1.2, 0.6, -1.95, -0.6, t, 0.3, -0.4, 0.2, 0.1, 1.0];
+        let step = sim.step(&x, &[0.2, -0.3, 0.1, 0.4]).unwrap();
+        assert_eq!(step.lambda.len(), 12);
+        for (k, row) in scene.rows().iter().enumerate() {
+            let expected = match *row {
+                ConstraintRow::LowerLimit { joint } => {
+                    x[joint] - scene.bodies[joint].limits.unwrap()[0]
+                }
+                ConstraintRow::UpperLimit { joint } => {
+                    scene.bodies[joint].limits.unwrap()[1] - x[joint]
+                }
+                ConstraintRow::FrictionEdge { pair, .. } => step.contacts[pair].distance,
+            };
+            assert!((step.d[k] - expected).abs() < 1e-12, "row {k} {row:?}");
+        }
+        assert_eq!(step.impulses.len(), 2);
+        for (pair, imp) in step.impulses.iter().enumerate() {
+            let (mut plus, mut minus) = (None, None);
+            for (row, l) in scene.rows().iter().zip(&step.lambda) {
+                if let ConstraintRow::FrictionEdge { pair: p, positive } = *row
+                    && p == pair
+                {
+                    *if positive { &mut plus } else { &mut minus } = Some(*l);
+                }
+            }
+            let (plus, minus) = (plus.unwrap(), minus.unwrap());
+            assert_eq!(imp.normal, plus + minus);
+            let mu = scene.contacts[pair].friction;
+            assert!(imp.tangent.abs() <= mu * imp.normal + 1e-12, "{imp:?}");
+            let length = imp.on_b[0].hypot(imp.on_b[1]);
+            assert!((length - imp.normal.hypot(imp.tangent)).abs() < 1e-9 * (1.0 + length));
+            touched[pair] |= imp.normal > 1e-3;
+        }
+        let total: f64 = step.impulses.iter().map(|i| i.normal).sum();
+        assert_eq!(step.normal_impulse(), total);
+    }
+    assert!(touched[0], "finger a never touched the ellipse");
+}

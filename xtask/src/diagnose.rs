@@ -102,12 +102,6 @@ fn world(hard: bool) -> anyhow::Result<Simulator> {
     )?)
 }
 
-/// Normal contact impulse of a step (the rows after the joint limits).
-fn contact_impulse(scene: &Scene, lambda: &[f64]) -> f64 {
-    let limit_rows = scene.bodies.iter().filter(|b| b.limits.is_some()).count() * 2;
-    lambda[limit_rows..].iter().sum()
-}
-
 fn receding(horizon: usize, shift: usize, hard: bool, seconds: f64) -> anyhow::Result<Run> {
     let scene = Scene::flicking_finger();
     let settings = LibrarySettings {
@@ -151,7 +145,7 @@ fn receding(horizon: usize, shift: usize, hard: bool, seconds: f64) -> anyhow::R
                 }
             }
             let s = sim.step(&x, &u)?;
-            run.impulses.push(contact_impulse(&scene, &s.lambda));
+            run.impulses.push(s.normal_impulse());
             x = s.x_next;
             run.states.push(x.clone());
         }
@@ -206,7 +200,7 @@ fn policy(lib: &Library, hard: bool, seconds: f64) -> anyhow::Result<Run> {
     for _ in 0..(seconds / 0.05).round() as usize {
         policy.control(&x, &mut u)?;
         let s = sim.step(&x, &u)?;
-        run.impulses.push(contact_impulse(lib.scene(), &s.lambda));
+        run.impulses.push(s.normal_impulse());
         x = s.x_next;
         run.states.push(x.clone());
     }

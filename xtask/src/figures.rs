@@ -244,13 +244,6 @@ fn closed_loop(lib: &Library, policy: &Policy, seconds: f64) -> anyhow::Result<R
             ..StepSettings::default()
         },
     )?;
-    let limit_rows: usize = lib
-        .scene()
-        .bodies
-        .iter()
-        .filter(|b| b.limits.is_some())
-        .count()
-        * 2;
     let mut x = lib.settings.x0.clone();
     let mut u = vec![0.0; lib.scene().n_controls];
     let mut states = vec![x.clone()];
@@ -258,7 +251,7 @@ fn closed_loop(lib: &Library, policy: &Policy, seconds: f64) -> anyhow::Result<R
     for _ in 0..(seconds / lib.settings.h) as usize {
         policy.control(&x, &mut u)?;
         let s = sim.step(&x, &u)?;
-        impulses.push(s.lambda[limit_rows..].iter().sum());
+        impulses.push(s.normal_impulse());
         x = s.x_next;
         states.push(x.clone());
     }

@@ -24,7 +24,102 @@ pub struct ContactFrame {
     pub witness_unique: bool,
 }
 
-/// Constraint values and Jacobian rows at `q`.
+/// What a complementarity row is and whose it is ([`Scene::rows`]): rows are never decoded by position
+/// outside this crate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum ConstraintRow {
+    /// Joint `joint`'s lower limit, `q_j - lo >= 0`.
+    LowerLimit {
+        /// The joint (body index).
+        joint: usize,
+    },
+    /// Joint `joint`'s upper limit, `hi - q_j >= 0`.
+    UpperLimit {
+        /// The joint (body index).
+        joint: usize,
+    },
+    /// An edge of contact pair `pair`'s linearised friction cone: the row `J_n + mu J_t` (`positive`) or
+    /// `J_n - mu J_t`, whose constraint value is the pair's signed distance.
+    FrictionEdge {
+        /// The contact pair (index into [`Scene::contacts`]).
+        pair: usize,
+        /// Which edge: `+ mu J_t` or `- mu J_t`.
+        positive: bool,
+    },
+}
+
+impl ConstraintRow {
+    /// The rows of `scene` in the order of [`Constraints`]: each limited joint's lower then upper row,
+    /// then each contact pair's two friction-cone edges.
+    pub(crate) fn of(scene: &Scene) -> Vec<ConstraintRow> {
+        let mut rows = Vec::new();
+        for (joint, b) in scene.bodies.iter().enumerate() {
+            if b.limits.is_some() {
+                rows.push(ConstraintRow::LowerLimit { joint });
+                rows.push(ConstraintRow::UpperLimit { joint });
+            }
+        }
+        for pair in 0..scene.contacts.len() {
+            rows.push(ConstraintRow::FrictionEdge {
+                pair,
+                positive: true,
+            });
+            rows.push(ConstraintRow::FrictionEdge {
+                pair,
+                positive: false,
+            });
+        }
+        rows
+    }
+}
+
+/// A contact pair's impulse over one step, from its two friction-cone rows `lambda_+` and `lambda_-`:
+/// `normal = lambda_+ + lambda_-` along the pair's normal (from A to B), `tangent = mu (lambda_+ -
+/// lambda_-)` along `perp(normal)`; `on_b` is the impulse on body B in world coordinates (A receives
+/// its opposite).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ContactImpulse {
+    /// Along the normal.
+    pub normal: f64,
+    /// Along the tangent `perp(normal)`.
+    pub tangent: f64,
+    /// On body B, world coordinates.
+    pub on_b: [f64; 2],
+}
+
+impl ContactImpulse {
+    /// Each pair's impulse from the step's row impulses `lambda` (the order of [`Scene::rows`]) and the
+    /// pairs' frames.
+    pub(crate) fn of(
+        scene: &Scene,
+        lambda: &[f64],
+        frames: &[ContactFrame],
+    ) -> Vec<ContactImpulse> {
+        let mut edges = vec![[0.0; 2]; scene.contacts.len()];
+        for (row, l) in scene.rows().iter().zip(lambda) {
+            if let ConstraintRow::FrictionEdge { pair, positive } = *row {
+                edges[pair][usize::from(!positive)] = *l;
+            }
+        }
+        edges
+            .iter()
+            .zip(&scene.contacts)
+            .zip(frames)
+            .map(|((&[plus, minus], pair), frame)| {
+                let (normal, tangent) = (plus + minus, pair.friction * (plus - minus));
+                let [nx, ny] = frame.normal;
+                ContactImpulse {
+                    normal,
+                    tangent,
+                    on_b: [normal * nx - tangent * ny, normal * ny + tangent * nx],
+                }
+            })
+            .collect()
+    }
+}
+
+/// Constraint values and Jacobian rows at `q`, in the order of [`Scene::rows`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct Constraints<T = f64> {
     /// `d(q)`, one per row.

@@ -30,7 +30,7 @@ mod kinematics;
 mod scene;
 mod step;
 
-pub use constraint::{Constraints, ContactFrame};
+pub use constraint::{ConstraintRow, Constraints, ContactFrame, ContactImpulse};
 pub use derivative::{SecondOrderStep, StepDerivatives, step_residual, step_residual_at};
 pub use error::{DynamicsError, SceneProblem};
 pub use jet::{Jet, Jet1};

@@ -9,6 +9,7 @@
 //! (the world frame for a root body) and its `centre` in its own joint frame; the ellipse's x axis is the
 //! joint frame's x axis.
 
+use crate::constraint::ConstraintRow;
 use crate::error::{DynamicsError, SceneProblem};
 use geometry::Ellipse;
 use serde::{Deserialize, Serialize};
@@ -141,6 +142,8 @@ pub struct Scene {
     pub contacts: Vec<ContactPair>,
     /// Number of controls.
     pub n_controls: usize,
+    /// What each complementarity row is.
+    rows: Vec<ConstraintRow>,
 }
 
 impl Scene {
@@ -252,13 +255,16 @@ impl Scene {
         if !problems.is_empty() {
             return Err(DynamicsError::Scene(problems));
         }
-        Ok(Scene {
+        let mut scene = Scene {
             gravity: spec.gravity,
             bodies,
             contacts,
             n_controls,
             spec,
-        })
+            rows: Vec::new(),
+        };
+        scene.rows = ConstraintRow::of(&scene);
+        Ok(scene)
     }
 
     /// Parse and check a TOML scene.
@@ -339,7 +345,13 @@ impl Scene {
 
     /// Number of unilateral constraint rows: two per joint with limits, two per contact pair.
     pub fn n_constraints(&self) -> usize {
-        2 * self.bodies.iter().filter(|b| b.limits.is_some()).count() + 2 * self.contacts.len()
+        self.rows.len()
+    }
+
+    /// What each complementarity row is (joint limit of which joint, or friction-cone edge of which
+    /// contact pair), in the order of a step's `lambda` and `d`.
+    pub fn rows(&self) -> &[ConstraintRow] {
+        &self.rows
     }
 
     /// Whether body `j` is `i` or one of its ancestors (so joint `j` moves body `i`).

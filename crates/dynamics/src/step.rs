@@ -9,7 +9,7 @@
 
 #![allow(non_snake_case)]
 
-use crate::constraint::{Constraints, ContactFrame};
+use crate::constraint::{Constraints, ContactFrame, ContactImpulse};
 use crate::error::DynamicsError;
 use crate::kinematics::{Kinematics, Ring};
 use crate::scene::Scene;
@@ -137,8 +137,17 @@ pub struct Step {
     pub d: Vec<f64>,
     /// Contact geometry at the start of the step, one per pair.
     pub contacts: Vec<ContactFrame>,
+    /// Each contact pair's impulse over the step (from its two rows of `lambda`).
+    pub impulses: Vec<ContactImpulse>,
     /// How the complementarity solve went.
     pub info: Info,
+}
+
+impl Step {
+    /// The step's total normal contact impulse, over every contact pair (joint limits excluded).
+    pub fn normal_impulse(&self) -> f64 {
+        self.impulses.iter().map(|i| i.normal).sum()
+    }
 }
 
 /// A simulator: the scene, its settings and the solvers' warm-start state.
@@ -524,11 +533,13 @@ impl Simulator {
         }
         let lambda = z[n..].to_vec();
         self.warm = Some(z);
+        let impulses = ContactImpulse::of(&self.scene, &lambda, &cons.contacts);
         let step = Step {
             x_next,
             lambda,
             d: cons.d,
             contacts: cons.contacts,
+            impulses,
             info,
         };
         Ok((step, problem))

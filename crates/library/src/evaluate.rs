@@ -179,8 +179,6 @@ pub fn evaluate_in(
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(settings.seed);
     let kick =
         Normal::new(0.0, settings.kick_std).map_err(|e| LibraryError::Invalid(e.to_string()))?;
-    // The contact rows (two per pair) follow the joint-limit rows.
-    let limit_rows: usize = scene.bodies.iter().filter(|b| b.limits.is_some()).count() * 2;
     let mut x = settings.x0.clone();
     let mut u = vec![0.0; scene.n_controls];
     let mut contacts = ContactEvents::default();
@@ -222,7 +220,7 @@ pub fn evaluate_in(
         if s.info.status != ncp::Status::Converged {
             unconverged += 1;
         }
-        contacts.observe(s.lambda[limit_rows..].iter().sum::<f64>());
+        contacts.observe(s.normal_impulse());
         x = s.x_next;
         if let Some((at, angle)) = since_kick
             && x[free] - angle >= std::f64::consts::FRAC_PI_2

@@ -518,34 +518,15 @@ impl World {
             self.warning = Some("the world's state became non-finite; it was reset".into());
             return Ok(());
         }
-        let limit_rows: usize = self
-            .scene
-            .bodies
-            .iter()
-            .filter(|b| b.limits.is_some())
-            .count()
-            * 2;
         self.contacts = step
             .contacts
             .iter()
-            .enumerate()
-            .map(|(p, c)| {
-                let (l1, l2) = (
-                    step.lambda[limit_rows + 2 * p],
-                    step.lambda[limit_rows + 2 * p + 1],
-                );
-                let friction = self.scene.contacts[p].friction;
-                let t = [-c.normal[1], c.normal[0]];
-                let (normal, tangent) = (l1 + l2, friction * (l1 - l2));
-                ContactView {
-                    point: c.point_b,
-                    normal: c.normal,
-                    distance: c.distance,
-                    impulse: [
-                        normal * c.normal[0] + tangent * t[0],
-                        normal * c.normal[1] + tangent * t[1],
-                    ],
-                }
+            .zip(&step.impulses)
+            .map(|(c, i)| ContactView {
+                point: c.point_b,
+                normal: c.normal,
+                distance: c.distance,
+                impulse: i.on_b,
             })
             .collect();
         self.x = step.x_next;
