@@ -4,7 +4,7 @@
 //! - [`Scene`]: checked, immutable scene data, from a TOML file ([`Scene::from_toml_str`],
 //!   `scenes/finger.toml`) or [`Scene::flicking_finger`].
 //! - [`Kinematics`]: positions, point Jacobians, `M(q)`, `r(q, v)`.
-//! - [`Constraints`]: `d(q)` and `J(q)` in SCENE.md's row order.
+//! - [`Constraints`]: `d(q)` and `J(q)` in the order of [`Scene::rows`] (SCENE.md's), each row typed by [`ConstraintRow`]; a [`Step`] gives each pair's [`ContactImpulse`].
 //! - [`Simulator::step_with_derivatives`]: exact `fx`, `fu` by the implicit function theorem.
 //! - [`Simulator::step`]: one step for the models [`Complementarity::Hard`], `Logistic` (eq. 17) and
 //!   `Normal` (eq. 14 with 15).

@@ -131,7 +131,7 @@ impl StepSettings {
 pub struct Step {
     /// `[q + h v'; v']`.
     pub x_next: Vec<f64>,
-    /// Row impulses, SCENE.md's row order.
+    /// Row impulses, in the order of [`Scene::rows`](crate::Scene::rows) (SCENE.md's).
     pub lambda: Vec<f64>,
     /// Constraint values `d(q)` at the start of the step.
     pub d: Vec<f64>,
