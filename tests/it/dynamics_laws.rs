@@ -29,7 +29,9 @@ fn state() -> impl Strategy<Value = Vec<f64>> {
 fn physical_step(sim: &mut Simulator, x: &[f64], u: &[f64]) -> Option<dynamics::Step> {
     match sim.step(x, u) {
         Ok(step) => Some(step),
-        Err(DynamicsError::Ncp(ncp::NcpError::NoSolution { .. })) => None,
+        Err(DynamicsError::Ncp(
+            ncp::NcpError::NoSolution { .. } | ncp::NcpError::Infeasible { .. },
+        )) => None,
         Err(e) => panic!("step at {x:?}: {e}"),
     }
 }

@@ -58,6 +58,14 @@ pub enum DynamicsError {
     /// A capability this model does not have (yet), or a degenerate state it cannot differentiate at.
     #[error("unsupported: {0}")]
     Unsupported(&'static str),
+    /// A matrix of the step's linearisation could not be factored.
+    #[error("{what} cannot be factored: {cause}")]
+    Singular {
+        /// Which matrix.
+        what: &'static str,
+        /// Why (the failing pivot).
+        cause: ncp::FactorError,
+    },
     /// The contact geometry could not be evaluated.
     #[error(transparent)]
     Geometry(#[from] geometry::GeometryError),

@@ -10,6 +10,33 @@ use faer::linalg::lu::partial_pivoting::{factor, solve};
 use faer::{Mat, Par};
 use serde::{Deserialize, Serialize};
 
+/// Why a matrix could not be factored.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum FactorError {
+    /// The matrix has the wrong number of entries for this workspace.
+    #[error("the matrix has {len} entries; a {n} x {n} factorisation needs {}", n * n)]
+    Shape {
+        /// Entries given.
+        len: usize,
+        /// The workspace's size.
+        n: usize,
+    },
+    /// An entry is NaN or infinite.
+    #[error("the matrix has a non-finite entry")]
+    NonFinite,
+    /// Singular to working precision: elimination step `column`'s largest available pivot is below
+    /// `threshold` (`n eps max|a|`).
+    #[error("singular to working precision: pivot {column} is {pivot:e}, below {threshold:e}")]
+    Singular {
+        /// The elimination step (column) that failed.
+        column: usize,
+        /// The largest pivot available there (its magnitude).
+        pivot: f64,
+        /// The smallest pivot accepted.
+        threshold: f64,
+    },
+}
+
 /// Which dense LU implementation a solver uses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -88,14 +115,17 @@ impl DenseLu {
         self.n
     }
 
-    /// Factor the row-major `n x n` matrix `a`. Returns false when it is singular to working precision
-    /// (a pivot below `n eps max|a|`, or a non-finite entry); the factorisation is then unusable.
-    pub fn factor(&mut self, a: &[f64]) -> bool {
+    /// Factor the row-major `n x n` matrix `a`. An error when it is singular to working precision (a
+    /// pivot below `n eps max|a|`: the failing column and pivot), has a non-finite entry, or has the wrong
+    /// size; the factorisation is then unusable.
+    pub fn factor(&mut self, a: &[f64]) -> Result<(), FactorError> {
         let n = self.n;
-        debug_assert_eq!(a.len(), n * n);
+        if a.len() != n * n {
+            return Err(FactorError::Shape { len: a.len(), n });
+        }
         let scale = a.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-        if !scale.is_finite() {
-            return false;
+        if !scale.is_finite() || a.iter().any(|v| v.is_nan()) {
+            return Err(FactorError::NonFinite);
         }
         let tiny = (n as f64) * f64::EPSILON * scale;
         match &mut self.backend {
@@ -115,7 +145,11 @@ impl DenseLu {
                         }
                     }
                     if !(best > tiny) {
-                        return false;
+                        return Err(FactorError::Singular {
+                            column: k,
+                            pivot: best,
+                            threshold: tiny,
+                        });
                     }
                     if p != k {
                         let (top, bottom) = lu.split_at_mut(p * n);
@@ -137,7 +171,7 @@ impl DenseLu {
                         }
                     }
                 }
-                true
+                Ok(())
             }
             Backend::Faer {
                 lu,
@@ -160,10 +194,17 @@ impl DenseLu {
                     stack,
                     Default::default(),
                 );
-                (0..n).all(|k| {
+                match (0..n).find(|&k| {
                     let u = lu[(k, k)];
-                    u.is_finite() && u.abs() > tiny
-                })
+                    !(u.is_finite() && u.abs() > tiny)
+                }) {
+                    None => Ok(()),
+                    Some(k) => Err(FactorError::Singular {
+                        column: k,
+                        pivot: lu[(k, k)].abs(),
+                        threshold: tiny,
+                    }),
+                }
             }
         }
     }
@@ -346,7 +387,7 @@ mod tests {
             let c: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
             for solver in [LinearSolver::Hand, LinearSolver::Faer] {
                 let mut lu = DenseLu::new(n, solver);
-                assert!(lu.factor(&a));
+                lu.factor(&a).unwrap();
                 let mut y = c.clone();
                 lu.solve_transposed(&mut y);
                 for j in 0..n {
@@ -370,7 +411,7 @@ mod tests {
             let b: Vec<f64> = (0..n * k).map(|_| rng.random_range(-1.0..1.0)).collect();
             for solver in [LinearSolver::Hand, LinearSolver::Faer] {
                 let mut lu = DenseLu::new(n, solver);
-                assert!(lu.factor(&a));
+                lu.factor(&a).unwrap();
                 let mut many = b.clone();
                 lu.solve_many(&mut many, k);
                 for c in 0..k {
@@ -395,7 +436,7 @@ mod tests {
                 .collect();
             for solver in [LinearSolver::Hand, LinearSolver::Faer] {
                 let mut lu = DenseLu::new(n, solver);
-                assert!(lu.factor(&a));
+                lu.factor(&a).unwrap();
                 let mut y = b.clone();
                 lu.solve(&mut y);
                 let err = x
@@ -411,11 +452,35 @@ mod tests {
     fn singular_and_non_finite_matrices_are_reported() {
         for solver in [LinearSolver::Hand, LinearSolver::Faer] {
             let mut lu = DenseLu::new(3, solver);
-            assert!(!lu.factor(&[1.0, 2.0, 3.0, 2.0, 4.0, 6.0, 0.0, 1.0, 1.0]));
-            assert!(!lu.factor(&[1.0, 0.0, 0.0, 0.0, f64::NAN, 0.0, 0.0, 0.0, 1.0]));
+            // Rows 1 and 2 are parallel: elimination fails in its second column.
+            let e = lu
+                .factor(&[1.0, 2.0, 3.0, 2.0, 4.0, 6.0, 0.0, 1.0, 1.0])
+                .unwrap_err();
+            match e {
+                FactorError::Singular {
+                    column, threshold, ..
+                } => {
+                    assert!(column >= 1, "{e}");
+                    assert!(threshold > 0.0 && threshold < 1e-14, "{e}");
+                }
+                other => panic!("{solver:?}: {other}"),
+            }
+            assert!(e.to_string().contains("pivot"), "{e}");
+            assert_eq!(
+                lu.factor(&[1.0, 0.0, 0.0, 0.0, f64::NAN, 0.0, 0.0, 0.0, 1.0]),
+                Err(FactorError::NonFinite)
+            );
+            assert_eq!(
+                lu.factor(&[1.0, 0.0]),
+                Err(FactorError::Shape { len: 2, n: 3 })
+            );
             // A pivot far below the matrix's scale is singular; the same matrix scaled uniformly is not.
-            assert!(!lu.factor(&[0.0, 1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1e-300]));
-            assert!(lu.factor(&[0.0, 1e-200, 0.0, 1e-200, 0.0, 0.0, 0.0, 0.0, 1e-200]));
+            assert!(matches!(
+                lu.factor(&[0.0, 1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1e-300]),
+                Err(FactorError::Singular { column: 2, .. })
+            ));
+            lu.factor(&[0.0, 1e-200, 0.0, 1e-200, 0.0, 0.0, 0.0, 0.0, 1e-200])
+                .unwrap();
         }
     }
 }

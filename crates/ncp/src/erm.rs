@@ -226,7 +226,7 @@ impl ErmSolver {
                         m[i * c + i] += mu;
                     }
                 }
-                if is_positive_definite(&m, c) && lu.factor(&m) {
+                if is_positive_definite(&m, c) && lu.factor(&m).is_ok() {
                     for i in 0..c {
                         d[i] = if free[i] { -cur.g[i] } else { 0.0 };
                     }

@@ -44,10 +44,12 @@ pub enum NcpError {
     },
     /// The block of equality rows cannot be eliminated (it is singular), so the free variables are not
     /// determined by the complementarity variables.
-    #[error("the {n_free}x{n_free} block of equality rows is singular")]
+    #[error("the {n_free}x{n_free} block of equality rows cannot be factored: {cause}")]
     SingularFreeBlock {
         /// Number of equality rows.
         n_free: usize,
+        /// Why (the failing pivot).
+        cause: crate::dense::FactorError,
     },
     /// Lemke's method ended on a secondary ray: the LCP has no solution (certain for copositive-plus M,
     /// which includes every positive semi-definite M).

@@ -87,7 +87,7 @@ pub fn lemke(problem: &LinearMcp, settings: &LemkeSettings) -> Result<Solution, 
                     .collect()
             }
             _ => {
-                let mut rng = crate::instances::SplitMix64::new(attempt);
+                let mut rng = crate::rng::SplitMix64::new(attempt);
                 (0..c).map(|_| rng.uniform(0.5, 2.0)).collect()
             }
         };
@@ -202,7 +202,7 @@ fn lemke_lcp(m: &[f64], q: &[f64], max_pivots: usize, covering: &[f64]) -> Attem
                 b[i * n + r] = col[i];
             }
         }
-        if !lu.factor(&b) {
+        if lu.factor(&b).is_err() {
             // A singular basis only arises from rounding; let the caller retry with another covering vector.
             return Attempt::Breakdown(pivots);
         }
@@ -312,7 +312,7 @@ fn basic_z(
         }
     }
     let mut z = vec![0.0; n];
-    if !lu.factor(b) {
+    if lu.factor(b).is_err() {
         return z;
     }
     let mut x = rhs.to_vec();
@@ -347,7 +347,7 @@ fn refine(m: &[f64], q: &[f64], basis: &[usize], z: Vec<f64>) -> Vec<f64> {
         x[r] = -q[i];
     }
     let mut lu = DenseLu::new(k, LinearSolver::Hand);
-    if !lu.factor(&a) {
+    if lu.factor(&a).is_err() {
         return z;
     }
     lu.solve(&mut x);
@@ -422,7 +422,7 @@ pub fn enumerate_solutions(problem: &LinearMcp, tol: f64) -> Result<Vec<Vec<f64>
                 x[r] = -b[i];
             }
             let mut lu = DenseLu::new(k, LinearSolver::Hand);
-            if !lu.factor(&mat) {
+            if lu.factor(&mat).is_err() {
                 continue;
             }
             lu.solve(&mut x);

@@ -39,10 +39,11 @@ pub mod instances;
 mod lemke;
 mod newton;
 mod problem;
+mod rng;
 mod solution;
 pub mod special;
 
-pub use dense::{DenseLu, LinearSolver};
+pub use dense::{DenseLu, FactorError, LinearSolver};
 pub use erm::{ErmSettings, ErmSolver};
 pub use error::NcpError;
 pub use function::{

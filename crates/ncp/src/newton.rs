@@ -216,7 +216,13 @@ impl NewtonSolver {
         // A problem that can solve its hard version exactly (a linear one, by Lemke's method) offers that
         // as a start: the smoothed solution lies within O(sigma) of it, and the redundant rows there already
         // carry the impulse split that the smoothing converges to.
-        if let Some(hard) = problem.hard_solution()
+        let hard = problem.as_linear().and_then(|p| {
+            crate::lemke::lemke(p, &crate::lemke::LemkeSettings::default())
+                .ok()
+                .filter(|s| s.converged())
+                .map(|s| s.z)
+        });
+        if let Some(hard) = hard
             && hard.len() == n
             && hard.iter().all(|v| v.is_finite())
         {
@@ -297,7 +303,7 @@ fn run(
         iterations += 1;
         newton_matrix(n, nf, &w.dphi, &w.jac, &mut w.h);
         // Newton direction first: H dz = -Phi, along which psi falls at rate -2 psi.
-        let mut newton_ok = w.lu.factor(&w.h);
+        let mut newton_ok = w.lu.factor(&w.h).is_ok();
         if newton_ok {
             for i in 0..n {
                 w.dz[i] = -w.phi[i];
@@ -360,7 +366,7 @@ fn run(
                 w.lm[i * n + i] += mu;
                 w.dz[i] = -w.grad[i];
             }
-            if w.lu.factor(&w.lm) {
+            if w.lu.factor(&w.lm).is_ok() {
                 w.lu.solve(&mut w.dz);
                 if w.dz.iter().all(|v| v.is_finite()) {
                     let slope: f64 = w.grad.iter().zip(&w.dz).map(|(g, d)| g * d).sum();

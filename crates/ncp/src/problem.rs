@@ -20,9 +20,9 @@ pub trait Mcp {
     }
     /// Write `F(z)` into `value` and, when asked, the row-major `n x n` Jacobian `dF/dz` into `jacobian`.
     fn evaluate(&self, z: &[f64], value: &mut [f64], jacobian: Option<&mut [f64]>);
-    /// An exact solution of the hard problem, if the problem can compute one; smoothed solves that fail
-    /// from their warm start restart from it. `None` by default.
-    fn hard_solution(&self) -> Option<Vec<f64>> {
+    /// The problem as a linear one, if it is: a smoothed solve that fails from its warm start restarts
+    /// from the hard problem's exact solution (Lemke's method). `None` by default.
+    fn as_linear(&self) -> Option<&LinearMcp> {
         None
     }
 }
@@ -134,8 +134,10 @@ impl LinearMcp {
         for i in 0..f {
             mff[i * f..(i + 1) * f].copy_from_slice(&self.m[i * n..i * n + f]);
         }
-        if f > 0 && !lu.factor(&mff) {
-            return Err(NcpError::SingularFreeBlock { n_free: f });
+        if f > 0
+            && let Err(cause) = lu.factor(&mff)
+        {
+            return Err(NcpError::SingularFreeBlock { n_free: f, cause });
         }
         // Columns of M_ff^-1 [M_fc, q_f]: x = X lambda + x0.
         let mut x_of_lambda = vec![0.0; f * c];
@@ -205,11 +207,8 @@ impl Mcp for LinearMcp {
         }
     }
 
-    fn hard_solution(&self) -> Option<Vec<f64>> {
-        crate::lemke::lemke(self, &crate::lemke::LemkeSettings::default())
-            .ok()
-            .filter(|s| s.converged())
-            .map(|s| s.z)
+    fn as_linear(&self) -> Option<&LinearMcp> {
+        Some(self)
     }
 }
 
@@ -328,6 +327,12 @@ mod tests {
             vec![0.0, 1.0, 1.0],
         ];
         let p = LinearMcp::from_rows(2, &singular, &[0.0; 3]).unwrap();
-        assert_eq!(p.reduce(), Err(NcpError::SingularFreeBlock { n_free: 2 }));
+        assert!(matches!(
+            p.reduce(),
+            Err(NcpError::SingularFreeBlock {
+                n_free: 2,
+                cause: crate::FactorError::Singular { column: 1, .. }
+            })
+        ));
     }
 }

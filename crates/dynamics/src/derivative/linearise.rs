@@ -283,7 +283,7 @@ impl Simulator {
         // d phi / d lambda has underflowed (lambda >> sigma). The velocities are still unique. Hold the
         // smallest impulses of such rows fixed, one at a time, until the remaining active rows are
         // independent: the derivative of that branch of impulses, and the derivative of v'.
-        while !lu.factor(&H) {
+        while let Err(cause) = lu.factor(&H) {
             let weakest = (0..m)
                 .filter(|&k| dphi[k].1 > 0.5 && dphi[k].0 < 1e-12)
                 .min_by(|&a, &b| z[n + a].total_cmp(&z[n + b]));
@@ -294,9 +294,10 @@ impl Simulator {
                     H = build(&dphi);
                 }
                 None => {
-                    return Err(DynamicsError::Unsupported(
-                        "the step's Jacobian is singular at this state",
-                    ));
+                    return Err(DynamicsError::Singular {
+                        what: "the step's Jacobian",
+                        cause,
+                    });
                 }
             }
         }
@@ -332,9 +333,10 @@ impl Simulator {
         // nu from M nu = -J^T e_b.
         let mut lu = DenseLu::new(n, LinearSolver::Hand);
         let mass: Vec<f64> = (0..n * n).map(|e| M(e / n, e % n)).collect();
-        if !lu.factor(&mass) {
-            return Err(DynamicsError::Unsupported("a singular mass matrix"));
-        }
+        lu.factor(&mass).map_err(|cause| DynamicsError::Singular {
+            what: "the mass matrix",
+            cause,
+        })?;
         let mut nu: Vec<f64> = (0..n)
             .map(|i| -(0..m).map(|k| J(k, i) * jets[k].db).sum::<f64>())
             .collect();
@@ -369,11 +371,10 @@ impl Simulator {
         let mut p = z.to_vec();
         p.extend_from_slice(&nu);
         let mut lu = DenseLu::new(np, LinearSolver::Hand);
-        if !lu.factor(&H) {
-            return Err(DynamicsError::Unsupported(
-                "the step's Jacobian is singular at this state",
-            ));
-        }
+        lu.factor(&H).map_err(|cause| DynamicsError::Singular {
+            what: "the step's Jacobian",
+            cause,
+        })?;
         Ok((p, H, lu, kinds))
     }
 }
