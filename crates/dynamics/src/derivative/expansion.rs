@@ -72,12 +72,20 @@ impl Taylor {
     /// The functions `f` of `dim` arguments at `at`, to second order, evaluated in `K`-direction jets: in
     /// one pass when `dim <= K`; otherwise the arguments are cut into blocks of `K / 2` and each pair of
     /// blocks takes one pass (its jets carry both blocks' directions), which together cover every
-    /// gradient entry and every block of the Hessian.
+    /// gradient entry and every block of the Hessian. `f` hands its values, in order, to the [`Sink`];
+    /// `len` is how many there are (the storage is allocated once).
     fn expand<const K: usize>(
         at: &[f64],
-        mut f: impl FnMut(&[Jet<K>]) -> Result<Vec<Jet<K>>, DynamicsError>,
+        len: usize,
+        mut f: impl FnMut(&[Jet<K>], &mut Sink<'_>) -> Result<(), DynamicsError>,
     ) -> Result<Taylor, DynamicsError> {
         let dim = at.len();
+        let mut taylor = Taylor {
+            dim,
+            re: Vec::with_capacity(len),
+            g: Vec::with_capacity(len * dim),
+            h: Vec::with_capacity(len * dim * dim),
+        };
         if dim <= K {
             // One pass: the jets' leading blocks are the expansion.
             let args: Vec<Jet<K>> = at
@@ -85,78 +93,89 @@ impl Taylor {
                 .enumerate()
                 .map(|(i, &a)| Jet::variable(a, i))
                 .collect();
-            let values = f(&args)?;
-            let len = values.len();
-            let mut t = Taylor {
-                dim,
-                re: Vec::with_capacity(len),
-                g: Vec::with_capacity(len * dim),
-                h: Vec::with_capacity(len * dim * dim),
-            };
-            for v in &values {
+            let dirs: Vec<usize> = (0..dim).collect();
+            f(&args, &mut Sink::new(&mut taylor, &dirs, true))?;
+            return Ok(taylor);
+        }
+        let half = (K / 2).max(1);
+        let blocks: Vec<Vec<usize>> = (0..dim)
+            .step_by(half)
+            .map(|s| (s..(s + half).min(dim)).collect())
+            .collect();
+        let mut first = true;
+        for a in 0..blocks.len() {
+            for b in a + 1..blocks.len() {
+                let dirs = [blocks[a].as_slice(), blocks[b].as_slice()].concat();
+                let args: Vec<Jet<K>> = at
+                    .iter()
+                    .enumerate()
+                    .map(|(i, &v)| match dirs.iter().position(|&d| d == i) {
+                        Some(l) => Jet::variable(v, l),
+                        None => Jet::from(v),
+                    })
+                    .collect();
+                f(&args, &mut Sink::new(&mut taylor, &dirs, first))?;
+                first = false;
+            }
+        }
+        Ok(taylor)
+    }
+}
+
+/// Where one pass of [`Taylor::expand`] writes its functions' values, gradient and Hessian entries (its
+/// directions `dirs` of the arguments), in the order they are handed over.
+pub(super) struct Sink<'a> {
+    taylor: &'a mut Taylor,
+    dirs: &'a [usize],
+    /// Whether this pass creates the functions (the first), or fills in entries of existing ones.
+    first: bool,
+    next: usize,
+}
+
+impl<'a> Sink<'a> {
+    fn new(taylor: &'a mut Taylor, dirs: &'a [usize], first: bool) -> Self {
+        Sink {
+            taylor,
+            dirs,
+            first,
+            next: 0,
+        }
+    }
+
+    /// The next functions' values in jets.
+    fn emit<const K: usize>(&mut self, values: &[Jet<K>]) {
+        let t = &mut *self.taylor;
+        let dim = t.dim;
+        let whole = self.dirs.len() == dim;
+        for v in values {
+            let o = self.next;
+            self.next += 1;
+            if self.first {
                 t.re.push(v.re);
-                t.g.extend_from_slice(&v.g[..dim]);
-                for row in &v.h[..dim] {
-                    t.h.extend_from_slice(&row[..dim]);
-                }
-            }
-            return Ok(t);
-        }
-        let passes: Vec<Vec<usize>> = {
-            let half = (K / 2).max(1);
-            let blocks: Vec<Vec<usize>> = (0..dim)
-                .step_by(half)
-                .map(|s| (s..(s + half).min(dim)).collect())
-                .collect();
-            let mut passes = Vec::new();
-            for a in 0..blocks.len() {
-                for b in a + 1..blocks.len() {
-                    passes.push([blocks[a].as_slice(), blocks[b].as_slice()].concat());
-                }
-            }
-            passes
-        };
-        let mut out: Option<Taylor> = None;
-        let mut local = vec![usize::MAX; dim];
-        for dirs in &passes {
-            local.iter_mut().for_each(|l| *l = usize::MAX);
-            for (l, &i) in dirs.iter().enumerate() {
-                local[i] = l;
-            }
-            let args: Vec<Jet<K>> = at
-                .iter()
-                .zip(&local)
-                .map(|(&a, &l)| {
-                    if l == usize::MAX {
-                        Jet::from(a)
+                if whole {
+                    // The one pass over all arguments, in order: its leading blocks, copied (whole
+                    // when the jets have exactly that many directions).
+                    t.g.extend_from_slice(&v.g[..dim]);
+                    if dim == K {
+                        t.h.extend_from_slice(v.h.as_flattened());
                     } else {
-                        Jet::variable(a, l)
+                        for row in &v.h[..dim] {
+                            t.h.extend_from_slice(&row[..dim]);
+                        }
                     }
-                })
-                .collect();
-            let values = f(&args)?;
-            let t = out.get_or_insert_with(|| Taylor {
-                dim,
-                re: values.iter().map(|v| v.re).collect(),
-                g: vec![0.0; values.len() * dim],
-                h: vec![0.0; values.len() * dim * dim],
-            });
-            for (o, v) in values.iter().enumerate() {
-                for (l, &i) in dirs.iter().enumerate() {
-                    t.g[o * dim + i] = v.g[l];
-                    let row = o * dim * dim + i * dim;
-                    for (l2, &j) in dirs.iter().enumerate() {
-                        t.h[row + j] = v.h[l][l2];
-                    }
+                    continue;
+                }
+                t.g.resize(t.g.len() + dim, 0.0);
+                t.h.resize(t.h.len() + dim * dim, 0.0);
+            }
+            for (l, &i) in self.dirs.iter().enumerate() {
+                t.g[o * dim + i] = v.g[l];
+                let row = o * dim * dim + i * dim;
+                for (l2, &j) in self.dirs.iter().enumerate() {
+                    t.h[row + j] = v.h[l][l2];
                 }
             }
         }
-        Ok(out.unwrap_or(Taylor {
-            dim,
-            re: Vec::new(),
-            g: Vec::new(),
-            h: Vec::new(),
-        }))
     }
 }
 
@@ -340,7 +359,8 @@ impl Simulator {
         &self,
         q: &[Jet<K>],
         side: &mut Option<(Vec<ContactFrame>, Vec<f64>)>,
-    ) -> Result<Vec<Jet<K>>, DynamicsError> {
+        sink: &mut Sink<'_>,
+    ) -> Result<(), DynamicsError> {
         let scene = self.scene();
         let kin = Kinematics::new(scene, q);
         let cons = Constraints::new(scene, &kin, q)?;
@@ -351,12 +371,11 @@ impl Simulator {
         if side.is_none() {
             *side = Some((cons.contacts, distance));
         }
-        let mut out = Vec::with_capacity(M.len() + cons.jacobian.len() + 2 * d.len());
-        out.extend(M);
-        out.extend(cons.jacobian);
-        out.extend(d);
-        out.extend(sigma);
-        Ok(out)
+        sink.emit(&M);
+        sink.emit(&cons.jacobian);
+        sink.emit(&d);
+        sink.emit(&sigma);
+        Ok(())
     }
 
     /// The forces `r(q, v) + B u` of `(q, v)` in any jet, `u` held constant.
@@ -374,12 +393,17 @@ impl Simulator {
         let scene = self.scene();
         let n = scene.n_dof();
         let mut side = None;
+        let m = scene.n_constraints();
+        let len = n * n + m * n + 2 * m;
         let geometry = if n <= 3 {
-            Taylor::expand::<3>(&x[..n], |q| self.geometry(q, &mut side))?
+            Taylor::expand::<3>(&x[..n], len, |q, sink| self.geometry(q, &mut side, sink))?
         } else {
-            Taylor::expand::<6>(&x[..n], |q| self.geometry(q, &mut side))?
+            Taylor::expand::<6>(&x[..n], len, |q, sink| self.geometry(q, &mut side, sink))?
         };
-        let forces = Taylor::expand::<6>(&x[..2 * n], |qv| Ok(self.forces(qv, u)))?;
+        let forces = Taylor::expand::<6>(&x[..2 * n], n, |qv, sink| {
+            sink.emit(&self.forces(qv, u));
+            Ok(())
+        })?;
         let (contacts, distance) = side.expect("the geometry ran at least once");
         Ok(Expansion {
             n,

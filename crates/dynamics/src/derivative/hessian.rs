@@ -32,7 +32,27 @@ impl Expansion {
         kinds: &[RowKind],
         sigma: f64,
     ) -> Vec<f64> {
-        let (n, m) = (self.n, self.m);
+        // The finger's sizes compiled in (the same arithmetic, its loops unrolled); any other at run time.
+        match (self.n, cols) {
+            (3, 8) => self.equation_hessians_sized::<3, 8>(h, x, p, dp, kinds, sigma),
+            _ => self.equation_hessians_sized::<0, 0>(h, x, p, dp, kinds, sigma),
+        }
+    }
+
+    /// [`Expansion::equation_hessians`] with `N` joints and `C` columns when they are not 0.
+    #[allow(clippy::too_many_arguments)]
+    fn equation_hessians_sized<const N: usize, const C: usize>(
+        &self,
+        h: f64,
+        x: &[f64],
+        p: &[f64],
+        dp: &[f64],
+        kinds: &[RowKind],
+        sigma: f64,
+    ) -> Vec<f64> {
+        let n = if N > 0 { N } else { self.n };
+        let cols = if C > 0 { C } else { dp.len() / p.len() };
+        let m = self.m;
         let geo = &self.geometry;
         let cc = cols * cols;
         // out += scale * H_q(f) in the leading n x n block.
