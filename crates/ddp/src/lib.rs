@@ -41,6 +41,7 @@ mod linalg;
 mod model;
 pub mod problems;
 mod solver;
+mod work;
 
 pub use error::DdpError;
 pub use model::{Cost, CostDerivatives, Dynamics, QuadraticCost, SecondOrder};

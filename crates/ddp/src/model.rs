@@ -114,10 +114,10 @@ pub trait Cost {
     /// `l_f(x)`.
     fn terminal(&self, x: &[f64]) -> f64;
 
-    /// The derivatives of `l_i` at `(x, u)`.
+    /// The derivatives of `l_i` at `(x, u)`, every entry of `out` written (it holds another knot's).
     fn running_derivatives(&self, i: usize, x: &[f64], u: &[f64], out: &mut CostDerivatives);
 
-    /// `dl_f/dx` (`n`) and `d^2 l_f/dx^2` (`n x n`).
+    /// `dl_f/dx` (`n`) and `d^2 l_f/dx^2` (`n x n`), every entry written.
     fn terminal_derivatives(&self, x: &[f64], lx: &mut [f64], lxx: &mut [f64]);
 }
 

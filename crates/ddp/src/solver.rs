@@ -3,12 +3,9 @@
 //! optional control limits (box QP), after Tassa, Erez and Todorov (IROS 2012) and Tassa, Mansard and
 //! Todorov (ICRA 2014).
 
-use crate::boxqp;
 use crate::error::DdpError;
-use crate::linalg::{
-    cholesky_into, cholesky_solve, mul_into, mul_tn_into, mul_tv_into, symmetrize,
-};
-use crate::model::{Cost, CostDerivatives, Dynamics};
+use crate::model::{Cost, Dynamics};
+use crate::work::Workspace;
 use serde::{Deserialize, Serialize};
 
 /// Which second-order terms the backward pass keeps.
@@ -249,24 +246,10 @@ pub struct ValueModel {
     pub hessian: Vec<f64>,
 }
 
-/// What one backward pass produces.
-struct Backward {
-    k: Vec<Vec<f64>>,
-    gains: Vec<Vec<f64>>,
-    /// `[sum k^T Q_u, sum 1/2 k^T Q_uu k]`.
-    dv: [f64; 2],
-}
-
 /// The optimiser. See the module documentation.
 #[derive(Debug, Clone)]
 pub struct Ddp {
     settings: DdpSettings,
-}
-
-/// First derivatives along a trajectory (cached for Gauss-Newton across regularisation retries).
-struct Linearisation {
-    fx: Vec<Vec<f64>>,
-    fu: Vec<Vec<f64>>,
 }
 
 impl Ddp {
@@ -358,13 +341,15 @@ impl Ddp {
             observe(&it);
             iterations.push(it);
         };
+        // Everything the passes write, allocated once: the backward pass's temporaries and results, the
+        // line search's trial trajectory, Gauss-Newton's linearisation.
+        let mut work = Workspace::new(n, m, horizon);
         let mut gains = vec![vec![0.0; m * n]; horizon];
         // The value model of the last successful backward pass, and the one being computed (swapped on
         // success, so that a pass that fails half way leaves the last one intact; no allocation per pass).
         let mut values = vec![(vec![0.0; n], vec![0.0; n * n]); horizon + 1];
         let mut trial_values = values.clone();
         let mut k_prev = vec![vec![0.0; m]; horizon];
-        let mut lin: Option<Linearisation> = None;
         let mut status = Status::MaxIterations;
         // Whether the last pass was accepted (the first pass counts: its model is the initial one).
         let mut previous_accepted = true;
@@ -376,7 +361,7 @@ impl Ddp {
             let span = tracing::info_span!("ddp.iteration", iteration);
             let _guard = span.enter();
             // Backward pass, raising mu until Q_uu is positive definite everywhere.
-            let bp = loop {
+            loop {
                 match self.backward(
                     dynamics,
                     &mut data,
@@ -384,43 +369,42 @@ impl Ddp {
                     (&x, &u),
                     &k_prev,
                     mu,
-                    &mut lin,
+                    &mut work,
                     &mut trial_values,
                 ) {
-                    Ok(Some(bp)) => {
+                    Ok(true) => {
                         std::mem::swap(&mut values, &mut trial_values);
-                        break bp;
+                        break;
                     }
-                    Ok(None) => {
+                    Ok(false) => {
                         increase(&mut mu, &mut dmu);
                         if mu > s.mu_max {
                             status = Status::RegularisationExceeded;
-                            break Backward {
-                                k: Vec::new(),
-                                gains: Vec::new(),
-                                dv: [0.0; 2],
-                            };
+                            break;
                         }
                     }
                     Err(e) => return Err(e),
                 }
-            };
+            }
             if status == Status::RegularisationExceeded {
                 break;
             }
-            gains = bp.gains;
-            k_prev = bp.k.clone();
-            let step =
-                bp.k.iter()
-                    .zip(&u)
-                    .map(|(k, u)| {
-                        k.iter()
-                            .zip(u)
-                            .map(|(a, b)| a.abs() / (b.abs() + 1.0))
-                            .fold(0.0, f64::max)
-                    })
-                    .sum::<f64>()
-                    / horizon as f64;
+            std::mem::swap(&mut gains, &mut work.gains);
+            for (p, k) in k_prev.iter_mut().zip(&work.k) {
+                p.copy_from_slice(k);
+            }
+            let dv = work.dv;
+            let step = k_prev
+                .iter()
+                .zip(&u)
+                .map(|(k, u)| {
+                    k.iter()
+                        .zip(u)
+                        .map(|(a, b)| a.abs() / (b.abs() + 1.0))
+                        .fold(0.0, f64::max)
+                })
+                .sum::<f64>()
+                / horizon as f64;
             if step < s.tol_step && mu < 1e-5 {
                 status = Status::StepConverged;
                 record(&mut iterations, Iteration::unchanged(total, mu, step));
@@ -431,16 +415,15 @@ impl Ddp {
             // Forward pass with a line search.
             let mut accepted = None;
             for (index, &alpha) in alphas.iter().enumerate().skip(first_alpha) {
-                let expected = -alpha * (bp.dv[0] + alpha * bp.dv[1]);
-                if let Ok((xn, un, cn)) = self.forward(
+                let expected = -alpha * (dv[0] + alpha * dv[1]);
+                if let Ok(cn) = self.forward(
                     dynamics,
                     (&data, &mut trial),
                     cost,
-                    &x,
-                    &u,
-                    &bp.k,
-                    &gains,
+                    (&x, &u),
+                    (&k_prev, &gains),
                     alpha,
+                    &mut work,
                 ) {
                     let reduction = total - cn;
                     let ratio = if expected > 0.0 {
@@ -449,7 +432,7 @@ impl Ddp {
                         reduction.signum()
                     };
                     if ratio > s.accept_ratio && reduction.is_finite() {
-                        accepted = Some((xn, un, cn, alpha, expected, reduction));
+                        accepted = Some((cn, alpha, expected, reduction));
                         if s.adaptive_line_search {
                             first_alpha = index.saturating_sub(2);
                         }
@@ -462,15 +445,15 @@ impl Ddp {
             }
             let just_accepted = std::mem::replace(&mut previous_accepted, accepted.is_some());
             match accepted {
-                Some((xn, un, cn, alpha, expected, reduction)) => {
+                Some((cn, alpha, expected, reduction)) => {
                     tracing::debug!(cost = cn, reduction, expected, mu, alpha, step, "accepted");
                     dmu = (dmu / s.mu_factor).min(1.0 / s.mu_factor);
                     mu = if mu * dmu > s.mu_min { mu * dmu } else { 0.0 };
-                    x = xn;
-                    u = un;
+                    std::mem::swap(&mut x, &mut work.x_trial);
+                    std::mem::swap(&mut u, &mut work.u_trial);
                     total = cn;
                     std::mem::swap(&mut data, &mut trial);
-                    lin = None;
+                    work.lin_current = false;
                     record(
                         &mut iterations,
                         Iteration {
@@ -485,25 +468,23 @@ impl Ddp {
                     if reduction < s.tol_cost * (1.0 + total.abs()) {
                         status = Status::CostConverged;
                         // The gains of the final trajectory.
-                        if let Ok(Some(bp)) = self.backward(
+                        if let Ok(true) = self.backward(
                             dynamics,
                             &mut data,
                             cost,
                             (&x, &u),
                             &k_prev,
                             mu,
-                            &mut lin,
+                            &mut work,
                             &mut trial_values,
                         ) {
-                            gains = bp.gains;
+                            std::mem::swap(&mut gains, &mut work.gains);
                             std::mem::swap(&mut values, &mut trial_values);
                         }
                         break;
                     }
                 }
-                None if just_accepted
-                    && -(bp.dv[0] + bp.dv[1]) < RESOLUTION * (1.0 + total.abs()) =>
-                {
+                None if just_accepted && -(dv[0] + dv[1]) < RESOLUTION * (1.0 + total.abs()) => {
                     // The model that was just trusted expects less from its full step than a rollout
                     // resolves: converged (the failed line search compared rounding errors).
                     status = Status::CostConverged;
@@ -546,8 +527,10 @@ impl Ddp {
         })
     }
 
-    /// The backward pass at regularisation `mu` along the trajectory `(x, u)`, writing `(V_x, V_xx)` at
-    /// every knot into `values`; `Ok(None)` when `Q_uu` is not positive definite.
+    /// The backward pass at regularisation `mu` along the trajectory `(x, u)`, by stages over the
+    /// workspace (Q's expansion, its regularisation, the gains, the value's update; `work.k`,
+    /// `work.gains` and `work.dv` hold the result), writing `(V_x, V_xx)` at every knot into `values`;
+    /// `Ok(false)` when `Q_uu` is not positive definite.
     #[allow(clippy::too_many_arguments)]
     fn backward<D: Dynamics, C: Cost>(
         &self,
@@ -557,60 +540,42 @@ impl Ddp {
         (x, u): (&[Vec<f64>], &[Vec<f64>]),
         k_prev: &[Vec<f64>],
         mu: f64,
-        lin: &mut Option<Linearisation>,
+        work: &mut Workspace,
         values: &mut [(Vec<f64>, Vec<f64>)],
-    ) -> Result<Option<Backward>, DdpError> {
+    ) -> Result<bool, DdpError> {
         let (n, m) = (dynamics.state_dim(), dynamics.control_dim());
         let horizon = u.len();
         let full = self.settings.method == Method::Full;
-        if !full && lin.is_none() {
-            let mut fx = Vec::with_capacity(horizon);
-            let mut fu = Vec::with_capacity(horizon);
+        if !full && !work.lin_current {
+            // Gauss-Newton: the linearisation of this trajectory, kept across regularisation retries.
+            if work.lin_fx.is_empty() {
+                work.lin_fx = vec![vec![0.0; n * n]; horizon];
+                work.lin_fu = vec![vec![0.0; n * m]; horizon];
+            }
             for i in 0..horizon {
-                let (mut a, mut b) = (vec![0.0; n * n], vec![0.0; n * m]);
                 dynamics
-                    .calc_diff(&mut data[i], &x[i], &u[i], &mut a, &mut b)
+                    .calc_diff(
+                        &mut data[i],
+                        &x[i],
+                        &u[i],
+                        &mut work.lin_fx[i],
+                        &mut work.lin_fu[i],
+                    )
                     .map_err(|e| DdpError::Derivatives {
                         step: i,
                         source: Box::new(e),
                     })?;
-                fx.push(a);
-                fu.push(b);
             }
-            *lin = Some(Linearisation { fx, fu });
+            work.lin_current = true;
         }
-        let mut vx = vec![0.0; n];
-        let mut vxx = vec![0.0; n * n];
-        cost.terminal_derivatives(&x[horizon], &mut vx, &mut vxx);
-        values[horizon].0.copy_from_slice(&vx);
-        values[horizon].1.copy_from_slice(&vxx);
-        let mut k_all = vec![Vec::new(); horizon];
-        let mut gains = vec![Vec::new(); horizon];
-        let mut dv = [0.0; 2];
-        let mut cd = CostDerivatives::zeros(n, m);
-        let nm = n + m;
-        let (mut fx_buf, mut fu_buf, mut hess) =
-            (vec![0.0; n * n], vec![0.0; n * m], vec![0.0; nm * nm]);
-        // Workspace, reused at every step.
-        let mut qx = vec![0.0; n];
-        let mut qu = vec![0.0; m];
-        let mut vxx_fx = vec![0.0; n * n];
-        let mut vxx_fu = vec![0.0; n * m];
-        let mut qxx = vec![0.0; n * n];
-        let mut qux = vec![0.0; m * n];
-        let mut quu = vec![0.0; m * m];
-        let mut qux_reg = vec![0.0; m * n];
-        let mut quu_reg = vec![0.0; m * m];
-        let mut reg_ux = vec![0.0; m * n];
-        let mut reg_uu = vec![0.0; m * m];
-        let mut chol = vec![0.0; m * m];
-        let mut quu_k = vec![0.0; m];
-        let mut quu_bk = vec![0.0; m * n];
-        let mut tmp_n = vec![0.0; n];
-        let mut tmp_nn = vec![0.0; n * n];
+        cost.terminal_derivatives(&x[horizon], &mut work.vx, &mut work.vxx);
+        values[horizon].0.copy_from_slice(&work.vx);
+        values[horizon].1.copy_from_slice(&work.vxx);
+        work.dv = [0.0; 2];
         for i in (0..horizon).rev() {
-            cost.running_derivatives(i, &x[i], &u[i], &mut cd);
-            let (fx, fu): (&[f64], &[f64]) = if full {
+            cost.running_derivatives(i, &x[i], &u[i], &mut work.cd);
+            if full {
+                let w = &mut *work;
                 dynamics
                     .second_order()
                     .ok_or(DdpError::NoSecondDerivatives)?
@@ -618,210 +583,81 @@ impl Ddp {
                         &mut data[i],
                         &x[i],
                         &u[i],
-                        &vx,
-                        &mut fx_buf,
-                        &mut fu_buf,
-                        &mut hess,
+                        &w.vx,
+                        &mut w.fx,
+                        &mut w.fu,
+                        &mut w.hess,
                     )
                     .map_err(|e| DdpError::Derivatives {
                         step: i,
                         source: Box::new(e),
                     })?;
-                (&fx_buf, &fu_buf)
             } else {
-                let l = lin.as_ref().expect("linearised above");
-                (&l.fx[i], &l.fu[i])
-            };
-            // Q's expansion (eq. 11).
-            mul_tv_into(&mut qx, fx, &vx, n, n);
-            mul_tv_into(&mut qu, fu, &vx, n, m);
-            for a in 0..n {
-                qx[a] += cd.lx[a];
+                work.fx.copy_from_slice(&work.lin_fx[i]);
+                work.fu.copy_from_slice(&work.lin_fu[i]);
             }
-            for a in 0..m {
-                qu[a] += cd.lu[a];
+            work.q_expansion(full);
+            work.regularise(mu, self.settings.regularisation);
+            if !work.gains(i, self.settings.control_limits.as_ref(), &u[i], &k_prev[i]) {
+                return Ok(false);
             }
-            mul_into(&mut vxx_fx, &vxx, fx, n, n, n);
-            mul_into(&mut vxx_fu, &vxx, fu, n, n, m);
-            mul_tn_into(&mut qxx, fx, &vxx_fx, n, n, n);
-            mul_tn_into(&mut qux, fu, &vxx_fx, n, m, n);
-            mul_tn_into(&mut quu, fu, &vxx_fu, n, m, m);
-            for (a, b) in qxx.iter_mut().zip(&cd.lxx) {
-                *a += b;
+            if !work.value_update(i) {
+                return Ok(false);
             }
-            for (a, b) in qux.iter_mut().zip(&cd.lux) {
-                *a += b;
-            }
-            for (a, b) in quu.iter_mut().zip(&cd.luu) {
-                *a += b;
-            }
-            if full {
-                for a in 0..n {
-                    for b in 0..n {
-                        qxx[a * n + b] += hess[a * nm + b];
-                    }
-                }
-                for a in 0..m {
-                    for b in 0..n {
-                        qux[a * n + b] += hess[(n + a) * nm + b];
-                    }
-                    for b in 0..m {
-                        quu[a * m + b] += hess[(n + a) * nm + n + b];
-                    }
-                }
-            }
-            symmetrize(&mut quu, m);
-            // The regularised pair gives the policy; the value's update below uses the plain Q (Tassa,
-            // Erez and Todorov 2012).
-            qux_reg.copy_from_slice(&qux);
-            quu_reg.copy_from_slice(&quu);
-            if mu > 0.0 {
-                match self.settings.regularisation {
-                    Regularisation::State => {
-                        mul_tn_into(&mut reg_ux, fu, fx, n, m, n);
-                        mul_tn_into(&mut reg_uu, fu, fu, n, m, m);
-                        for (a, b) in qux_reg.iter_mut().zip(&reg_ux) {
-                            *a += mu * b;
-                        }
-                        for (a, b) in quu_reg.iter_mut().zip(&reg_uu) {
-                            *a += mu * b;
-                        }
-                    }
-                    Regularisation::Control => {
-                        for a in 0..m {
-                            quu_reg[a * m + a] += mu;
-                        }
-                    }
-                }
-            }
-            let (k, big_k) = match &self.settings.control_limits {
-                None => {
-                    if !cholesky_into(&mut chol, &quu_reg, m) {
-                        return Ok(None);
-                    }
-                    let mut k: Vec<f64> = qu.iter().map(|e| -e).collect();
-                    cholesky_solve(&chol, m, &mut k, 1);
-                    let mut big_k: Vec<f64> = qux_reg.iter().map(|e| -e).collect();
-                    cholesky_solve(&chol, m, &mut big_k, n);
-                    (k, big_k)
-                }
-                Some(lim) => {
-                    let lower: Vec<f64> = (0..m).map(|j| lim.lower[j] - u[i][j]).collect();
-                    let upper: Vec<f64> = (0..m).map(|j| lim.upper[j] - u[i][j]).collect();
-                    let Some(qp) = boxqp::solve(&quu_reg, &qu, &lower, &upper, &k_prev[i]) else {
-                        return Ok(None);
-                    };
-                    let mut big_k = vec![0.0; m * n];
-                    if let Some(l) = &qp.free_factor {
-                        let free: Vec<usize> = (0..m).filter(|&j| !qp.clamped[j]).collect();
-                        let nf = free.len();
-                        let mut rhs = vec![0.0; nf * n];
-                        for (a, &j) in free.iter().enumerate() {
-                            for b in 0..n {
-                                rhs[a * n + b] = -qux_reg[j * n + b];
-                            }
-                        }
-                        cholesky_solve(l, nf, &mut rhs, n);
-                        for (a, &j) in free.iter().enumerate() {
-                            big_k[j * n..(j + 1) * n].copy_from_slice(&rhs[a * n..(a + 1) * n]);
-                        }
-                    }
-                    (qp.x, big_k)
-                }
-            };
-            // dV and the value's expansion at step i:
-            // V_x = Q_x + K^T Q_uu k + K^T Q_u + Q_ux^T k, V_xx = Q_xx + K^T Q_uu K + K^T Q_ux + Q_ux^T K.
-            mul_into(&mut quu_k, &quu, &k, m, m, 1);
-            dv[0] += k.iter().zip(&qu).map(|(a, b)| a * b).sum::<f64>();
-            dv[1] += 0.5 * k.iter().zip(&quu_k).map(|(a, b)| a * b).sum::<f64>();
-            for a in 0..m {
-                quu_k[a] += qu[a];
-            }
-            mul_tv_into(&mut tmp_n, &big_k, &quu_k, m, n);
-            vx.copy_from_slice(&qx);
-            for a in 0..n {
-                vx[a] += tmp_n[a];
-            }
-            mul_tv_into(&mut tmp_n, &qux, &k, m, n);
-            for a in 0..n {
-                vx[a] += tmp_n[a];
-            }
-            mul_into(&mut quu_bk, &quu, &big_k, m, m, n);
-            for (a, b) in quu_bk.iter_mut().zip(&qux) {
-                *a += 2.0 * b;
-            }
-            // K^T (Q_uu K + 2 Q_ux), symmetrised: K^T Q_uu K + K^T Q_ux + Q_ux^T K.
-            mul_tn_into(&mut tmp_nn, &big_k, &quu_bk, m, n, n);
-            vxx.copy_from_slice(&qxx);
-            for (a, b) in vxx.iter_mut().zip(&tmp_nn) {
-                *a += b;
-            }
-            symmetrize(&mut vxx, n);
-            if !(vx.iter().chain(&vxx).all(|e| e.is_finite())) {
-                return Ok(None);
-            }
-            k_all[i] = k;
-            gains[i] = big_k;
-            values[i].0.copy_from_slice(&vx);
-            values[i].1.copy_from_slice(&vxx);
+            values[i].0.copy_from_slice(&work.vx);
+            values[i].1.copy_from_slice(&work.vxx);
         }
-        Ok(Some(Backward {
-            k: k_all,
-            gains,
-            dv,
-        }))
+        Ok(true)
     }
 
-    /// The forward pass at step size `alpha`: `u = u_i + alpha k_i + K_i (x - x_i)`, clamped to the limits.
-    #[allow(clippy::too_many_arguments, clippy::type_complexity)]
+    /// The forward pass at step size `alpha` into the workspace's trial trajectory: at each knot, try
+    /// the step `u = u_i + alpha k_i + K_i (x - x_i)` (clamped to the limits), then roll it out; the
+    /// trial's total cost, or `Err` where a step fails or a cost is not finite.
+    #[allow(clippy::too_many_arguments)]
     fn forward<D: Dynamics, C: Cost>(
         &self,
         dynamics: &mut D,
         (data, trial): (&[D::Data], &mut [D::Data]),
         cost: &C,
-        x: &[Vec<f64>],
-        u: &[Vec<f64>],
-        k: &[Vec<f64>],
-        gains: &[Vec<f64>],
+        (x, u): (&[Vec<f64>], &[Vec<f64>]),
+        (k, gains): (&[Vec<f64>], &[Vec<f64>]),
         alpha: f64,
-    ) -> Result<(Vec<Vec<f64>>, Vec<Vec<f64>>, f64), ()> {
+        work: &mut Workspace,
+    ) -> Result<f64, ()> {
         let (n, m) = (dynamics.state_dim(), dynamics.control_dim());
         let horizon = u.len();
-        let mut xn = Vec::with_capacity(horizon + 1);
-        let mut un = Vec::with_capacity(horizon);
-        xn.push(x[0].clone());
+        let (xn, un) = (&mut work.x_trial, &mut work.u_trial);
+        xn[0].copy_from_slice(&x[0]);
         let mut total = 0.0;
         for i in 0..horizon {
-            let mut ui: Vec<f64> = (0..m)
-                .map(|a| {
-                    u[i][a]
-                        + alpha * k[i][a]
-                        + (0..n)
-                            .map(|b| gains[i][a * n + b] * (xn[i][b] - x[i][b]))
-                            .sum::<f64>()
-                })
-                .collect();
+            let ui = &mut un[i];
+            for a in 0..m {
+                ui[a] = u[i][a]
+                    + alpha * k[i][a]
+                    + (0..n)
+                        .map(|b| gains[i][a * n + b] * (xn[i][b] - x[i][b]))
+                        .sum::<f64>();
+            }
             if let Some(l) = &self.settings.control_limits {
                 for a in 0..m {
                     ui[a] = ui[a].clamp(l.lower[a], l.upper[a]);
                 }
             }
-            let mut next = vec![0.0; n];
+            let (done, rest) = xn.split_at_mut(i + 1);
+            let next = &mut rest[0];
             dynamics
-                .calc(&mut trial[i], Some(&data[i]), &xn[i], &ui, &mut next)
+                .calc(&mut trial[i], Some(&data[i]), &done[i], ui, next)
                 .map_err(|_| ())?;
-            total += cost.running(i, &xn[i], &ui);
+            total += cost.running(i, &done[i], ui);
             if !(total.is_finite() && next.iter().all(|e| e.is_finite())) {
                 return Err(());
             }
-            xn.push(next);
-            un.push(ui);
         }
         total += cost.terminal(&xn[horizon]);
         if !total.is_finite() {
             return Err(());
         }
-        Ok((xn, un, total))
+        Ok(total)
     }
 }
 
