@@ -488,3 +488,54 @@ fn lemke_finds_tiny_entries_on_rows_of_tiny_scale() {
         assert!((s.z[0] - 1.0).abs() < 1e-15);
     }
 }
+
+/// The three solvers through one call shape ([`ncp::Solver`]): a generic caller gets the exact answer
+/// from Lemke's method and answers within O(sigma) of it from the smoothed Newton and ERM solvers.
+#[test]
+fn every_solver_answers_through_one_call_shape() {
+    use ncp::{ErmSettings, ErmSolver, Lemke, NewtonSettings, NewtonSolver, Solver};
+    fn solve<S: Solver + ?Sized>(s: &mut S, p: &LinearMcp, rows: &S::Rows) -> Vec<f64> {
+        let z0 = vec![0.0; p.dim()];
+        let out = s.solve(p, rows, &z0).unwrap();
+        assert!(out.converged(), "{:?}", out.info);
+        out.z
+    }
+    // One equality row (a velocity) and two complementarity rows (impulses), a P-matrix LCP.
+    let p = LinearMcp::from_rows(
+        1,
+        &[
+            vec![2.0, -1.0, -0.5],
+            vec![1.0, 1.0, 0.2],
+            vec![0.5, 0.2, 1.0],
+        ],
+        &[0.3, -0.4, 0.1],
+    )
+    .unwrap();
+    let exact = solve(&mut Lemke::new(LemkeSettings::default()).unwrap(), &p, &());
+    let sigma = 1e-4;
+    let mut newton = NewtonSolver::new(NewtonSettings::default()).unwrap();
+    let smooth = solve(&mut newton, &p, &[NcpFunction::Logistic { sigma }; 2]);
+    let mut erm = ErmSolver::new(ErmSettings::default()).unwrap();
+    let expected = solve(&mut erm, &p, &[sigma; 2]);
+    for (name, z) in [("newton", &smooth), ("erm", &expected)] {
+        let gap = z
+            .iter()
+            .zip(&exact)
+            .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+        assert!(gap < 10.0 * sigma, "{name}: {z:?} vs exact {exact:?}");
+    }
+    assert!(
+        exact.iter().any(|v| v.abs() > 1e-3),
+        "a trivial solution tests nothing"
+    );
+    // The shape's checks: Lemke's settings and the start's length.
+    assert!(
+        Lemke::new(LemkeSettings {
+            max_pivots: 0,
+            ..LemkeSettings::default()
+        })
+        .is_err()
+    );
+    let mut lemke = Lemke::new(LemkeSettings::default()).unwrap();
+    assert!(lemke.solve(&p, &(), &[0.0]).is_err());
+}

@@ -15,6 +15,8 @@
 //!   NCP functions (paper section IV-A; sigma per row is eq. 18).
 //! - [`ErmSolver`]: the expected residual minimisation of eq. (14) with (15), equality rows held exactly.
 //! - [`lemke`] and [`enumerate_solutions`]: exact answers for the hard problem.
+//! - [`Solver`]: one call shape for [`Lemke`], [`NewtonSolver`] and [`ErmSolver`] (a problem, each row's
+//!   data, a start).
 //!
 //! ```
 //! use ncp::{LinearMcp, NcpFunction, NewtonSettings, NewtonSolver, lemke, LemkeSettings};
@@ -41,6 +43,7 @@ mod newton;
 mod problem;
 mod rng;
 mod solution;
+mod solver;
 pub mod special;
 
 pub use dense::{DenseLu, FactorError, LinearSolver};
@@ -54,6 +57,7 @@ pub use lemke::{LemkeSettings, complementarity_residual, enumerate_solutions, le
 pub use newton::{NewtonSettings, NewtonSolver};
 pub use problem::{LinearMcp, Mcp, Reduced};
 pub use solution::{Info, Solution, Status};
+pub use solver::{Lemke, Solver};
 
 /// The README's examples, compiled and run as doctests so that they cannot go stale.
 #[doc = include_str!("../README.md")]
