@@ -202,49 +202,7 @@ fn smoothed_steps_converge_to_the_hard_step_as_sigma_shrinks() {
 /// A three-link finger on the same ellipse: four joints, three controls, two contact pairs. Its 11 state
 /// and control entries take two vector-dual passes for first derivatives, and several passes of jets for
 /// second derivatives.
-const THREE_LINKS: &str = r#"
-gravity = [0.0, -4.0]
-[[body]]
-name = "link1"
-semi_axes = [0.6, 0.2]
-density = 1.0
-parent = "world"
-anchor = [0.0, 0.0]
-centre = [0.6, 0.0]
-joint = { limits = [-3.2, 0.0], damping = 0.2, actuated = true }
-[[body]]
-name = "link2"
-semi_axes = [0.6, 0.2]
-density = 1.0
-parent = "link1"
-anchor = [1.2, 0.0]
-centre = [0.6, 0.0]
-joint = { damping = 0.2, actuated = true }
-[[body]]
-name = "link3"
-semi_axes = [0.4, 0.15]
-density = 1.0
-parent = "link2"
-anchor = [1.2, 0.0]
-centre = [0.4, 0.0]
-joint = { damping = 0.2, actuated = true }
-[[body]]
-name = "ellipse"
-semi_axes = [0.7, 0.5]
-density = 1.0
-parent = "world"
-anchor = [0.0, -3.0]
-centre = [0.0, 0.0]
-joint = { damping = 0.7 }
-[[contact]]
-a = "link3"
-b = "ellipse"
-friction = 0.5
-[[contact]]
-a = "link2"
-b = "ellipse"
-friction = 0.5
-"#;
+const THREE_LINKS: &str = include_str!("../../scenes/three_link_finger.toml");
 
 #[test]
 fn derivatives_of_a_four_joint_scene_match_central_differences() {
@@ -294,57 +252,7 @@ fn derivatives_of_a_four_joint_scene_match_central_differences() {
 
 /// Two two-link fingers on either side of the ellipse: five joints, four controls, two contact pairs
 /// (14 state and control entries).
-const TWO_FINGERS: &str = r#"
-gravity = [0.0, -4.0]
-[[body]]
-name = "a1"
-semi_axes = [0.8, 0.25]
-density = 1.0
-parent = "world"
-anchor = [-1.2, 0.0]
-centre = [0.8, 0.0]
-joint = { limits = [-3.1, 0.0], damping = 0.2, actuated = true }
-[[body]]
-name = "a2"
-semi_axes = [0.8, 0.25]
-density = 1.0
-parent = "a1"
-anchor = [1.6, 0.0]
-centre = [0.8, 0.0]
-joint = { limits = [-2.0, 2.0], damping = 0.2, actuated = true }
-[[body]]
-name = "b1"
-semi_axes = [0.8, 0.25]
-density = 1.0
-parent = "world"
-anchor = [1.2, 0.0]
-centre = [0.8, 0.0]
-joint = { limits = [-3.1, 0.0], damping = 0.2, actuated = true }
-[[body]]
-name = "b2"
-semi_axes = [0.8, 0.25]
-density = 1.0
-parent = "b1"
-anchor = [1.6, 0.0]
-centre = [0.8, 0.0]
-joint = { limits = [-2.0, 2.0], damping = 0.2, actuated = true }
-[[body]]
-name = "ellipse"
-semi_axes = [0.7, 0.5]
-density = 1.0
-parent = "world"
-anchor = [0.0, -2.6]
-centre = [0.0, 0.0]
-joint = { damping = 0.7 }
-[[contact]]
-a = "a2"
-b = "ellipse"
-friction = 0.5
-[[contact]]
-a = "b2"
-b = "ellipse"
-friction = 0.5
-"#;
+const TWO_FINGERS: &str = include_str!("../../scenes/two_fingers.toml");
 
 /// `c^T [fx fu]` at `y = (x, u)` by the exact first derivatives of a fresh solve.
 fn c_gradient(sim: &mut Simulator, c: &[f64], y: &[f64]) -> Vec<f64> {

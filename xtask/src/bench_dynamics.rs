@@ -141,6 +141,9 @@ pub fn section(reference_dir: &Path) -> anyhow::Result<String> {
         ));
     }
 
+    // Scenes beyond the finger: the derivatives of any size.
+    out.push_str(&scenes_table(&states)?);
+
     // Exact derivatives against central differences, both against the reference.
     let text = std::fs::read_to_string(reference_dir.join("finger_steps.json"))?;
     let data: serde_json::Value = serde_json::from_str(&text)?;
@@ -271,6 +274,71 @@ pub fn section(reference_dir: &Path) -> anyhow::Result<String> {
             .zip(&best)
             .fold(0.0f64, |m, (a, b)| m.max(max_diff(a, b)));
         out.push_str(&format!("| {tol:.0e} | {ns:.0} | {err:.1e} |\n"));
+    }
+    Ok(out)
+}
+
+/// Step, first and second derivatives on scenes of 3, 4 and 5 joints (logistic, sigma = 0.1, h = 0.05),
+/// median over states in contact.
+fn scenes_table(finger_states: &[Vec<f64>]) -> anyhow::Result<String> {
+    let mut out = String::from(
+        "\nScenes of any size (logistic, sigma = 0.1, h = 0.05; median over 8 states with a link on the ellipse, warm-started; the Hessian of c^T f over (x, u) for a fixed c): the scene files under scenes/.\n\n| scene | joints / controls / rows | step (ns) | step + exact fx, fu (ns) | + Hessian of c^T f (ns) |\n|---|---:|---:|---:|---:|\n",
+    );
+    let three = Scene::from_toml_str(include_str!("../../scenes/three_link_finger.toml"))?;
+    let two = Scene::from_toml_str(include_str!("../../scenes/two_fingers.toml"))?;
+    let at = |f: &dyn Fn(f64) -> Vec<f64>| (0..8).map(|i| f(i as f64 * 0.4)).collect::<Vec<_>>();
+    let cases: [(&str, Scene, Vec<Vec<f64>>, Vec<f64>); 3] = [
+        (
+            "finger (finger.toml)",
+            Scene::flicking_finger(),
+            finger_states.iter().take(8).cloned().collect(),
+            U.to_vec(),
+        ),
+        (
+            "three-link finger (three_link_finger.toml)",
+            three,
+            at(&|t| vec![-1.2, -0.6, -0.8 + 0.1 * t.sin(), t, 0.5, -1.0, 1.5, 0.2]),
+            vec![0.2, -0.3, 0.1],
+        ),
+        (
+            "two fingers (two_fingers.toml)",
+            two,
+            at(&|t| vec![-1.2, 0.6, -1.95, -0.6, t, 0.3, -0.4, 0.2, 0.1, 1.0]),
+            vec![0.2, -0.3, 0.1, 0.4],
+        ),
+    ];
+    for (name, scene, states, u) in cases {
+        let (n, nu, rows) = (scene.n_dof(), scene.n_controls, scene.n_constraints());
+        let mut s = Simulator::new(
+            scene,
+            StepSettings {
+                model: Complementarity::Logistic { sigma: 0.1 },
+                ..StepSettings::default()
+            },
+        )?;
+        let c: Vec<f64> = (0..2 * n).map(|i| 0.3 - 0.1 * i as f64).collect();
+        let mut k = 0;
+        let step = time_ns(2000, || {
+            k += 1;
+            black_box(s.step(&states[k % states.len()], &u).unwrap());
+        });
+        let exact = time_ns(1000, || {
+            k += 1;
+            black_box(
+                s.step_with_derivatives(&states[k % states.len()], &u)
+                    .unwrap(),
+            );
+        });
+        let hessian = time_ns(300, || {
+            k += 1;
+            black_box(
+                s.step_with_hessian(&states[k % states.len()], &u, &c)
+                    .unwrap(),
+            );
+        });
+        out.push_str(&format!(
+            "| {name} | {n} / {nu} / {rows} | {step:.0} | {exact:.0} | {hessian:.0} |\n"
+        ));
     }
     Ok(out)
 }
