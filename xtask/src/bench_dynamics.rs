@@ -278,6 +278,9 @@ pub fn section(reference_dir: &Path) -> anyhow::Result<String> {
     Ok(out)
 }
 
+/// A scene, its states and control.
+type Case = (&'static str, Scene, Vec<Vec<f64>>, Vec<f64>);
+
 /// Step, first and second derivatives on scenes of 3, 4 and 5 joints (logistic, sigma = 0.1, h = 0.05),
 /// median over states in contact.
 fn scenes_table(finger_states: &[Vec<f64>]) -> anyhow::Result<String> {
@@ -287,7 +290,7 @@ fn scenes_table(finger_states: &[Vec<f64>]) -> anyhow::Result<String> {
     let three = Scene::from_toml_str(include_str!("../../scenes/three_link_finger.toml"))?;
     let two = Scene::from_toml_str(include_str!("../../scenes/two_fingers.toml"))?;
     let at = |f: &dyn Fn(f64) -> Vec<f64>| (0..8).map(|i| f(i as f64 * 0.4)).collect::<Vec<_>>();
-    let cases: [(&str, Scene, Vec<Vec<f64>>, Vec<f64>); 3] = [
+    let cases: [Case; 3] = [
         (
             "finger (finger.toml)",
             Scene::flicking_finger(),
