@@ -254,22 +254,6 @@ fn derivatives_of_a_four_joint_scene_match_central_differences() {
 /// (14 state and control entries).
 const TWO_FINGERS: &str = include_str!("../../scenes/two_fingers.toml");
 
-/// `c^T [fx fu]` at `y = (x, u)` by the exact first derivatives of a fresh solve.
-fn c_gradient(sim: &mut Simulator, c: &[f64], y: &[f64]) -> Vec<f64> {
-    let nx = c.len();
-    let nu = y.len() - nx;
-    sim.reset_warm_start();
-    let (_, d) = sim.step_with_derivatives(&y[..nx], &y[nx..]).unwrap();
-    let mut g = vec![0.0; nx + nu];
-    for (j, gj) in g.iter_mut().enumerate().take(nx) {
-        *gj = (0..nx).map(|i| c[i] * d.fx[i * nx + j]).sum();
-    }
-    for k in 0..nu {
-        g[nx + k] = (0..nx).map(|i| c[i] * d.fu[i * nu + k]).sum();
-    }
-    g
-}
-
 /// The Hessian of `c^T f` against central differences of the exact first derivatives, at each state of
 /// `states` (under `u`); returns how many of them were in contact (an impulse above 1e-3).
 fn hessians_match_differences(
@@ -300,7 +284,10 @@ fn hessians_match_differences(
             let (mut yp, mut ym) = (y.clone(), y.clone());
             yp[k] += eps;
             ym[k] -= eps;
-            let (gp, gm) = (c_gradient(&mut sim, &c, &yp), c_gradient(&mut sim, &c, &ym));
+            let (gp, gm) = (
+                crate::support::c_gradient(&mut sim, &c, &yp),
+                crate::support::c_gradient(&mut sim, &c, &ym),
+            );
             (0..cols)
                 .map(|i| (gp[i] - gm[i]) / (2.0 * eps))
                 .collect::<Vec<f64>>()

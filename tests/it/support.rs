@@ -16,17 +16,19 @@ pub fn reference_json(name: &str) -> serde_json::Value {
     serde_json::from_str(&text).expect("valid reference JSON")
 }
 
-/// `c^T [fx fu]` of the finger's step at `y = (x, u)` (8 entries), by the exact first derivatives from a
+/// `c^T [fx fu]` of the step at `y = (x, u)` (`x` as long as `c`), by the exact first derivatives from a
 /// cold start: the gradient whose differences check the Hessian of `c^T f`.
 pub fn c_gradient(sim: &mut dynamics::Simulator, c: &[f64], y: &[f64]) -> Vec<f64> {
+    let nx = c.len();
+    let nu = y.len() - nx;
     sim.reset_warm_start();
-    let (_, d) = sim.step_with_derivatives(&y[..6], &y[6..]).unwrap();
-    let mut g = vec![0.0; 8];
-    for (j, gj) in g.iter_mut().enumerate().take(6) {
-        *gj = (0..6).map(|i| c[i] * d.fx[i * 6 + j]).sum();
+    let (_, d) = sim.step_with_derivatives(&y[..nx], &y[nx..]).unwrap();
+    let mut g = vec![0.0; nx + nu];
+    for (j, gj) in g.iter_mut().enumerate().take(nx) {
+        *gj = (0..nx).map(|i| c[i] * d.fx[i * nx + j]).sum();
     }
-    for k in 0..2 {
-        g[6 + k] = (0..6).map(|i| c[i] * d.fu[i * 2 + k]).sum();
+    for k in 0..nu {
+        g[nx + k] = (0..nx).map(|i| c[i] * d.fu[i * nu + k]).sum();
     }
     g
 }

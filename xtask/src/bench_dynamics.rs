@@ -92,25 +92,8 @@ pub fn section(reference_dir: &Path) -> anyhow::Result<String> {
     ] {
         let mut s = sim(model, 0.05);
         let mut k = 0;
-        let step = time_ns(2000, || {
-            k += 1;
-            black_box(s.step(&states[k % states.len()], &U).unwrap());
-        });
-        let exact = time_ns(1000, || {
-            k += 1;
-            black_box(
-                s.step_with_derivatives(&states[k % states.len()], &U)
-                    .unwrap(),
-            );
-        });
         let c = [0.3, -0.7, 1.0, 0.2, -0.1, 0.5];
-        let hessian = time_ns(300, || {
-            k += 1;
-            black_box(
-                s.step_with_hessian(&states[k % states.len()], &U, &c)
-                    .unwrap(),
-            );
-        });
+        let [step, exact, hessian] = derivative_times(&mut s, &states, &U, &c, &mut k);
         let differences = |central: bool, s: &mut Simulator, k: &mut usize| {
             time_ns(200, || {
                 *k += 1;
@@ -278,6 +261,31 @@ pub fn section(reference_dir: &Path) -> anyhow::Result<String> {
     Ok(out)
 }
 
+/// Median ns of a step, a step with exact `fx`, `fu`, and a step with those and the Hessian of `c^T f`,
+/// cycling through `states` under `u` (`k` counts the calls, so a caller's later timings go on cycling).
+fn derivative_times(
+    s: &mut Simulator,
+    states: &[Vec<f64>],
+    u: &[f64],
+    c: &[f64],
+    k: &mut usize,
+) -> [f64; 3] {
+    let mut next = || {
+        *k += 1;
+        &states[*k % states.len()]
+    };
+    let step = time_ns(2000, || {
+        black_box(s.step(next(), u).unwrap());
+    });
+    let exact = time_ns(1000, || {
+        black_box(s.step_with_derivatives(next(), u).unwrap());
+    });
+    let hessian = time_ns(300, || {
+        black_box(s.step_with_hessian(next(), u, c).unwrap());
+    });
+    [step, exact, hessian]
+}
+
 /// A scene, its states and control.
 type Case = (&'static str, Scene, Vec<Vec<f64>>, Vec<f64>);
 
@@ -320,25 +328,7 @@ fn scenes_table(finger_states: &[Vec<f64>]) -> anyhow::Result<String> {
             },
         )?;
         let c: Vec<f64> = (0..2 * n).map(|i| 0.3 - 0.1 * i as f64).collect();
-        let mut k = 0;
-        let step = time_ns(2000, || {
-            k += 1;
-            black_box(s.step(&states[k % states.len()], &u).unwrap());
-        });
-        let exact = time_ns(1000, || {
-            k += 1;
-            black_box(
-                s.step_with_derivatives(&states[k % states.len()], &u)
-                    .unwrap(),
-            );
-        });
-        let hessian = time_ns(300, || {
-            k += 1;
-            black_box(
-                s.step_with_hessian(&states[k % states.len()], &u, &c)
-                    .unwrap(),
-            );
-        });
+        let [step, exact, hessian] = derivative_times(&mut s, &states, &u, &c, &mut 0);
         out.push_str(&format!(
             "| {name} | {n} / {nu} / {rows} | {step:.0} | {exact:.0} | {hessian:.0} |\n"
         ));

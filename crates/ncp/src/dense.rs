@@ -123,8 +123,12 @@ impl DenseLu {
         if a.len() != n * n {
             return Err(FactorError::Shape { len: a.len(), n });
         }
-        let scale = a.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-        if !scale.is_finite() || a.iter().any(|v| v.is_nan()) {
+        // The largest magnitude, NaN kept once seen (`f64::max` would drop it): one pass finds both.
+        let scale = a.iter().fold(0.0f64, |m, v| {
+            let e = v.abs();
+            if e > m || e.is_nan() { e } else { m }
+        });
+        if !scale.is_finite() {
             return Err(FactorError::NonFinite);
         }
         let tiny = (n as f64) * f64::EPSILON * scale;

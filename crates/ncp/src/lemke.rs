@@ -30,6 +30,20 @@ fn default_max_size() -> usize {
     LemkeSettings::default().max_size
 }
 
+impl LemkeSettings {
+    /// Check the settings: at least one pivot.
+    pub fn validate(&self) -> Result<(), NcpError> {
+        if self.max_pivots == 0 {
+            return Err(NcpError::Setting {
+                name: "max_pivots",
+                value: 0.0,
+                expected: "at least 1",
+            });
+        }
+        Ok(())
+    }
+}
+
 impl Default for LemkeSettings {
     fn default() -> Self {
         LemkeSettings {
@@ -43,13 +57,7 @@ impl Default for LemkeSettings {
 /// must be non-singular) and Lemke's method solves the rest. `Err(Infeasible)` on ray termination.
 #[tracing::instrument(name = "ncp.lemke", level = "debug", skip_all)]
 pub fn lemke(problem: &LinearMcp, settings: &LemkeSettings) -> Result<Solution, NcpError> {
-    if settings.max_pivots == 0 {
-        return Err(NcpError::Setting {
-            name: "max_pivots",
-            value: 0.0,
-            expected: "at least 1",
-        });
-    }
+    settings.validate()?;
     let rows = problem.dim() - problem.n_free();
     if rows > settings.max_size {
         return Err(NcpError::TooLarge {

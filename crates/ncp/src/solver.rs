@@ -35,13 +35,7 @@ pub struct Lemke {
 impl Lemke {
     /// The method with checked settings.
     pub fn new(settings: LemkeSettings) -> Result<Self, NcpError> {
-        if settings.max_pivots == 0 {
-            return Err(NcpError::Setting {
-                name: "max_pivots",
-                value: 0.0,
-                expected: "at least 1",
-            });
-        }
+        settings.validate()?;
         Ok(Lemke { settings })
     }
 }

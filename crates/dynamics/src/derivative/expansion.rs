@@ -86,40 +86,43 @@ impl Taylor {
             g: Vec::with_capacity(len * dim),
             h: Vec::with_capacity(len * dim * dim),
         };
-        if dim <= K {
-            // One pass: the jets' leading blocks are the expansion.
+        let mut first = true;
+        for dirs in block_pairs(dim, K) {
             let args: Vec<Jet<K>> = at
                 .iter()
                 .enumerate()
-                .map(|(i, &a)| Jet::variable(a, i))
+                .map(|(i, &v)| match dirs.iter().position(|&d| d == i) {
+                    Some(l) => Jet::variable(v, l),
+                    None => Jet::from(v),
+                })
                 .collect();
-            let dirs: Vec<usize> = (0..dim).collect();
-            f(&args, &mut Sink::new(&mut taylor, &dirs, true))?;
-            return Ok(taylor);
-        }
-        let half = (K / 2).max(1);
-        let blocks: Vec<Vec<usize>> = (0..dim)
-            .step_by(half)
-            .map(|s| (s..(s + half).min(dim)).collect())
-            .collect();
-        let mut first = true;
-        for a in 0..blocks.len() {
-            for b in a + 1..blocks.len() {
-                let dirs = [blocks[a].as_slice(), blocks[b].as_slice()].concat();
-                let args: Vec<Jet<K>> = at
-                    .iter()
-                    .enumerate()
-                    .map(|(i, &v)| match dirs.iter().position(|&d| d == i) {
-                        Some(l) => Jet::variable(v, l),
-                        None => Jet::from(v),
-                    })
-                    .collect();
-                f(&args, &mut Sink::new(&mut taylor, &dirs, first))?;
-                first = false;
-            }
+            f(&args, &mut Sink::new(&mut taylor, &dirs, first))?;
+            first = false;
         }
         Ok(taylor)
     }
+}
+
+/// The passes of directions that give every second derivative of `dim` arguments with `width` directions
+/// per pass: all of them in one pass when they fit, otherwise the arguments cut into blocks of `width / 2`
+/// and one pass per pair of blocks (which together cover every gradient entry and every block of the
+/// Hessian).
+pub(super) fn block_pairs(dim: usize, width: usize) -> Vec<Vec<usize>> {
+    if dim <= width {
+        return vec![(0..dim).collect()];
+    }
+    let half = (width / 2).max(1);
+    let blocks: Vec<Vec<usize>> = (0..dim)
+        .step_by(half)
+        .map(|s| (s..(s + half).min(dim)).collect())
+        .collect();
+    let mut passes = Vec::new();
+    for a in 0..blocks.len() {
+        for b in a + 1..blocks.len() {
+            passes.push([blocks[a].as_slice(), blocks[b].as_slice()].concat());
+        }
+    }
+    passes
 }
 
 /// Where one pass of [`Taylor::expand`] writes its functions' values, gradient and Hessian entries (its

@@ -7,7 +7,7 @@
 #![allow(non_snake_case)]
 
 use super::StepDerivatives;
-use super::expansion::{D2, DIRECTIONS, Expansion};
+use super::expansion::{D2, DIRECTIONS, Expansion, block_pairs};
 use super::linearise::{RowKind, system};
 use crate::error::DynamicsError;
 use crate::step::{Complementarity, Simulator, Step, check};
@@ -207,22 +207,7 @@ fn general_hessians(
 ) -> Vec<f64> {
     let n = ing.n;
     let np = lin.p.len();
-    let passes: Vec<Vec<usize>> = if cols <= DIRECTIONS {
-        vec![(0..cols).collect()]
-    } else {
-        let half = DIRECTIONS / 2;
-        let blocks: Vec<Vec<usize>> = (0..cols)
-            .step_by(half)
-            .map(|s| (s..(s + half).min(cols)).collect())
-            .collect();
-        let mut passes = Vec::new();
-        for a in 0..blocks.len() {
-            for b in a + 1..blocks.len() {
-                passes.push([blocks[a].as_slice(), blocks[b].as_slice()].concat());
-            }
-        }
-        passes
-    };
+    let passes = block_pairs(cols, DIRECTIONS);
     let cc = cols * cols;
     let mut e = vec![0.0; np * cc];
     for dirs in &passes {
