@@ -3,8 +3,8 @@
 //! the step conserves to O(h) without drag and contact; and scene files that are checked field by field.
 
 use dynamics::{
-    Complementarity, Constraints, DynamicsError, Kinematics, Scene, Simulator, StateCovariance,
-    StepSettings,
+    Complementarity, Constraints, DynamicsError, Kinematics, Model, Scene, Simulator,
+    StateCovariance, StepSettings,
 };
 use proptest::prelude::*;
 
@@ -114,14 +114,28 @@ proptest! {
         let mut sim = Simulator::new(scene.clone(), StepSettings::default()).unwrap();
         let by_control = sim.step(&x, &[tau[0], tau[1]]).unwrap();
         sim.reset_warm_start();
-        let by_force = sim.step_with_forces(&x, &[0.0, 0.0], &[tau[0], tau[1], 0.0]).unwrap();
+        let by_control_d = sim.derivatives().ok();
         sim.reset_warm_start();
+        sim.data_mut().set_forces(&[tau[0], tau[1], 0.0]).unwrap();
+        let by_force = sim.step(&x, &[0.0, 0.0]).unwrap();
+        let by_force_d = sim.derivatives().ok();
+        sim.reset_warm_start();
+        sim.data_mut().clear_forces();
         let plain = sim.step(&x, &[0.0, 0.0]).unwrap();
         sim.reset_warm_start();
-        let no_force = sim.step_with_forces(&x, &[0.0, 0.0], &[0.0; 3]).unwrap();
+        sim.data_mut().set_forces(&[0.0; 3]).unwrap();
+        let no_force = sim.step(&x, &[0.0, 0.0]).unwrap();
         for i in 0..6 {
             prop_assert!((by_control.x_next[i] - by_force.x_next[i]).abs() < 1e-10);
             prop_assert!((plain.x_next[i] - no_force.x_next[i]).abs() < 1e-12);
+        }
+        // The forces are an input held fixed: the step's derivatives in x are those of the same torque
+        // given as controls.
+        if let (Some(a), Some(b)) = (by_control_d, by_force_d) {
+            let scale = a.fx.iter().fold(1.0f64, |m, v| m.max(v.abs()));
+            for (p, q) in a.fx.iter().zip(&b.fx) {
+                prop_assert!((p - q).abs() <= 1e-6 * scale, "{p} vs {q}");
+            }
         }
     }
 
@@ -265,9 +279,9 @@ proptest! {
         ..ProptestConfig::default()
     })]
 
-    /// `derivatives_of` and `second_order_of` linearise the step the caller holds, with no second solve:
-    /// they agree with the calls that solve the step again (to the solver's tolerance), leave the warm
-    /// start alone, and refuse a step whose rows do not fit the state.
+    /// `Model::derivatives` and `Model::second_order` linearise the step the data holds, with no second
+    /// solve: they agree with the calls that solve the step (to the solver's tolerance) in a fresh data,
+    /// and leave the data alone; a data holding no step, or made by a model of another size, is refused.
     #[test]
     fn derivatives_of_a_stored_step_match_a_fresh_solve(
         x in state(),
@@ -281,18 +295,22 @@ proptest! {
         prop_assume!(step.is_some());
         let step = step.unwrap();
         prop_assume!(step.d[4] > -0.2 && step.info.status == ncp::Status::Converged);
-        let Ok((_, fresh)) = sim.step_with_derivatives(&x, &u) else {
+        let model = sim.model();
+        let mut fresh_data = model.create_data();
+        prop_assert!(model.derivatives(&fresh_data).is_err());
+        let Ok(fresh) = model.step_with_derivatives(&mut fresh_data, &x, &u) else {
             // Refused (a singular Jacobian at an active-set change): the stored step must be refused too.
-            prop_assert!(sim.derivatives_of(&x, &u, &step).is_err());
+            prop_assert!(sim.derivatives().is_err());
             return Ok(());
         };
-        let stored = sim.derivatives_of(&x, &u, &step).unwrap();
+        let stored = sim.derivatives().unwrap();
         let scale = fresh.fx.iter().chain(&fresh.fu).fold(1.0f64, |m, v| m.max(v.abs()));
         for (a, b) in stored.fx.iter().chain(&stored.fu).zip(fresh.fx.iter().chain(&fresh.fu)) {
             prop_assert!((a - b).abs() <= 1e-6 * scale, "model {}: {} vs {}", which, a, b);
         }
         if which != 1 || !sim.has_state_covariance() {
-            let (so, again) = (sim.second_order_of(&x, &u, &step), sim.second_order_step(&x, &u));
+            let model = sim.model();
+            let (so, again) = (model.second_order(sim.data()), model.second_order_step(&mut fresh_data, &x, &u));
             if let (Ok(so), Ok(again)) = (so, again) {
                 prop_assert_eq!(&so.step.x_next, &step.x_next);
                 let (h1, h2) = (so.hessian(&c).unwrap(), again.hessian(&c).unwrap());
@@ -302,10 +320,35 @@ proptest! {
                 }
             }
         }
-        // A step with other rows than this state's is refused, not linearised.
-        let mut wrong = step.clone();
-        wrong.lambda.pop();
-        prop_assert!(sim.derivatives_of(&x, &u, &wrong).is_err());
+        // Linearising left the data as it was: its step is the one it computed.
+        prop_assert_eq!(sim.data().step(), Some(&step));
+        // Data of a model of another size is refused, not linearised or stepped.
+        let other = Model::new(Scene::from_toml_str(include_str!("../../scenes/three_link_finger.toml")).unwrap(), StepSettings::default()).unwrap();
+        let mut alien = other.create_data();
+        let refused = |e: Result<(), DynamicsError>| matches!(e, Err(DynamicsError::Input { what: "step data", .. }));
+        prop_assert!(refused(sim.model().derivatives(&alien).map(|_| ())));
+        prop_assert!(refused(sim.model().step(&mut alien, &x, &u).map(|_| ())));
+    }
+
+    /// A model's answer depends only on the data handed in: a step in one data is bit for bit the same
+    /// whatever steps other data of the same model took in between (no state hidden in the model).
+    #[test]
+    fn a_models_step_depends_only_on_its_data(
+        x in state(),
+        others in proptest::collection::vec((state(), (-2.0f64..2.0, -2.0f64..2.0)), 1..4),
+        u in (-2.0f64..2.0, -2.0f64..2.0),
+    ) {
+        let model = Model::new(Scene::flicking_finger(), StepSettings::default()).unwrap();
+        let u = [u.0, u.1];
+        let mut quiet = model.create_data();
+        let alone = model.step(&mut quiet, &x, &u).map(|s| s.x_next.clone()).ok();
+        let mut data = model.create_data();
+        let mut busy = model.create_data();
+        for (y, v) in &others {
+            let _ = model.step(&mut busy, y, &[v.0, v.1]);
+        }
+        let after = model.step(&mut data, &x, &u).map(|s| s.x_next.clone()).ok();
+        prop_assert_eq!(alone, after);
     }
 }
 
@@ -455,9 +498,13 @@ fn bad_states_and_settings_are_typed_errors() {
     ));
     for forces in [&[f64::NAN, 0.0, 0.0][..], &[0.0, 0.0]] {
         assert!(matches!(
-            sim.step_with_forces(&[-0.5; 6], &[0.0; 2], forces),
+            sim.data_mut().set_forces(forces),
             Err(DynamicsError::Input { what: "forces", .. })
         ));
+        assert!(
+            sim.data().forces().is_empty(),
+            "a refused input leaves the forces as they were"
+        );
     }
     for bad in [
         StepSettings {

@@ -310,7 +310,7 @@ One pass (backward pass with the steps' derivatives, then the forward pass with 
         let step = t.step.as_secs_f64() * 1e3;
         let rest = total - second - step - t.first.as_secs_f64() * 1e3;
         out.push_str(&format!(
-            "\nWhere the time of the full-DDP solve at sigma = 0.1 goes ({passes} passes, {total:.0} ms): second derivatives of the steps (`FingerDynamics`'s `calc_diff_second`: one `Simulator::second_order_of` per step and trajectory (the step the forward pass stored, not solved again), kept in the knot's data, then a cheap contraction per backward attempt; {} calls) {second:.0} ms ({:.0}%), steps of the forward passes and line searches {step:.0} ms ({:.0}%), the optimiser's own backward-pass algebra, box QP and bookkeeping {rest:.0} ms ({:.0}%).\n",
+            "\nWhere the time of the full-DDP solve at sigma = 0.1 goes ({passes} passes, {total:.0} ms): second derivatives of the steps (`FingerDynamics`'s `calc_diff_second`: one `Model::second_order` per step and trajectory (of the step the forward pass stored in the knot's data, not solved again), kept in the knot's data, then a cheap contraction per backward attempt; {} calls) {second:.0} ms ({:.0}%), steps of the forward passes and line searches {step:.0} ms ({:.0}%), the optimiser's own backward-pass algebra, box QP and bookkeeping {rest:.0} ms ({:.0}%).\n",
             t.second_calls,
             100.0 * second / total,
             100.0 * step / total,

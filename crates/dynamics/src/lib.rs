@@ -5,9 +5,13 @@
 //!   `scenes/finger.toml`) or [`Scene::flicking_finger`].
 //! - [`Kinematics`]: positions, point Jacobians, `M(q)`, `r(q, v)`.
 //! - [`Constraints`]: `d(q)` and `J(q)` in the order of [`Scene::rows`] (SCENE.md's), each row typed by [`ConstraintRow`]; a [`Step`] gives each pair's [`ContactImpulse`].
-//! - [`Simulator::step_with_derivatives`]: exact `fx`, `fu` by the implicit function theorem.
-//! - [`Simulator::step`]: one step for the models [`Complementarity::Hard`], `Logistic` (eq. 17) and
-//!   `Normal` (eq. 14 with 15).
+//! - [`Model`] (the scene, its settings, the rows' noise; fixed while it steps) and [`StepData`] (what a
+//!   step reads and writes: applied forces, warm start, the step and its point, solver scratch), as
+//!   MuJoCo's model and data: [`Model::step`] fills a data, [`Model::derivatives`] and
+//!   [`Model::second_order`] linearise the step it holds (exact `fx`, `fu` by the implicit function
+//!   theorem, and the Hessians of `c^T f`), never solving it again.
+//! - [`Simulator`]: a model with one data, for one simulation; [`Simulator::step`] for the models
+//!   [`Complementarity::Hard`], `Logistic` (eq. 17) and `Normal` (eq. 14 with 15).
 //!
 //! ```
 //! use dynamics::{FLICKING_FINGER_X0, Scene, Simulator, StepSettings};
@@ -28,6 +32,7 @@ mod error;
 mod jet;
 mod kinematics;
 mod scene;
+mod simulator;
 mod step;
 
 pub use constraint::{ConstraintRow, Constraints, ContactFrame, ContactImpulse};
@@ -38,7 +43,8 @@ pub use kinematics::{Kinematics, Ring, Scalar};
 pub use scene::{
     Body, BodySpec, ContactPair, ContactSpec, FLICKING_FINGER_X0, JointSpec, Scene, SceneSpec,
 };
-pub use step::{Complementarity, Drag, Simulator, StateCovariance, Step, StepSettings};
+pub use simulator::Simulator;
+pub use step::{Complementarity, Drag, Model, StateCovariance, Step, StepData, StepSettings};
 
 /// The README's examples, compiled and run as doctests so that they cannot go stale.
 #[doc = include_str!("../README.md")]

@@ -150,15 +150,94 @@ impl Step {
     }
 }
 
-/// A simulator: the scene, its settings and the solvers' warm-start state.
+/// The model of a step (as MuJoCo's `mjModel`): the scene, the step's settings and the rows' noise, fixed
+/// while it steps. Everything a step writes lives in a [`StepData`] the caller owns ([`Model::create_data`]):
+/// one per sequence of steps (a simulation), or one per knot of a trajectory (an optimiser), so no answer
+/// depends on a step the caller did not hand in. [`Simulator`](crate::Simulator) pairs a model with one
+/// data for the common case of one simulation.
 #[derive(Debug)]
-pub struct Simulator {
+pub struct Model {
     scene: Scene,
     settings: StepSettings,
-    newton: NewtonSolver,
     erm: ErmSolver,
-    warm: Option<Vec<f64>>,
     covariance: Option<StateCovariance>,
+}
+
+/// What a step of a [`Model`] reads besides `(x, u)` and what it writes (as MuJoCo's `mjData`): the applied
+/// forces (an input, [`StepData::set_forces`]), the solution the next solve starts from, the last step
+/// with the `(x, u)` it was computed from (which [`Model::derivatives`] linearises, never solving again),
+/// and the solvers' scratch space.
+#[derive(Debug)]
+pub struct StepData {
+    n_dof: usize,
+    n_rows: usize,
+    newton: NewtonSolver,
+    /// Where the next solve starts: `[v'; lambda]` of the last step, or set by the caller.
+    warm: Option<Vec<f64>>,
+    /// Generalised forces added to `r + B u` (one per joint), or empty for none.
+    forces: Vec<f64>,
+    x: Vec<f64>,
+    u: Vec<f64>,
+    step: Option<Step>,
+}
+
+impl StepData {
+    /// The last step computed with this data, if any (and it succeeded).
+    pub fn step(&self) -> Option<&Step> {
+        self.step.as_ref()
+    }
+
+    /// The state and controls the last step was computed from (empty before the first).
+    pub fn point(&self) -> (&[f64], &[f64]) {
+        (&self.x, &self.u)
+    }
+
+    /// Hold the generalised forces `forces` (one per joint) over every following step, added to
+    /// `r + B u`: a user pulling on a body ([`Kinematics::point_force`]). Their derivatives are zero (they
+    /// are an input, like `u`, held fixed).
+    pub fn set_forces(&mut self, forces: &[f64]) -> Result<(), DynamicsError> {
+        check("forces", forces, self.n_dof)?;
+        self.forces.clear();
+        self.forces.extend_from_slice(forces);
+        Ok(())
+    }
+
+    /// Stop applying forces.
+    pub fn clear_forces(&mut self) {
+        self.forces.clear();
+    }
+
+    /// The applied generalised forces (empty: none).
+    pub fn forces(&self) -> &[f64] {
+        &self.forces
+    }
+
+    /// Start the next solve from `z = [v'; lambda]` (for instance the solution of an earlier step at the
+    /// same state, which the solve then accepts without iterating).
+    pub fn set_warm_start(&mut self, z: &[f64]) -> Result<(), DynamicsError> {
+        check("warm start", z, self.n_dof + self.n_rows)?;
+        self.warm = Some(z.to_vec());
+        Ok(())
+    }
+
+    /// Start the next solve from the solution of `other`'s last step (a step of the same model near this
+    /// one: the same knot of the trajectory an optimiser improves); nothing if it has none.
+    pub fn warm_start_from(&mut self, other: &StepData) {
+        if let Some(step) = &other.step
+            && other.n_dof == self.n_dof
+            && step.lambda.len() == self.n_rows
+        {
+            let z = self.warm.get_or_insert_with(Vec::new);
+            z.clear();
+            z.extend_from_slice(&step.x_next[self.n_dof..]);
+            z.extend_from_slice(&step.lambda);
+        }
+    }
+
+    /// Forget the warm start (the next step starts from `[v; 0]`).
+    pub fn reset_warm_start(&mut self) {
+        self.warm = None;
+    }
 }
 
 /// A Gaussian state estimate's covariance, from which each row's noise follows (paper eq. 18):
@@ -200,18 +279,49 @@ pub(crate) fn row_sigmas<T: Ring>(
         .collect()
 }
 
-impl Simulator {
-    /// A simulator of `scene` with checked settings.
+impl Model {
+    /// The model of `scene` with checked settings.
     pub fn new(scene: Scene, settings: StepSettings) -> Result<Self, DynamicsError> {
         settings.validate()?;
-        Ok(Simulator {
-            newton: NewtonSolver::new(settings.newton)?,
+        NewtonSolver::new(settings.newton)?;
+        Ok(Model {
             erm: ErmSolver::new(settings.erm)?,
             scene,
             settings,
-            warm: None,
             covariance: None,
         })
+    }
+
+    /// Fresh data for this model's steps: no warm start, no applied forces, no step yet.
+    pub fn create_data(&self) -> StepData {
+        StepData {
+            n_dof: self.scene.n_dof(),
+            n_rows: self.scene.n_constraints(),
+            newton: NewtonSolver::new(self.settings.newton)
+                .expect("the settings were validated by Model::new"),
+            warm: None,
+            forces: Vec::new(),
+            x: Vec::new(),
+            u: Vec::new(),
+            step: None,
+        }
+    }
+
+    /// `Err` unless `data` was created by a model of this scene's sizes.
+    pub(crate) fn check_data(&self, data: &StepData) -> Result<(), DynamicsError> {
+        if data.n_dof != self.scene.n_dof() || data.n_rows != self.scene.n_constraints() {
+            return Err(DynamicsError::Input {
+                what: "step data",
+                problem: format!(
+                    "was created for {} joints and {} rows; this model has {} and {}",
+                    data.n_dof,
+                    data.n_rows,
+                    self.scene.n_dof(),
+                    self.scene.n_constraints()
+                ),
+            });
+        }
+        Ok(())
     }
 
     /// The scene.
@@ -267,30 +377,13 @@ impl Simulator {
         self.covariance.as_ref()
     }
 
-    /// Start the next solve from `z = [v'; lambda]` (for instance the solution of an earlier step at the
-    /// same state, which the solve then accepts without iterating).
-    pub fn set_warm_start(&mut self, z: &[f64]) -> Result<(), DynamicsError> {
-        check(
-            "warm start",
-            z,
-            self.scene.n_dof() + self.scene.n_constraints(),
-        )?;
-        self.warm = Some(z.to_vec());
-        Ok(())
-    }
-
-    /// Forget the warm start (the next step starts from `[v; 0]`).
-    pub fn reset_warm_start(&mut self) {
-        self.warm = None;
-    }
-
     /// The mixed LCP of the step from `x` under `u`, with the start-of-step quantities.
     pub fn problem(&self, x: &[f64], u: &[f64]) -> Result<(LinearMcp, Constraints), DynamicsError> {
         self.problem_with(x, u, None)
     }
 
-    /// [`Simulator::problem`] with optional extra generalised forces (checked by the caller).
-    fn problem_with(
+    /// [`Model::problem`] with optional extra generalised forces (checked by the caller).
+    pub(crate) fn problem_with(
         &self,
         x: &[f64],
         u: &[f64],
@@ -322,7 +415,7 @@ impl Simulator {
         }
     }
 
-    /// [`Simulator::recovered`] on distances in a dual type: a clamped row's distance is the constant
+    /// [`Model::recovered`] on distances in a dual type: a clamped row's distance is the constant
     /// `-recovery`, with no derivatives.
     pub(crate) fn recovered_all<T: Ring>(&self, d: &mut [T]) {
         if let Some(depth) = self.settings.recovery {
@@ -335,8 +428,8 @@ impl Simulator {
     }
 
     /// The derivative passes' ingredients as the step sees them, in place: explicit drag checked
-    /// ([`Simulator::check_drag`]), implicit drag added to `M` ([`Simulator::with_drag`]), the rows'
-    /// distances limited by the recovery ([`Simulator::recovered_all`]). Returns the distances as they
+    /// ([`Model::check_drag`]), implicit drag added to `M` ([`Model::with_drag`]), the rows'
+    /// distances limited by the recovery ([`Model::recovered_all`]). Returns the distances as they
     /// were, which the step reports.
     pub(crate) fn prepare_ingredients<T: Ring>(
         &self,
@@ -464,35 +557,36 @@ impl Simulator {
         Ok((LinearMcp::from_row_major(n, a, b)?, cons))
     }
 
-    /// One step from `x` under the controls `u`.
+    /// One step from `x` under the controls `u`, with `data`'s applied forces, started from its warm
+    /// start; the step is kept in `data` (for [`Model::derivatives`], and its solution as the next warm
+    /// start) and returned.
     #[tracing::instrument(name = "dynamics.step", level = "debug", skip_all)]
-    pub fn step(&mut self, x: &[f64], u: &[f64]) -> Result<Step, DynamicsError> {
-        let problem = self.problem(x, u)?;
-        Ok(self.solve_step(x, problem)?.0)
-    }
-
-    /// One step from `x` under the controls `u` with the generalised forces `forces` (one per joint,
-    /// held over the step) added to `r + B u`: a user pulling on a body ([`Kinematics::point_force`]).
-    pub fn step_with_forces(
-        &mut self,
+    pub fn step<'d>(
+        &self,
+        data: &'d mut StepData,
         x: &[f64],
         u: &[f64],
-        forces: &[f64],
-    ) -> Result<Step, DynamicsError> {
-        check("forces", forces, self.scene.n_dof())?;
-        let problem = self.problem_with(x, u, Some(forces))?;
-        Ok(self.solve_step(x, problem)?.0)
+    ) -> Result<&'d Step, DynamicsError> {
+        self.check_data(data)?;
+        let forces = (!data.forces.is_empty()).then_some(&data.forces[..]);
+        let problem = self.problem_with(x, u, forces)?;
+        self.solve_into(data, x, u, problem)?;
+        Ok(data.step.as_ref().expect("stored by solve_into"))
     }
 
-    /// The step from its mixed LCP; also returns the problem (whose matrix the derivatives reuse).
-    pub(crate) fn solve_step(
-        &mut self,
+    /// Solve the step's mixed LCP from `data`'s warm start and keep the step, its point and its solution
+    /// in `data`; returns the problem (whose matrix the derivatives reuse). `x` and `u` were checked.
+    pub(crate) fn solve_into(
+        &self,
+        data: &mut StepData,
         x: &[f64],
+        u: &[f64],
         (problem, cons): (LinearMcp, Constraints),
-    ) -> Result<(Step, LinearMcp), DynamicsError> {
+    ) -> Result<LinearMcp, DynamicsError> {
         let n = self.scene.n_dof();
         let m = cons.d.len();
-        let mut z = match &self.warm {
+        data.step = None;
+        let mut z = match &data.warm {
             Some(w) if w.len() == n + m => w.clone(),
             _ => {
                 let mut z = vec![0.0; n + m];
@@ -517,7 +611,7 @@ impl Simulator {
                     .into_iter()
                     .map(|sigma| NcpFunction::Logistic { sigma })
                     .collect();
-                self.newton.solve_in_place(&problem, &functions, &mut z)?
+                data.newton.solve_in_place(&problem, &functions, &mut z)?
             }
             Complementarity::Normal { sigma } => {
                 let s = self.erm.solve(&problem, &sigmas(sigma), &z)?;
@@ -532,17 +626,21 @@ impl Simulator {
             x_next[n + i] = z[i];
         }
         let lambda = z[n..].to_vec();
-        self.warm = Some(z);
+        data.warm = Some(z);
         let impulses = ContactImpulse::of(&self.scene, &lambda, &cons.contacts);
-        let step = Step {
+        data.x.clear();
+        data.x.extend_from_slice(x);
+        data.u.clear();
+        data.u.extend_from_slice(u);
+        data.step = Some(Step {
             x_next,
             lambda,
             d: cons.d,
             contacts: cons.contacts,
             impulses,
             info,
-        };
-        Ok((step, problem))
+        });
+        Ok(problem)
     }
 }
 

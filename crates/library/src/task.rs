@@ -2,7 +2,7 @@
 //! `-theta3` at the end (SCENE.md, paper section V-A).
 
 use ddp::{Dynamics, QuadraticCost, SecondOrder};
-use dynamics::{DynamicsError, SecondOrderStep, Simulator, Step};
+use dynamics::{DynamicsError, Model, SecondOrderStep, Simulator, Step};
 use thiserror::Error;
 
 /// SCENE.md's control weight `c_u`.
@@ -27,25 +27,26 @@ pub enum TaskError {
     NotConverged(ncp::Status),
 }
 
-/// A [`Simulator`] as the optimiser's dynamics: [`Dynamics::calc`] is [`Simulator::step`],
-/// [`Dynamics::calc_diff`] [`Simulator::derivatives_of`] that step and the second-order capability
-/// [`Simulator::second_order_of`] it (any scene).
+/// A step [`Model`] as the optimiser's dynamics: [`Dynamics::calc`] is [`Model::step`] in the knot's data,
+/// [`Dynamics::calc_diff`] [`Model::derivatives`] of the step stored there, and the second-order
+/// capability [`Model::second_order`] of it (any scene).
 ///
-/// Each knot's [`StepData`] keeps its step, which the knot's linearisation differentiates as it is (no
-/// second solve), and whose solution `[v'; lambda]` starts the next step computed near it; and the step's
-/// second-order expansion once computed: a backward pass retried with more regularisation at the same
-/// trajectory changes only the vector the Hessian is contracted with, and costs the contraction alone.
+/// Each knot's [`StepData`] holds the model's step data: its step, which the knot's linearisation
+/// differentiates as it is (no second solve), and the warm start of the knot's next solve, which `calc`
+/// takes from the same knot of the trajectory being improved (`near`) when there is one and otherwise from
+/// the knot's own last solution (a fresh knot starts from `[v; 0]`). It also keeps the step's second-order
+/// expansion once computed: a backward pass retried with more regularisation at the same trajectory
+/// changes only the vector the Hessian is contracted with, and costs the contraction alone.
 #[derive(Debug)]
 pub struct FingerDynamics {
-    sim: Simulator,
+    model: Model,
 }
 
 /// One knot's step, kept by [`FingerDynamics`] (see there).
-#[derive(Debug, Default)]
+#[derive(Debug)]
 pub struct StepData {
-    /// The step last computed at the knot; its derivatives linearise it as it is, and its solution
-    /// `[v'; lambda]` starts the next solve near it.
-    step: Option<Step>,
+    /// The model's data: the step last computed at the knot, and where the knot's next solve starts.
+    data: dynamics::StepData,
     /// That step's second-order expansion, once asked for.
     prepared: Option<SecondOrderStep>,
 }
@@ -53,36 +54,29 @@ pub struct StepData {
 impl StepData {
     /// The step last computed at the knot, if any.
     pub fn step(&self) -> Option<&Step> {
-        self.step.as_ref()
+        self.data.step()
     }
 }
 
 impl FingerDynamics {
-    /// Wrap a simulator.
+    /// The dynamics of a simulator's model (its data is left behind).
     pub fn new(sim: Simulator) -> Self {
-        FingerDynamics { sim }
+        FingerDynamics::from_model(sim.into_model())
     }
 
-    /// The simulator.
-    pub fn simulator(&self) -> &Simulator {
-        &self.sim
+    /// The dynamics of `model`.
+    pub fn from_model(model: Model) -> Self {
+        FingerDynamics { model }
     }
 
-    /// The simulator, mutably (to change its covariance or reset its warm start).
-    pub fn simulator_mut(&mut self) -> &mut Simulator {
-        &mut self.sim
+    /// The step model.
+    pub fn model(&self) -> &Model {
+        &self.model
     }
 
-    /// Start the simulator's next solve from the solution `[v'; lambda]` of `step`, if given.
-    fn resume(&mut self, step: Option<&Step>) {
-        if let Some(step) = step {
-            let n = self.sim.scene().n_dof();
-            let mut z = step.x_next[n..].to_vec();
-            z.extend_from_slice(&step.lambda);
-            self.sim
-                .set_warm_start(&z)
-                .expect("a stored solution has the scene's size");
-        }
+    /// The step model, mutably (to change its covariance).
+    pub fn model_mut(&mut self) -> &mut Model {
+        &mut self.model
     }
 }
 
@@ -91,15 +85,18 @@ impl Dynamics for FingerDynamics {
     type Data = StepData;
 
     fn state_dim(&self) -> usize {
-        self.sim.scene().n_state()
+        self.model.scene().n_state()
     }
 
     fn control_dim(&self) -> usize {
-        self.sim.scene().n_controls
+        self.model.scene().n_controls
     }
 
     fn create_data(&self) -> StepData {
-        StepData::default()
+        StepData {
+            data: self.model.create_data(),
+            prepared: None,
+        }
     }
 
     fn calc(
@@ -110,23 +107,23 @@ impl Dynamics for FingerDynamics {
         u: &[f64],
         next: &mut [f64],
     ) -> Result<(), TaskError> {
-        self.resume(near.and_then(StepData::step));
+        if let Some(near) = near {
+            data.data.warm_start_from(&near.data);
+        }
         data.prepared = None;
-        data.step = None;
-        let s = self.sim.step(x, u)?;
+        let s = self.model.step(&mut data.data, x, u)?;
         if s.info.status != ncp::Status::Converged {
             return Err(TaskError::NotConverged(s.info.status));
         }
         next.copy_from_slice(&s.x_next);
-        data.step = Some(s);
         Ok(())
     }
 
     fn calc_diff(
         &mut self,
         data: &mut StepData,
-        x: &[f64],
-        u: &[f64],
+        _x: &[f64],
+        _u: &[f64],
         fx: &mut [f64],
         fu: &mut [f64],
     ) -> Result<(), TaskError> {
@@ -135,10 +132,7 @@ impl Dynamics for FingerDynamics {
             fu.copy_from_slice(&so.derivatives.fu);
             return Ok(());
         }
-        let d = match &data.step {
-            Some(step) => self.sim.derivatives_of(x, u, step)?,
-            None => self.sim.step_with_derivatives(x, u)?.1,
-        };
+        let d = self.model.derivatives(&data.data)?;
         fx.copy_from_slice(&d.fx);
         fu.copy_from_slice(&d.fu);
         Ok(())
@@ -155,18 +149,15 @@ impl SecondOrder<StepData> for FingerDynamics {
     fn calc_diff_second(
         &mut self,
         data: &mut StepData,
-        x: &[f64],
-        u: &[f64],
+        _x: &[f64],
+        _u: &[f64],
         c: &[f64],
         fx: &mut [f64],
         fu: &mut [f64],
         hess: &mut [f64],
     ) -> Result<(), TaskError> {
         if data.prepared.is_none() {
-            let so = match &data.step {
-                Some(step) => self.sim.second_order_of(x, u, step)?,
-                None => self.sim.second_order_step(x, u)?,
-            };
+            let so = self.model.second_order(&data.data)?;
             if so.step.info.status != ncp::Status::Converged {
                 return Err(TaskError::NotConverged(so.step.info.status));
             }

@@ -497,9 +497,15 @@ impl World {
             ),
             Err(e) => (vec![0.0; m], Some(e)),
         };
-        let n = self.scene.n_dof();
-        let forces = self.spring().map_or_else(|| vec![0.0; n], |(f, _)| f);
-        let step = match self.sim.step_with_forces(&self.x, &u, &forces) {
+        // The spring the user pulls with is an input of the step's data, held over the step.
+        let applied = match self.spring() {
+            Some((forces, _)) => self.sim.data_mut().set_forces(&forces),
+            None => {
+                self.sim.data_mut().clear_forces();
+                Ok(())
+            }
+        };
+        let step = match applied.and_then(|()| self.sim.step(&self.x, &u)) {
             Ok(step) => step,
             // The contact solve itself failed (a violent state the hard model has no answer for):
             // start over rather than stop the world.

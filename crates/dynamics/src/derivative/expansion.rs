@@ -13,7 +13,7 @@ use crate::constraint::{Constraints, ContactFrame};
 use crate::error::DynamicsError;
 use crate::jet::{Jet, Jet1};
 use crate::kinematics::Kinematics;
-use crate::step::Simulator;
+use crate::step::Model;
 use nalgebra::{SMatrix, SVector};
 use num_dual::{Derivative, Dual2SVec64, DualSVec64};
 
@@ -302,7 +302,7 @@ fn jet1_dual(d: &F1) -> D1 {
     D1::new(d.re, Derivative::some(SVector::from(d.g)))
 }
 
-impl Simulator {
+impl Model {
     /// Each row's noise in the scalar type of `jac`: the model's constant, or eq. (18) through `J(q)`.
     pub(super) fn noise<T: crate::kinematics::Ring>(&self, jac: &[T], m: usize) -> Vec<T> {
         use crate::step::{Complementarity, row_sigmas};

@@ -8,9 +8,9 @@
 
 use super::StepDerivatives;
 use super::expansion::{D2, DIRECTIONS, Expansion, block_pairs};
-use super::linearise::{RowKind, system};
+use super::linearise::{RowKind, Source, system};
 use crate::error::DynamicsError;
-use crate::step::{Complementarity, Simulator, Step, check};
+use crate::step::{Complementarity, Model, Step, check};
 use nalgebra::SMatrix;
 use ncp::{DenseLu, NcpFunction};
 use num_dual::Derivative;
@@ -152,12 +152,12 @@ impl Expansion {
     }
 }
 
-impl Simulator {
-    pub(super) fn second_order(
-        &mut self,
+impl Model {
+    pub(super) fn second_order_from(
+        &self,
         x: &[f64],
         u: &[f64],
-        given: Option<&Step>,
+        source: Source<'_>,
     ) -> Result<SecondOrderStep, DynamicsError> {
         let (n, nu, h) = (
             self.scene().n_dof(),
@@ -168,7 +168,7 @@ impl Simulator {
         check("x", x, 2 * n)?;
         check("u", u, nu)?;
         let ing = self.expansion(x, u)?;
-        let lin = self.linearise(x, u, Some(&ing), given)?;
+        let lin = self.linearise(x, u, Some(&ing), source)?;
         let derivatives = self.first_derivatives(&lin);
         let model = self.settings().model;
         let structured = match model {
@@ -311,15 +311,16 @@ impl SecondOrderStep {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::{Scene, StepSettings};
+    use crate::{Scene, Simulator, StepSettings};
 
     /// The structured equation Hessians and the dual path (one pass, or one per pair of blocks of four
     /// directions) for the same step and `c`.
     fn both(sim: &mut Simulator, x: &[f64], u: &[f64], c: &[f64]) -> (Vec<f64>, Vec<f64>, f64) {
         let structured = sim.second_order_step(x, u).unwrap();
-        let ing = sim.expansion(x, u).unwrap();
+        let ing = sim.model().expansion(x, u).unwrap();
         let lin = sim
-            .linearise(x, u, Some(&ing), Some(&structured.step))
+            .model()
+            .linearise(x, u, Some(&ing), Source::Stored(sim.data()))
             .unwrap();
         let (n, cols, h) = (structured.n, structured.cols, structured.h);
         let equations = general_hessians(&ing, h, x, &lin, cols, false);

@@ -8,7 +8,7 @@ use super::expansion::{D1, DIRECTIONS, Expansion, Ingredients};
 use crate::constraint::Constraints;
 use crate::error::DynamicsError;
 use crate::kinematics::Scalar;
-use crate::step::{Complementarity, Simulator, Step, check};
+use crate::step::{Complementarity, Model, Step, StepData, check};
 use ncp::{
     DenseLu, LinearSolver, Mcp, NcpFunction, normal_expected_squared, normal_expected_squared_third,
 };
@@ -118,15 +118,23 @@ pub(super) fn system<T: Scalar>(
     out
 }
 
-impl Simulator {
+/// Where the step to linearise comes from.
+pub(super) enum Source<'a> {
+    /// Solve it now in this data (the ingredients' values make its problem: the geometry runs once).
+    Solve(&'a mut StepData),
+    /// The step this data holds, linearised as it is (no second solve).
+    Stored(&'a StepData),
+}
+
+impl Model {
     /// The step, the Jacobian of its equations in their unknowns and `dp/d(x, u)`.
     /// With `second` (the Hessian pass computes them anyway) the first-order ingredients are read off it.
     pub(super) fn linearise(
-        &mut self,
+        &self,
         x: &[f64],
         u: &[f64],
         second: Option<&Expansion>,
-        given: Option<&Step>,
+        source: Source<'_>,
     ) -> Result<Linearised, DynamicsError> {
         let model = self.settings().model;
         if self.has_state_covariance() && matches!(model, Complementarity::Normal { .. }) {
@@ -148,33 +156,36 @@ impl Simulator {
         }
         let values = |v: &[D1]| v.iter().map(|e| e.re).collect::<Vec<f64>>();
         let ing = &passes[0];
-        let (M, r) = (values(&ing.M), values(&ing.r));
+        let M = values(&ing.M);
+        let mut r = values(&ing.r);
+        let forces = match &source {
+            Source::Solve(data) => data.forces(),
+            Source::Stored(data) => data.forces(),
+        };
+        for (r, f) in r.iter_mut().zip(forces) {
+            *r += f;
+        }
         let cons = Constraints {
             d: ing.distance.clone(),
             jacobian: values(&ing.jac),
             contacts: ing.contacts.clone(),
         };
-        let (step, problem) = match given {
-            // The step computed before at (x, u): linearise its solution, no second solve.
-            Some(step) => {
-                let m = cons.d.len();
-                if step.x_next.len() != 2 * n || step.lambda.len() != m {
-                    return Err(DynamicsError::Input {
-                        what: "step",
-                        problem: format!(
-                            "has {} state entries and {} impulses; a step from this x has {} and {m}",
-                            step.x_next.len(),
-                            step.lambda.len(),
-                            2 * n
-                        ),
-                    });
-                }
+        let (step, problem) = match source {
+            Source::Stored(data) => {
+                self.check_data(data)?;
+                let step = data.step().ok_or(DynamicsError::Input {
+                    what: "step data",
+                    problem: "holds no step to linearise (compute one with Model::step first)"
+                        .into(),
+                })?;
                 let (problem, _) = self.assemble_problem(&x[n..], &M, &r, cons)?;
                 (step.clone(), problem)
             }
-            None => {
+            Source::Solve(data) => {
+                self.check_data(data)?;
                 let problem = self.assemble_problem(&x[n..], &M, &r, cons)?;
-                self.solve_step(x, problem)?
+                let problem = self.solve_into(data, x, u, problem)?;
+                (data.step().expect("stored by solve_into").clone(), problem)
             }
         };
         if step.info.status != ncp::Status::Converged {

@@ -26,8 +26,8 @@ pub use hessian::SecondOrderStep;
 pub use residual::{step_residual, step_residual_at};
 
 use crate::error::DynamicsError;
-use crate::step::{Simulator, Step};
-use linearise::Linearised;
+use crate::step::{Model, StepData};
+use linearise::{Linearised, Source};
 
 /// `fx` (row-major `2n x 2n`, `fx[i][j] = dx'_i / dx_j`) and `fu` (row-major `2n x n_u`).
 #[derive(Debug, Clone, PartialEq)]
@@ -38,34 +38,45 @@ pub struct StepDerivatives {
     pub fu: Vec<f64>,
 }
 
-impl Simulator {
-    /// One step and its exact derivatives, for every model: the hard model's are its active set's (module
-    /// documentation), the normal model's those of the first-order conditions of its minimisation.
-    #[tracing::instrument(name = "dynamics.step_derivatives", level = "debug", skip_all)]
-    pub fn step_with_derivatives(
-        &mut self,
-        x: &[f64],
-        u: &[f64],
-    ) -> Result<(Step, StepDerivatives), DynamicsError> {
-        let lin = self.linearise(x, u, None, None)?;
-        let der = self.first_derivatives(&lin);
-        Ok((lin.step, der))
+impl Model {
+    /// The exact derivatives of the step `data` holds (the last [`Model::step`] computed with it), at the
+    /// `(x, u)` it was computed from: its solution is linearised as it is, never solved again, so the
+    /// derivatives belong to exactly that step. For every model: the hard model's are its active set's
+    /// (module documentation), the normal model's those of the first-order conditions of its minimisation.
+    /// `Err` when `data` holds no step.
+    #[tracing::instrument(name = "dynamics.derivatives", level = "debug", skip_all)]
+    pub fn derivatives(&self, data: &StepData) -> Result<StepDerivatives, DynamicsError> {
+        let (x, u) = self.stored_point(data)?;
+        let lin = self.linearise(x, u, None, Source::Stored(data))?;
+        Ok(self.first_derivatives(&lin))
     }
 
-    /// The exact derivatives of `step`, a step this simulator computed from `x` under `u` (by
-    /// [`Simulator::step`] or a derivative call): its solution is linearised as it is, without solving the
-    /// step again, so the derivatives belong to exactly the step the caller holds (and the warm start is
-    /// left alone). A step computed from another `(x, u)` gives the derivatives of a wrong point; one with
-    /// another number of rows is an error.
-    #[tracing::instrument(name = "dynamics.derivatives_of", level = "debug", skip_all)]
-    pub fn derivatives_of(
-        &mut self,
+    /// One step from `x` under `u` in `data` (as [`Model::step`]) and its exact derivatives, the geometry
+    /// evaluated once for both.
+    #[tracing::instrument(name = "dynamics.step_derivatives", level = "debug", skip_all)]
+    pub fn step_with_derivatives(
+        &self,
+        data: &mut StepData,
         x: &[f64],
         u: &[f64],
-        step: &Step,
     ) -> Result<StepDerivatives, DynamicsError> {
-        let lin = self.linearise(x, u, None, Some(step))?;
+        let lin = self.linearise(x, u, None, Source::Solve(data))?;
         Ok(self.first_derivatives(&lin))
+    }
+
+    /// The point of the step `data` holds; `Err` for data of another model or holding no step.
+    fn stored_point<'d>(
+        &self,
+        data: &'d StepData,
+    ) -> Result<(&'d [f64], &'d [f64]), DynamicsError> {
+        self.check_data(data)?;
+        if data.step().is_none() {
+            return Err(DynamicsError::Input {
+                what: "step data",
+                problem: "holds no step to linearise (compute one with Model::step first)".into(),
+            });
+        }
+        Ok(data.point())
     }
 
     fn first_derivatives(&self, lin: &Linearised) -> StepDerivatives {
@@ -91,45 +102,25 @@ impl Simulator {
         StepDerivatives { fx, fu }
     }
 
-    /// One step, its first derivatives, and for a given `c` (length `2n`, the value gradient of DDP) the
-    /// Hessian of `c^T f(x, u)` with respect to `y = (x, u)`, row-major `(2n + n_u)^2`: the `f_xx`, `f_xu`,
-    /// `f_uu` terms contracted with `c`. [`Simulator::second_order_step`] then
-    /// [`SecondOrderStep::hessian`]; use those directly to contract one step with several `c`.
-    #[tracing::instrument(name = "dynamics.step_hessian", level = "debug", skip_all)]
-    pub fn step_with_hessian(
-        &mut self,
-        x: &[f64],
-        u: &[f64],
-        c: &[f64],
-    ) -> Result<(Step, StepDerivatives, Vec<f64>), DynamicsError> {
-        let so = self.second_order_step(x, u)?;
-        let hess = so.hessian(c)?;
-        Ok((so.step, so.derivatives, hess))
+    /// The first derivatives of the step `data` holds and everything its second derivatives need except
+    /// the vector they are contracted with (any scene): the step's linearisation, the factors of `K_p^T`,
+    /// and the Hessians of the step's equations. Each [`SecondOrderStep::hessian`] is the rest. Linearises
+    /// the stored step as [`Model::derivatives`] does; `Err` when `data` holds no step.
+    #[tracing::instrument(name = "dynamics.second_order", level = "debug", skip_all)]
+    pub fn second_order(&self, data: &StepData) -> Result<SecondOrderStep, DynamicsError> {
+        let (x, u) = self.stored_point(data)?;
+        self.second_order_from(x, u, Source::Stored(data))
     }
 
-    /// One step, its first derivatives, and everything its second derivatives need except the vector
-    /// they are contracted with (any scene): the step's linearisation, the factors of `K_p^T`, and the
-    /// Hessians of the step's equations along `T`. About three
-    /// quarters of the work of [`Simulator::step_with_hessian`]; each [`SecondOrderStep::hessian`] is the
-    /// rest.
+    /// One step from `x` under `u` in `data` (as [`Model::step`]) and its [`Model::second_order`], the
+    /// geometry evaluated once for both.
     #[tracing::instrument(name = "dynamics.second_order_step", level = "debug", skip_all)]
     pub fn second_order_step(
-        &mut self,
+        &self,
+        data: &mut StepData,
         x: &[f64],
         u: &[f64],
     ) -> Result<SecondOrderStep, DynamicsError> {
-        self.second_order(x, u, None)
-    }
-
-    /// [`Simulator::second_order_step`] of `step`, a step this simulator computed from `x` under `u`: its
-    /// solution is linearised as it is, without a second solve (see [`Simulator::derivatives_of`]).
-    #[tracing::instrument(name = "dynamics.second_order_of", level = "debug", skip_all)]
-    pub fn second_order_of(
-        &mut self,
-        x: &[f64],
-        u: &[f64],
-        step: &Step,
-    ) -> Result<SecondOrderStep, DynamicsError> {
-        self.second_order(x, u, Some(step))
+        self.second_order_from(x, u, Source::Solve(data))
     }
 }
