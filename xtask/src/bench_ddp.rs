@@ -137,6 +137,49 @@ fn max_gain(sol: &Solution) -> f64 {
         .fold(0.0f64, |m, k| m.max(k.abs()))
 }
 
+/// crocoddyl's solvers on the same unicycle in the same run (`xtask/scripts/crocoddyl_unicycle.py`, with
+/// the Python of `SLCP_PYTHON`, default `python3`), as rows of the unicycle table; a line saying why not
+/// when crocoddyl is not importable.
+fn crocoddyl_rows() -> String {
+    let python = std::env::var("SLCP_PYTHON").unwrap_or_else(|_| "python3".into());
+    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/crocoddyl_unicycle.py");
+    let output = std::process::Command::new(&python)
+        .arg(script)
+        .arg("21")
+        .output();
+    let lines = match output {
+        Ok(o) if o.status.success() => String::from_utf8_lossy(&o.stdout).into_owned(),
+        Ok(o) => {
+            let why = String::from_utf8_lossy(&o.stderr);
+            let why = why.lines().last().unwrap_or("failed");
+            return format!(
+                "\ncrocoddyl not run ({python}: {why}; `pip install crocoddyl` and set SLCP_PYTHON to compare in the same run).\n"
+            );
+        }
+        Err(e) => return format!("\ncrocoddyl not run ({python}: {e}).\n"),
+    };
+    let mut rows = String::new();
+    for line in lines.lines() {
+        let Ok(v) = serde_json::from_str::<serde_json::Value>(line) else {
+            continue;
+        };
+        let (Some(name), Some(iterations), Some(cost), Some(ms), Some(version)) = (
+            v["solver"].as_str(),
+            v["iterations"].as_u64(),
+            v["cost"].as_f64(),
+            v["ms"].as_f64(),
+            v["version"].as_str(),
+        ) else {
+            continue;
+        };
+        rows.push_str(&format!(
+            "| crocoddyl {version} {name} (Gauss-Newton: no second derivatives of the dynamics), from Python, median of 21 | free | {iterations} | - | {cost:.12e} | {ms:.2} | {:.0} |\n",
+            ms * 1e3 / iterations.max(1) as f64
+        ));
+    }
+    rows
+}
+
 pub fn section() -> anyhow::Result<String> {
     let mut out = String::new();
     out.push_str("The unicycle benchmark of the ddp issue: x0 = [-1, -1, 1], dt = 0.1, T = 75, running cost 50 |x|^2 + 0.5 |u|^2 (not scaled by dt), final 50 |x_T|^2, zero initial controls (`cargo xtask optimize --problem unicycle [--method ilqr] [--limit 2]`). Time: median of 5 solves.\n\n| method | controls | passes | status | final cost | solve (ms) | per pass (us) |\n|---|---|---:|---|---:|---:|---:|\n");
@@ -177,6 +220,7 @@ pub fn section() -> anyhow::Result<String> {
             ));
         }
     }
+    out.push_str(&crocoddyl_rows());
 
     out.push_str("\nThe flicking finger (SCENE.md: logistic model, h = 0.05, N = 75, cost -theta3 + 0.05 |u|^2, x0 at rest, zero initial controls; `cargo xtask optimize [--sigma S] [--method ilqr] [--regularisation control]`), at most 300 passes. theta3 is the ellipse's turn over the horizon; |K| the largest feedback gain of the returned policy (zero for iLQR: with no state Hessian in the cost, V_xx stays zero).\n\n| method | sigma | passes | status | cost | theta3 turned | max abs K | solve (ms) | per pass (ms) |\n|---|---:|---:|---|---:|---:|---:|---:|---:|\n");
     let runs = [
@@ -304,6 +348,7 @@ One pass (backward pass with the steps' derivatives, then the forward pass with 
 "
         ));
     }
+    out.push_str(&scenes_pass_table()?);
     if let Some((passes, secs, t)) = profile {
         let total = secs * 1e3;
         let second = t.second.as_secs_f64() * 1e3;
@@ -315,6 +360,83 @@ One pass (backward pass with the steps' derivatives, then the forward pass with 
             100.0 * second / total,
             100.0 * step / total,
             100.0 * rest / total
+        ));
+    }
+    Ok(out)
+}
+
+/// One full-DDP pass (as in the table above: a one-pass solve from the trajectory 30 passes into a solve,
+/// minus its rollout) on the finger and on the three-link finger (`scenes/three_link_finger.toml`: 4
+/// joints, 3 controls, 8 states), N = 75, logistic sigma = 0.1, the cost `-angle of the free body +
+/// 0.05 |u|^2`; median of 21.
+fn scenes_pass_table() -> anyhow::Result<String> {
+    let mut out = String::from(
+        "\nOne full-DDP pass (as above) on scenes of other sizes, N = 75, logistic sigma = 0.1, cost -(angle of the free body) + 0.05 |u|^2 from rest, median of 21:\n\n| scene | states / controls | pass (ms) | per knot (us) | passes to get there |\n|---|---:|---:|---:|---:|\n",
+    );
+    let three = Scene::from_toml_str(include_str!("../../scenes/three_link_finger.toml"))?;
+    let cases = [
+        (
+            "finger (SCENE.md)",
+            Scene::flicking_finger(),
+            dynamics::FLICKING_FINGER_X0.to_vec(),
+        ),
+        (
+            "three-link finger (three_link_finger.toml)",
+            three,
+            vec![-1.2, -0.6, -0.8, 0.0, 0.0, 0.0, 0.0, 0.0],
+        ),
+    ];
+    for (name, scene, x0) in cases {
+        let (n, m) = (scene.n_dof(), scene.n_controls);
+        let free = scene
+            .bodies
+            .iter()
+            .rposition(|b| b.actuator.is_none())
+            .unwrap_or(n - 1);
+        let cost = finger_cost(n, free, m);
+        let settings = StepSettings {
+            model: Complementarity::Logistic { sigma: 0.1 },
+            ..StepSettings::default()
+        };
+        let make = || -> anyhow::Result<FingerDynamics> {
+            Ok(FingerDynamics::new(Simulator::new(
+                scene.clone(),
+                settings,
+            )?))
+        };
+        let before = Ddp::new(DdpSettings {
+            max_iterations: 30,
+            ..DdpSettings::default()
+        })?
+        .solve(&mut make()?, &cost, &x0, &vec![vec![0.0; m]; 75])?;
+        let midway = before.controls;
+        let time = |max_iterations: usize| -> anyhow::Result<f64> {
+            let mut t = Vec::new();
+            for _ in 0..21 {
+                let mut d = make()?;
+                let s = Instant::now();
+                if max_iterations == 0 {
+                    ddp::rollout(&mut d, &cost, &x0, &midway)
+                        .map_err(|(i, e)| anyhow::anyhow!("step {i}: {e}"))?;
+                } else {
+                    Ddp::new(DdpSettings {
+                        max_iterations,
+                        ..DdpSettings::default()
+                    })?
+                    .solve(&mut d, &cost, &x0, &midway)?;
+                }
+                t.push(s.elapsed().as_secs_f64() * 1e3);
+            }
+            t.sort_by(f64::total_cmp);
+            Ok(t[10])
+        };
+        let rollout = time(0)?;
+        let pass = time(1)? - rollout;
+        out.push_str(&format!(
+            "| {name} | {} / {m} | {pass:.2} | {:.1} | {} |\n",
+            2 * n,
+            pass * 1e3 / 75.0,
+            before.iterations.len()
         ));
     }
     Ok(out)

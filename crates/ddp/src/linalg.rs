@@ -30,15 +30,17 @@ pub fn cholesky_solve(l: &[f64], n: usize, b: &mut [f64], k: usize) {
 
 /// `out = A^T B` for row-major `A` (`r x a`) and `B` (`r x b`).
 pub fn mul_tn_into(out: &mut [f64], a: &[f64], b: &[f64], r: usize, ca: usize, cb: usize) {
-    out[..ca * cb].iter_mut().for_each(|e| *e = 0.0);
-    for k in 0..r {
-        let brow = &b[k * cb..(k + 1) * cb];
-        for i in 0..ca {
-            let aki = a[k * ca + i];
+    let out = &mut out[..ca * cb];
+    out.fill(0.0);
+    if ca == 0 || cb == 0 {
+        return;
+    }
+    for (arow, brow) in a[..r * ca].chunks_exact(ca).zip(b.chunks_exact(cb)) {
+        for (&aki, orow) in arow.iter().zip(out.chunks_exact_mut(cb)) {
             if aki == 0.0 {
                 continue;
             }
-            for (o, bv) in out[i * cb..(i + 1) * cb].iter_mut().zip(brow) {
+            for (o, bv) in orow.iter_mut().zip(brow) {
                 *o += aki * bv;
             }
         }
@@ -47,17 +49,18 @@ pub fn mul_tn_into(out: &mut [f64], a: &[f64], b: &[f64], r: usize, ca: usize, c
 
 /// `out = A B` for row-major `A` (`r x k`) and `B` (`k x c`).
 pub fn mul_into(out: &mut [f64], a: &[f64], b: &[f64], r: usize, k: usize, c: usize) {
-    out[..r * c].iter_mut().for_each(|e| *e = 0.0);
-    for i in 0..r {
-        for l in 0..k {
-            let ail = a[i * k + l];
+    let out = &mut out[..r * c];
+    out.fill(0.0);
+    if k == 0 || c == 0 {
+        return;
+    }
+    let b = &b[..k * c];
+    for (arow, orow) in a[..r * k].chunks_exact(k).zip(out.chunks_exact_mut(c)) {
+        for (&ail, brow) in arow.iter().zip(b.chunks_exact(c)) {
             if ail == 0.0 {
                 continue;
             }
-            for (o, bv) in out[i * c..(i + 1) * c]
-                .iter_mut()
-                .zip(&b[l * c..(l + 1) * c])
-            {
+            for (o, bv) in orow.iter_mut().zip(brow) {
                 *o += ail * bv;
             }
         }

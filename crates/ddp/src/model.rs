@@ -183,10 +183,6 @@ impl QuadraticCost {
         }
     }
 
-    fn n(&self) -> usize {
-        self.target.len()
-    }
-
     fn m(&self) -> usize {
         self.r_lin.len()
     }
@@ -219,8 +215,25 @@ impl QuadraticCost {
         s
     }
 
-    fn dx(&self, x: &[f64]) -> Vec<f64> {
-        x.iter().zip(&self.target).map(|(a, b)| a - b).collect()
+    /// `(x - x*)^T W (x - x*)` without allocating `x - x*` (the same arithmetic, in the same order).
+    fn quad_offset(&self, w: &[f64], x: &[f64]) -> f64 {
+        let (n, t) = (x.len(), &self.target);
+        let mut s = 0.0;
+        for i in 0..n {
+            let di = x[i] - t[i];
+            for j in 0..n {
+                s += di * w[i * n + j] * (x[j] - t[j]);
+            }
+        }
+        s
+    }
+
+    /// `q_lin + W (x - x*)` into `out`.
+    fn gradient_into(&self, out: &mut [f64], w: &[f64], lin: &[f64], x: &[f64]) {
+        let (n, t) = (x.len(), &self.target);
+        for i in 0..n {
+            out[i] = lin[i] + (0..n).map(|j| w[i * n + j] * (x[j] - t[j])).sum::<f64>();
+        }
     }
 
     fn dot(a: &[f64], b: &[f64]) -> f64 {
@@ -230,24 +243,19 @@ impl QuadraticCost {
 
 impl Cost for QuadraticCost {
     fn running(&self, _i: usize, x: &[f64], u: &[f64]) -> f64 {
-        let dx = self.dx(x);
-        0.5 * Self::quad(&self.q, &dx, &dx)
+        0.5 * self.quad_offset(&self.q, x)
             + Self::dot(&self.q_lin, x)
             + 0.5 * Self::quad(&self.r, u, u)
             + Self::dot(&self.r_lin, u)
     }
 
     fn terminal(&self, x: &[f64]) -> f64 {
-        let dx = self.dx(x);
-        0.5 * Self::quad(&self.qf, &dx, &dx) + Self::dot(&self.qf_lin, x)
+        0.5 * self.quad_offset(&self.qf, x) + Self::dot(&self.qf_lin, x)
     }
 
     fn running_derivatives(&self, _i: usize, x: &[f64], u: &[f64], out: &mut CostDerivatives) {
-        let (n, m) = (self.n(), self.m());
-        let dx = self.dx(x);
-        for i in 0..n {
-            out.lx[i] = self.q_lin[i] + (0..n).map(|j| self.q[i * n + j] * dx[j]).sum::<f64>();
-        }
+        let m = self.m();
+        self.gradient_into(&mut out.lx, &self.q, &self.q_lin, x);
         for i in 0..m {
             out.lu[i] = self.r_lin[i] + (0..m).map(|j| self.r[i * m + j] * u[j]).sum::<f64>();
         }
@@ -257,11 +265,7 @@ impl Cost for QuadraticCost {
     }
 
     fn terminal_derivatives(&self, x: &[f64], lx: &mut [f64], lxx: &mut [f64]) {
-        let n = self.n();
-        let dx = self.dx(x);
-        for i in 0..n {
-            lx[i] = self.qf_lin[i] + (0..n).map(|j| self.qf[i * n + j] * dx[j]).sum::<f64>();
-        }
+        self.gradient_into(lx, &self.qf, &self.qf_lin, x);
         lxx.copy_from_slice(&self.qf);
     }
 }
