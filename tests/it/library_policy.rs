@@ -52,12 +52,15 @@ fn from_rest_without_kicks_the_global_policy_spins_the_ellipse_in_a_steady_cycle
     ] {
         let e = run_for(lib, model, h, 0.0, 200.0);
         assert!(e.final_spin_rate > 0.5, "{model:?} at h = {h}: {e:?}");
-        // A flick cycle: a tap and a flick per half turn of the ellipse, not a push.
+        // A flick cycle, not a push: one or a few contacts per half turn of the ellipse (a flick, often
+        // after a tap that repositions it; at h = 0.03 the two often merge into one contact), and out of
+        // contact most of the time.
         assert!(
             e.contacts_per_half_turn
-                .is_some_and(|c| (1.5..3.5).contains(&c)),
+                .is_some_and(|c| (0.9..3.5).contains(&c)),
             "{model:?} at h = {h}: {e:?}"
         );
+        assert!(e.contact_fraction < 0.5, "{model:?} at h = {h}: {e:?}");
         assert_eq!(e.unconverged_steps, 0);
     }
 }

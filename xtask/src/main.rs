@@ -68,8 +68,8 @@ enum Command {
     /// The paper's experiments end to end with default settings: summary, libraries and JSON under one
     /// folder (default results/).
     Reproduce(reproduce::Args),
-    /// The claim over library seeds: the paper's recipe, the default and two ablations for library
-    /// seeds 1-8, each on four worlds with and without kicks (minutes: sixteen library builds).
+    /// The claim over library seeds: the paper's recipe, the default and three ablations for library
+    /// seeds 1-8, each on four worlds with and without kicks (minutes: twenty-four library builds).
     Seeds(seeds::Args),
     /// Where the paper's limit cycle is won or lost: the optimiser as MPC (N = 75 and 90), online MPC
     /// and the libraries' policies from rest without kicks; a table and a picture per run.
