@@ -297,23 +297,92 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let start = Instant::now();
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
-    // The two libraries (each a sequential receding-horizon chain) build on their own threads while the
-    // optimiser and annealing experiments run on this one.
+    // The sigma = 0.05 library (the longest build) is built and run on a thread of its own; this one
+    // builds and runs the default library, then the optimiser and annealing experiments, so that each core
+    // has one sequence of work.
     let bars = MultiProgress::new();
     std::thread::scope(|scope| {
-        let builds: Vec<_> = [0.1, 0.05]
-            .map(|sigma| {
-                let bars = &bars;
-                scope.spawn(move || build(sigma, bars))
-            })
-            .into_iter()
-            .collect();
-        let rest = experiments(&bars);
-        let built: anyhow::Result<Vec<(Library, f64)>> = builds
-            .into_iter()
-            .map(|b| b.join().expect("a library build does not panic"))
-            .collect();
-        finish(args, start, rest?, built?)
+        let bars = &bars;
+        let comparison = scope.spawn(move || {
+            let (lib, secs) = build(0.05, bars)?;
+            evaluate_built(args, lib, secs)
+        });
+        let default = build(0.1, bars).and_then(|(lib, secs)| evaluate_built(args, lib, secs));
+        let rest = experiments(bars);
+        let comparison = comparison.join().expect("a library build does not panic");
+        finish(args, start, rest?, vec![default?, comparison?])
+    })
+}
+
+/// One built library, saved, with its closed-loop runs (and for the default one the figures and the
+/// runs beyond its training).
+struct Evaluated {
+    label: String,
+    secs: f64,
+    controllers: usize,
+    larger_kicks: Vec<Kicked>,
+    mismatched: Vec<Mismatched>,
+    closed_loop: Vec<ClosedLoop>,
+}
+
+fn evaluate_built(args: &Args, lib: Library, secs: f64) -> anyhow::Result<Evaluated> {
+    let sigma = match lib.settings.model {
+        Model::Logistic(sigma) => sigma,
+        other => anyhow::bail!("reproduce builds logistic libraries, not {other:?}"),
+    };
+    let mut larger_kicks = Vec::new();
+    let mut mismatched = Vec::new();
+    let mut closed_loop = Vec::new();
+    // The sigma = 0.1 library is the default one (`cargo xtask train`), which `view` and `figures`
+    // load.
+    let file = if sigma == 0.1 {
+        "finger.lib".to_string()
+    } else {
+        format!("finger_sigma{sigma}.lib")
+    };
+    lib.save(&args.out.join(file))?;
+    if sigma == 0.1 {
+        println!("drawing the figures ...");
+        crate::figures::write_all(&lib, &args.out.join("figures"))?;
+        // Kicks beyond the training's (variance 4, std 2): where does the policy break?
+        let policy = lib.policy()?;
+        for kick_std in [2.0, 8.0, 32.0, 128.0, 256.0] {
+            for (world, evaluation) in on_both_worlds(lib.scene(), &lib, &policy, args, kick_std)? {
+                larger_kicks.push(Kicked {
+                    kick_std,
+                    world: world.into(),
+                    evaluation,
+                });
+            }
+        }
+        // Worlds the library never saw: other friction, a heavier or lighter ellipse, other drag.
+        for (change, spec) in mismatched_scenes() {
+            let scene = Scene::new(spec)?;
+            for (world, evaluation) in on_both_worlds(&scene, &lib, &policy, args, 2.0)? {
+                mismatched.push(Mismatched {
+                    change: change.clone(),
+                    world: world.into(),
+                    evaluation,
+                });
+            }
+        }
+    }
+    for (world, h, kicks, evaluation) in on_four_worlds(&lib, args.seconds)? {
+        closed_loop.push(ClosedLoop {
+            library: recipe_label(sigma),
+            world,
+            h,
+            kicks,
+            evaluation,
+        });
+    }
+    Ok(Evaluated {
+        label: recipe_label(sigma),
+        secs,
+        controllers: lib.entries.len(),
+        larger_kicks,
+        mismatched,
+        closed_loop,
     })
 }
 
@@ -349,63 +418,17 @@ fn finish(
     args: &Args,
     start: Instant,
     (optimised, annealing): (Vec<Optimised>, Vec<Annealed>),
-    built: Vec<(Library, f64)>,
+    evaluated: Vec<Evaluated>,
 ) -> anyhow::Result<()> {
     let mut larger_kicks = Vec::new();
     let mut mismatched = Vec::new();
     let mut libraries = Vec::new();
     let mut closed_loop = Vec::new();
-    for (lib, secs) in built {
-        let sigma = match lib.settings.model {
-            Model::Logistic(sigma) => sigma,
-            other => anyhow::bail!("reproduce builds logistic libraries, not {other:?}"),
-        };
-        // The sigma = 0.1 library is the default one (`cargo xtask train`), which `view` and `figures`
-        // load.
-        let file = if sigma == 0.1 {
-            "finger.lib".to_string()
-        } else {
-            format!("finger_sigma{sigma}.lib")
-        };
-        lib.save(&args.out.join(file))?;
-        libraries.push((recipe_label(sigma), secs, lib.entries.len()));
-        if sigma == 0.1 {
-            println!("drawing the figures ...");
-            crate::figures::write_all(&lib, &args.out.join("figures"))?;
-            // Kicks beyond the training's (variance 4, std 2): where does the policy break?
-            let policy = lib.policy()?;
-            for kick_std in [2.0, 8.0, 32.0, 128.0, 256.0] {
-                for (world, evaluation) in
-                    on_both_worlds(lib.scene(), &lib, &policy, args, kick_std)?
-                {
-                    larger_kicks.push(Kicked {
-                        kick_std,
-                        world: world.into(),
-                        evaluation,
-                    });
-                }
-            }
-            // Worlds the library never saw: other friction, a heavier or lighter ellipse, other drag.
-            for (change, spec) in mismatched_scenes() {
-                let scene = Scene::new(spec)?;
-                for (world, evaluation) in on_both_worlds(&scene, &lib, &policy, args, 2.0)? {
-                    mismatched.push(Mismatched {
-                        change: change.clone(),
-                        world: world.into(),
-                        evaluation,
-                    });
-                }
-            }
-        }
-        for (world, h, kicks, evaluation) in on_four_worlds(&lib, args.seconds)? {
-            closed_loop.push(ClosedLoop {
-                library: recipe_label(sigma),
-                world,
-                h,
-                kicks,
-                evaluation,
-            });
-        }
+    for e in evaluated {
+        libraries.push((e.label, e.secs, e.controllers));
+        larger_kicks.extend(e.larger_kicks);
+        mismatched.extend(e.mismatched);
+        closed_loop.extend(e.closed_loop);
     }
     let seconds = start.elapsed().as_secs_f64();
     let summary = Summary {
