@@ -603,3 +603,31 @@ fn a_scene_file_with_extra_or_missing_array_entries_is_refused() {
     }
     assert!(Scene::from_toml_str(finger).is_ok());
 }
+
+/// A data carries no settings of its own: stepped by another model of the same sizes, it solves with that
+/// model's Newton settings, bit for bit as that model's own fresh data.
+#[test]
+fn a_data_steps_with_the_settings_of_the_model_that_steps_it() {
+    let loose = StepSettings {
+        newton: ncp::NewtonSettings {
+            tol: 1e-3,
+            max_iter: 3,
+            ..ncp::NewtonSettings::default()
+        },
+        ..StepSettings::default()
+    };
+    let tight = Model::new(Scene::flicking_finger(), StepSettings::default()).unwrap();
+    let loose = Model::new(Scene::flicking_finger(), loose).unwrap();
+    let x = [-0.9, -1.5, 0.3, 0.5, -0.4, 0.2];
+    let u = [0.3, -0.2];
+    let mut borrowed = loose.create_data();
+    let mut own = tight.create_data();
+    let a = tight.step(&mut borrowed, &x, &u).unwrap().clone();
+    let b = tight.step(&mut own, &x, &u).unwrap().clone();
+    assert_eq!(a, b);
+    let c = loose
+        .step(&mut loose.create_data(), &x, &u)
+        .unwrap()
+        .clone();
+    assert!(c.info.iterations <= 3, "{c:?}");
+}

@@ -611,6 +611,10 @@ impl Model {
                     .into_iter()
                     .map(|sigma| NcpFunction::Logistic { sigma })
                     .collect();
+                // The model's settings rule, whichever model of these sizes created the data.
+                if data.newton.settings() != &self.settings.newton {
+                    data.newton = NewtonSolver::new(self.settings.newton)?;
+                }
                 data.newton.solve_in_place(&problem, &functions, &mut z)?
             }
             Complementarity::Normal { sigma } => {
