@@ -69,9 +69,9 @@ pub struct LibrarySettings {
     /// Passes at most for each warm-started re-solve.
     pub warm_passes: usize,
     /// The optimiser's stopping tolerance on the relative cost change (`DdpSettings::tol_cost`). The
-    /// default 1e-5 builds the library about 1.6 times faster than 1e-9 with the same closed-loop
-    /// quality within the spread between seeds (docs/benchmarks.md, "library tolerance"); 1e-4 spins
-    /// clearly slower.
+    /// default 1e-5 builds the library about 1.3 times faster than 1e-7 with the same closed-loop
+    /// quality within the spread between seeds (docs/benchmarks.md, "library tolerance"); 1e-4 saves
+    /// little more, spins slower and resumes after fewer kicks on the hard world.
     pub tolerance: f64,
     /// Local controllers kept per trajectory: the paper keeps the first (1); up to `shift` keeps
     /// `u_t + K_t (x - x_t)` for `t < keep` as well, the controllers the trajectory runs before the next one
