@@ -10,7 +10,7 @@ use super::StepDerivatives;
 use super::expansion::{D2, DIRECTIONS, Expansion, block_pairs};
 use super::linearise::{RowKind, Source, system};
 use crate::error::DynamicsError;
-use crate::step::{Complementarity, Model, Step, check};
+use crate::step::{Complementarity, Model, Step};
 use nalgebra::SMatrix;
 use ncp::{DenseLu, NcpFunction};
 use num_dual::Derivative;
@@ -157,7 +157,7 @@ impl Model {
         &self,
         x: &[f64],
         u: &[f64],
-        source: Source<'_>,
+        mut source: Source<'_>,
     ) -> Result<SecondOrderStep, DynamicsError> {
         let (n, nu, h) = (
             self.scene().n_dof(),
@@ -165,10 +165,8 @@ impl Model {
             self.settings().h,
         );
         let cols = 2 * n + nu;
-        check("x", x, 2 * n)?;
-        check("u", u, nu)?;
         let ing = self.expansion(x, u)?;
-        let lin = self.linearise(x, u, Some(&ing), source)?;
+        let lin = self.linearise(x, u, Some(&ing), &mut source)?;
         let derivatives = self.first_derivatives(&lin);
         let model = self.settings().model;
         let structured = match model {
@@ -184,7 +182,7 @@ impl Model {
             }
         };
         Ok(SecondOrderStep {
-            step: lin.step,
+            step: source.data().step().expect("linearised above").clone(),
             derivatives,
             n,
             cols,
@@ -320,13 +318,14 @@ mod tests {
         let ing = sim.model().expansion(x, u).unwrap();
         let lin = sim
             .model()
-            .linearise(x, u, Some(&ing), Source::Stored(sim.data()))
+            .linearise(x, u, Some(&ing), &mut Source::Stored(sim.data()))
             .unwrap();
         let (n, cols, h) = (structured.n, structured.cols, structured.h);
         let equations = general_hessians(&ing, h, x, &lin, cols, false);
-        let lambda = lin.step.lambda.iter().fold(0.0f64, |a, &b| a.max(b));
+        let step = sim.data().step().unwrap().clone();
+        let lambda = step.lambda.iter().fold(0.0f64, |a, &b| a.max(b));
         let general = SecondOrderStep {
-            step: lin.step,
+            step,
             derivatives: structured.derivatives.clone(),
             n,
             cols,

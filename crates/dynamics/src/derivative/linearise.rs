@@ -8,7 +8,7 @@ use super::expansion::{D1, DIRECTIONS, Expansion, Ingredients};
 use crate::constraint::Constraints;
 use crate::error::DynamicsError;
 use crate::kinematics::Scalar;
-use crate::step::{Complementarity, Model, Step, StepData, check};
+use crate::step::{Complementarity, Model, StepData};
 use ncp::{
     DenseLu, LinearSolver, Mcp, NcpFunction, normal_expected_squared, normal_expected_squared_third,
 };
@@ -118,12 +118,23 @@ pub(super) fn system<T: Scalar>(
     out
 }
 
-/// Where the step to linearise comes from.
+/// Where the step to linearise comes from. The public entry points check the data (and, to solve, `x` and
+/// `u`) once; the stages below trust them.
 pub(super) enum Source<'a> {
     /// Solve it now in this data (the ingredients' values make its problem: the geometry runs once).
     Solve(&'a mut StepData),
     /// The step this data holds, linearised as it is (no second solve).
     Stored(&'a StepData),
+}
+
+impl Source<'_> {
+    /// The data, with the step once it is solved.
+    pub(super) fn data(&self) -> &StepData {
+        match self {
+            Source::Solve(data) => data,
+            Source::Stored(data) => data,
+        }
+    }
 }
 
 impl Model {
@@ -134,7 +145,7 @@ impl Model {
         x: &[f64],
         u: &[f64],
         second: Option<&Expansion>,
-        source: Source<'_>,
+        source: &mut Source<'_>,
     ) -> Result<Linearised, DynamicsError> {
         let model = self.settings().model;
         if self.has_state_covariance() && matches!(model, Complementarity::Normal { .. }) {
@@ -143,8 +154,6 @@ impl Model {
             ));
         }
         let (n, nu) = (self.scene().n_dof(), self.scene().n_controls);
-        check("x", x, 2 * n)?;
-        check("u", u, nu)?;
         // The ingredients in duals first: their values make the step's problem (the geometry runs once).
         let cols = 2 * n + nu;
         let mut passes = Vec::with_capacity(cols.div_ceil(DIRECTIONS));
@@ -158,11 +167,7 @@ impl Model {
         let ing = &passes[0];
         let M = values(&ing.M);
         let mut r = values(&ing.r);
-        let forces = match &source {
-            Source::Solve(data) => data.forces(),
-            Source::Stored(data) => data.forces(),
-        };
-        for (r, f) in r.iter_mut().zip(forces) {
+        for (r, f) in r.iter_mut().zip(source.data().forces()) {
             *r += f;
         }
         let cons = Constraints {
@@ -170,24 +175,15 @@ impl Model {
             jacobian: values(&ing.jac),
             contacts: ing.contacts.clone(),
         };
-        let (step, problem) = match source {
-            Source::Stored(data) => {
-                self.check_data(data)?;
-                let step = data.step().ok_or(DynamicsError::Input {
-                    what: "step data",
-                    problem: "holds no step to linearise (compute one with Model::step first)"
-                        .into(),
-                })?;
-                let (problem, _) = self.assemble_problem(&x[n..], &M, &r, cons)?;
-                (step.clone(), problem)
-            }
-            Source::Solve(data) => {
-                self.check_data(data)?;
-                let problem = self.assemble_problem(&x[n..], &M, &r, cons)?;
-                let problem = self.solve_into(data, x, u, problem)?;
-                (data.step().expect("stored by solve_into").clone(), problem)
-            }
+        let problem = self.assemble_problem(&x[n..], &M, &r, cons)?;
+        let problem = match source {
+            Source::Stored(_) => problem.0,
+            Source::Solve(data) => self.solve_into(data, x, u, problem)?,
         };
+        let step = source
+            .data()
+            .step()
+            .expect("a stored step (checked by the entry point) or one just solved");
         if step.info.status != ncp::Status::Converged {
             return Err(DynamicsError::Unsupported(
                 "derivatives of a step whose complementarity solve did not converge",
@@ -230,13 +226,7 @@ impl Model {
             }
         }
         lu.solve_many(&mut dp, cols);
-        Ok(Linearised {
-            step,
-            p,
-            lu,
-            dp,
-            kinds,
-        })
+        Ok(Linearised { p, lu, dp, kinds })
     }
 
     /// Logistic and hard models: `p = z`, the Newton matrix with each row's `(d phi/d lambda, d phi/d w)`;
@@ -392,7 +382,6 @@ impl Model {
 
 /// What the linearisation of a step keeps.
 pub(super) struct Linearised {
-    pub(super) step: Step,
     /// The unknowns of the step's equations at the solution ([`system`]).
     pub(super) p: Vec<f64>,
     /// The factors of `K_p`.

@@ -26,7 +26,7 @@ pub use hessian::SecondOrderStep;
 pub use residual::{step_residual, step_residual_at};
 
 use crate::error::DynamicsError;
-use crate::step::{Model, StepData};
+use crate::step::{Model, StepData, check};
 use linearise::{Linearised, Source};
 
 /// `fx` (row-major `2n x 2n`, `fx[i][j] = dx'_i / dx_j`) and `fu` (row-major `2n x n_u`).
@@ -47,7 +47,7 @@ impl Model {
     #[tracing::instrument(name = "dynamics.derivatives", level = "debug", skip_all)]
     pub fn derivatives(&self, data: &StepData) -> Result<StepDerivatives, DynamicsError> {
         let (x, u) = self.stored_point(data)?;
-        let lin = self.linearise(x, u, None, Source::Stored(data))?;
+        let lin = self.linearise(x, u, None, &mut Source::Stored(data))?;
         Ok(self.first_derivatives(&lin))
     }
 
@@ -60,7 +60,8 @@ impl Model {
         x: &[f64],
         u: &[f64],
     ) -> Result<StepDerivatives, DynamicsError> {
-        let lin = self.linearise(x, u, None, Source::Solve(data))?;
+        self.check_point(data, x, u)?;
+        let lin = self.linearise(x, u, None, &mut Source::Solve(data))?;
         Ok(self.first_derivatives(&lin))
     }
 
@@ -77,6 +78,13 @@ impl Model {
             });
         }
         Ok(data.point())
+    }
+
+    /// `Err` for data of another model, or an `x` or `u` of the wrong length or not finite.
+    fn check_point(&self, data: &StepData, x: &[f64], u: &[f64]) -> Result<(), DynamicsError> {
+        self.check_data(data)?;
+        check("x", x, self.scene().n_state())?;
+        check("u", u, self.scene().n_controls)
     }
 
     fn first_derivatives(&self, lin: &Linearised) -> StepDerivatives {
@@ -121,6 +129,7 @@ impl Model {
         x: &[f64],
         u: &[f64],
     ) -> Result<SecondOrderStep, DynamicsError> {
+        self.check_point(data, x, u)?;
         self.second_order_from(x, u, Source::Solve(data))
     }
 }
