@@ -32,6 +32,11 @@ pub struct Args {
     /// Leave the documentation alone.
     #[arg(long)]
     no_docs: bool,
+    /// Library seeds of the default recipe to run on the four worlds (1 to this; results under `seeds` in
+    /// summary.json): 1 is the default library itself, each further seed builds one more (about half a
+    /// minute each on two cores). `cargo xtask seeds` adds the paper's recipe and the ablations.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=64))]
+    seeds: u64,
 }
 
 /// Simulated seconds per closed-loop run of the documented results.
@@ -173,6 +178,9 @@ struct Summary {
     mismatched: Vec<Mismatched>,
     libraries: Vec<(String, f64, usize)>,
     closed_loop: Vec<ClosedLoop>,
+    /// The default recipe over library seeds 1 to `--seeds` (seed 1: the default library of
+    /// `closed_loop`), on the four worlds with and without kicks.
+    seeds: Vec<crate::seeds::SeedRun>,
     /// Simulated seconds per closed-loop run.
     run_seconds: f64,
     seconds: f64,
@@ -310,8 +318,42 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         let default = build(0.1, bars).and_then(|(lib, secs)| evaluate_built(args, lib, secs));
         let rest = experiments(bars);
         let comparison = comparison.join().expect("a library build does not panic");
-        finish(args, start, rest?, vec![default?, comparison?])
+        let (mut default, comparison) = (default?, comparison?);
+        let mut seeds = std::mem::take(&mut default.seed_runs);
+        seeds.extend(further_seeds(args, bars)?);
+        finish(args, start, rest?, vec![default, comparison], seeds)
     })
+}
+
+/// The default recipe's libraries of seeds 2 to `--seeds`, each on the four worlds, on two threads.
+fn further_seeds(args: &Args, bars: &MultiProgress) -> anyhow::Result<Vec<crate::seeds::SeedRun>> {
+    let jobs: Vec<u64> = (2..=args.seeds).collect();
+    if jobs.is_empty() {
+        return Ok(Vec::new());
+    }
+    let bar = bars.add(ProgressBar::new(jobs.len() as u64));
+    bar.set_style(
+        ProgressStyle::with_template(
+            "further library seeds: {bar:40} {pos}/{len} {elapsed_precise} (eta {eta})",
+        )
+        .expect("a valid template"),
+    );
+    let results = crate::on_two_threads(&jobs, |&seed| {
+        let settings = LibrarySettings {
+            seed,
+            ..LibrarySettings::default()
+        };
+        let lib = Library::build(&Scene::flicking_finger(), &settings, |_, _| {})?;
+        let runs = crate::seeds::runs_of(seed, crate::seeds::DEFAULT_RECIPE, &lib, args.seconds);
+        bar.inc(1);
+        runs
+    });
+    bar.finish_and_clear();
+    let mut runs = Vec::new();
+    for r in results {
+        runs.extend(r?);
+    }
+    Ok(runs)
 }
 
 /// One built library, saved, with its closed-loop runs (and for the default one the figures and the
@@ -323,6 +365,8 @@ struct Evaluated {
     larger_kicks: Vec<Kicked>,
     mismatched: Vec<Mismatched>,
     closed_loop: Vec<ClosedLoop>,
+    /// For the default library, its closed-loop runs as those of the seed sweep's first seed.
+    seed_runs: Vec<crate::seeds::SeedRun>,
 }
 
 fn evaluate_built(args: &Args, lib: Library, secs: f64) -> anyhow::Result<Evaluated> {
@@ -367,7 +411,18 @@ fn evaluate_built(args: &Args, lib: Library, secs: f64) -> anyhow::Result<Evalua
             }
         }
     }
+    let mut seed_runs = Vec::new();
     for (world, h, kicks, evaluation) in on_four_worlds(&lib, args.seconds)? {
+        if sigma == 0.1 {
+            seed_runs.push(crate::seeds::SeedRun {
+                seed: lib.settings.seed,
+                recipe: crate::seeds::DEFAULT_RECIPE.into(),
+                world: world.clone(),
+                h,
+                kicks,
+                evaluation: evaluation.clone(),
+            });
+        }
         closed_loop.push(ClosedLoop {
             library: recipe_label(sigma),
             world,
@@ -383,6 +438,7 @@ fn evaluate_built(args: &Args, lib: Library, secs: f64) -> anyhow::Result<Evalua
         larger_kicks,
         mismatched,
         closed_loop,
+        seed_runs,
     })
 }
 
@@ -419,6 +475,7 @@ fn finish(
     start: Instant,
     (optimised, annealing): (Vec<Optimised>, Vec<Annealed>),
     evaluated: Vec<Evaluated>,
+    seeds: Vec<crate::seeds::SeedRun>,
 ) -> anyhow::Result<()> {
     let mut larger_kicks = Vec::new();
     let mut mismatched = Vec::new();
@@ -438,6 +495,7 @@ fn finish(
         mismatched,
         libraries,
         closed_loop,
+        seeds,
         run_seconds: args.seconds,
         seconds,
     };
@@ -455,9 +513,9 @@ fn finish(
     if args.no_docs {
         return Ok(());
     }
-    if args.seconds != SECONDS {
+    if args.seconds != SECONDS || args.seeds != 1 {
         println!(
-            "{}/results.md left alone: it documents the default run ({SECONDS} s per closed loop)",
+            "{}/results.md left alone: it documents the default run ({SECONDS} s per closed loop, one library seed)",
             args.docs.display()
         );
         return Ok(());
@@ -605,10 +663,12 @@ fn report(s: &Summary) -> String {
             }
         );
     }
+    let last = s.seeds.iter().map(|r| r.seed).max().unwrap_or(1);
     let _ = writeln!(
         t,
-        "\n## Over library seeds\n\nThe same recipe over library seeds 1-8, against the paper's recipe and three ablations: `cargo xtask seeds` (its section below)."
+        "\n## Over library seeds (`seeds` in summary.json)\n\nThe default recipe with library seeds 1-{last} (`cargo xtask reproduce --seeds N` for more; each further seed builds one more library). `cargo xtask seeds` runs seeds 1-8 against the paper's recipe and three ablations (its section below).\n"
     );
+    crate::seeds::seed_rows(&mut t, &s.seeds, &[crate::seeds::DEFAULT_RECIPE]);
     let _ = writeln!(
         t,
         "\n## Figures (the default library at sigma = 0.1, seed 1)\n\n![Fig. 2: the contact surface](figures/fig2_contact_surface.png)\n\n![Fig. 3: the library's states](figures/fig3_library_states.png)\n\n![Fig. 4: the limit cycle in configuration space](figures/fig4_limit_cycle.png)\n\n![Fig. 5: one cycle in frames](figures/fig5_frames.png)"

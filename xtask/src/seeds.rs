@@ -94,16 +94,40 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// One closed-loop run of the seed sweep.
+/// One closed-loop run of a seed sweep.
 #[derive(Serialize)]
-struct SeedRun {
-    seed: u64,
+pub(crate) struct SeedRun {
+    pub(crate) seed: u64,
     /// Which recipe built the library (see the report's table).
-    recipe: String,
-    world: String,
-    h: f64,
-    kicks: bool,
-    evaluation: Evaluation,
+    pub(crate) recipe: String,
+    pub(crate) world: String,
+    pub(crate) h: f64,
+    pub(crate) kicks: bool,
+    pub(crate) evaluation: Evaluation,
+}
+
+/// The recipe `cargo xtask train` builds by default, as the sweeps' tables name it.
+pub(crate) const DEFAULT_RECIPE: &str = RECIPES[4];
+
+/// The runs of `lib` (built with `seed` by the recipe `recipe`) on the four worlds of `cargo xtask
+/// evaluate`, with and without kicks.
+pub(crate) fn runs_of(
+    seed: u64,
+    recipe: &str,
+    lib: &Library,
+    seconds: f64,
+) -> anyhow::Result<Vec<SeedRun>> {
+    Ok(crate::reproduce::on_four_worlds(lib, seconds)?
+        .into_iter()
+        .map(|(world, h, kicks, evaluation)| SeedRun {
+            seed,
+            recipe: recipe.into(),
+            world,
+            h,
+            kicks,
+            evaluation,
+        })
+        .collect())
 }
 
 /// The recipes of the seed sweep, each a library built with that seed, or one derived from it.
@@ -160,18 +184,7 @@ fn seed_sweep(args: &Args, bars: &MultiProgress) -> anyhow::Result<Vec<SeedRun>>
         }
         let mut runs = Vec::new();
         for (recipe, lib) in variants {
-            for (world, h, kicks, evaluation) in
-                crate::reproduce::on_four_worlds(&lib, args.seconds)?
-            {
-                runs.push(SeedRun {
-                    seed,
-                    recipe: recipe.into(),
-                    world,
-                    h,
-                    kicks,
-                    evaluation,
-                });
-            }
+            runs.extend(runs_of(seed, recipe, &lib, args.seconds)?);
         }
         bar.inc(1);
         Ok(runs)
@@ -190,23 +203,32 @@ fn seed_table(t: &mut String, s: &Summary) {
     let seeds: std::collections::BTreeSet<u64> = s.runs.iter().map(|r| r.seed).collect();
     let _ = writeln!(
         t,
-        "# The seed sweep (`cargo xtask seeds`, {:.0} s): libraries of seeds {}-{} from rest, {:.0} s per run\n\nLast quarter: the mean spin over the last quarter of the run (the paper's Fig. 5: about 0.67 rad/s, our reading); steady: seeds whose last quarter spins at 0.5 rad/s or more. With kicks (std 2 every 10 s): resumed = kicks after which the ellipse turned a further quarter turn before the next.\n\n| recipe | world | h | last quarter, no kicks: mean (min-max) rad/s | steady | with kicks: last quarter | resumed (mean) | seeds resuming after all but one kick |\n|---|---|---:|---:|---:|---:|---:|---:|",
+        "# The seed sweep (`cargo xtask seeds`, {:.0} s): libraries of seeds {}-{} from rest, {:.0} s per run\n",
         s.seconds,
         seeds.first().copied().unwrap_or(0),
         seeds.last().copied().unwrap_or(0),
         s.run_seconds
     );
-    for recipe in RECIPES {
+    seed_rows(t, &s.runs, &RECIPES);
+}
+
+/// The table of a seed sweep's `runs`, one row per recipe (in the order of `recipes`), world and time
+/// step, with and without kicks, after a paragraph saying what its columns mean.
+pub(crate) fn seed_rows(t: &mut String, runs: &[SeedRun], recipes: &[&str]) {
+    let _ = writeln!(
+        t,
+        "Last quarter: the mean spin over the last quarter of the run (the paper's Fig. 5: about 0.67 rad/s, our reading); steady: seeds whose last quarter spins at 0.5 rad/s or more. With kicks (std 2 every 10 s): resumed = kicks after which the ellipse turned a further quarter turn before the next.\n\n| recipe | world | h | last quarter, no kicks: mean (min-max) rad/s | steady | with kicks: last quarter | resumed (mean) | seeds resuming after all but one kick |\n|---|---|---:|---:|---:|---:|---:|---:|"
+    );
+    for &recipe in recipes {
         let mut keys: Vec<(String, f64)> = Vec::new();
-        for r in s.runs.iter().filter(|r| r.recipe == recipe) {
+        for r in runs.iter().filter(|r| r.recipe == recipe) {
             if !keys.iter().any(|(w, h)| *w == r.world && *h == r.h) {
                 keys.push((r.world.clone(), r.h));
             }
         }
         for (world, h) in keys {
             let runs = |kicks: bool| -> Vec<&Evaluation> {
-                s.runs
-                    .iter()
+                runs.iter()
                     .filter(|r| {
                         r.recipe == recipe && r.world == world && r.h == h && r.kicks == kicks
                     })
