@@ -228,13 +228,17 @@ fn recipe_label(sigma: f64) -> String {
 
 fn build(sigma: f64, bars: &MultiProgress) -> anyhow::Result<(Library, f64)> {
     let base = LibrarySettings::default();
+    // The comparison library's branches on two threads (the same library as on one): its build is the
+    // longest job, and once the default library's thread is done it has both cores to itself.
+    let (growth, chains) = if sigma == 0.1 {
+        (base.growth, base.chains)
+    } else {
+        (COMPARISON_GROWTH, 2)
+    };
     let settings = LibrarySettings {
         model: Model::Logistic(sigma),
-        growth: if sigma == 0.1 {
-            base.growth
-        } else {
-            COMPARISON_GROWTH
-        },
+        growth,
+        chains,
         ..base
     };
     let bar = bars.add(ProgressBar::new(settings.trajectories as u64));

@@ -6,18 +6,25 @@
 use crate::kinematics::Ring;
 use std::ops::{Add, AddAssign, Div, Mul, Neg, Sub, SubAssign};
 
-/// `re + g . s + 1/2 s^T h s`, to second order in `s`.
+/// `re + g . s + 1/2 s^T h s`, to second order in `s`. The Hessian is symmetric: only its upper
+/// triangle (`h[i][j]`, `j >= i`) is computed and stored (read it with [`Jet::hessian`]), which saves
+/// close to half the arithmetic of every operation.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Jet<const N: usize> {
     /// Value.
     pub re: f64,
     /// Gradient.
     pub g: [f64; N],
-    /// Hessian (symmetric).
-    pub h: [[f64; N]; N],
+    /// Hessian, upper triangle (the strict lower triangle stays zero).
+    h: [[f64; N]; N],
 }
 
 impl<const N: usize> Jet<N> {
+    /// The Hessian's entry `(i, j)`.
+    pub fn hessian(&self, i: usize, j: usize) -> f64 {
+        if i <= j { self.h[i][j] } else { self.h[j][i] }
+    }
+
     /// The variable `s_i` at value `re`.
     pub fn variable(re: f64, i: usize) -> Self {
         let mut j = Jet::from(re);
@@ -30,7 +37,7 @@ impl<const N: usize> Jet<N> {
         let mut out = Jet::from(f0);
         for i in 0..N {
             out.g[i] = f1 * self.g[i];
-            for j in 0..N {
+            for j in i..N {
                 out.h[i][j] = f1 * self.h[i][j] + f2 * self.g[i] * self.g[j];
             }
         }
@@ -61,7 +68,7 @@ impl<const N: usize> AddAssign for Jet<N> {
         self.re += o.re;
         for i in 0..N {
             self.g[i] += o.g[i];
-            for j in 0..N {
+            for j in i..N {
                 self.h[i][j] += o.h[i][j];
             }
         }
@@ -81,7 +88,7 @@ impl<const N: usize> Neg for Jet<N> {
         self.re = -self.re;
         for i in 0..N {
             self.g[i] = -self.g[i];
-            for j in 0..N {
+            for j in i..N {
                 self.h[i][j] = -self.h[i][j];
             }
         }
@@ -95,7 +102,7 @@ impl<const N: usize> Mul for Jet<N> {
         let mut out = Jet::from(self.re * o.re);
         for i in 0..N {
             out.g[i] = self.re * o.g[i] + o.re * self.g[i];
-            for j in 0..N {
+            for j in i..N {
                 out.h[i][j] = self.re * o.h[i][j]
                     + o.re * self.h[i][j]
                     + self.g[i] * o.g[j]
@@ -120,7 +127,7 @@ impl<const N: usize> Mul<f64> for Jet<N> {
         self.re *= o;
         for i in 0..N {
             self.g[i] *= o;
-            for j in 0..N {
+            for j in i..N {
                 self.h[i][j] *= o;
             }
         }
@@ -194,7 +201,7 @@ mod tests {
             for i in 0..2 {
                 assert!((j.g[i] - g[(0, i)]).abs() < 1e-13);
                 for k in 0..2 {
-                    assert!((j.h[i][k] - h[(i, k)]).abs() < 1e-13, "h[{i}][{k}]");
+                    assert!((j.hessian(i, k) - h[(i, k)]).abs() < 1e-13, "h[{i}][{k}]");
                 }
             }
         }

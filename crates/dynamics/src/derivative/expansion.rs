@@ -156,15 +156,11 @@ impl<'a> Sink<'a> {
             if self.first {
                 t.re.push(v.re);
                 if whole {
-                    // The one pass over all arguments, in order: its leading blocks, copied (whole
-                    // when the jets have exactly that many directions).
+                    // The one pass over all arguments, in order: its leading blocks, the Hessian
+                    // filled in from the jet's upper triangle.
                     t.g.extend_from_slice(&v.g[..dim]);
-                    if dim == K {
-                        t.h.extend_from_slice(v.h.as_flattened());
-                    } else {
-                        for row in &v.h[..dim] {
-                            t.h.extend_from_slice(&row[..dim]);
-                        }
+                    for i in 0..dim {
+                        t.h.extend((0..dim).map(|j| v.hessian(i, j)));
                     }
                     continue;
                 }
@@ -175,7 +171,7 @@ impl<'a> Sink<'a> {
                 t.g[o * dim + i] = v.g[l];
                 let row = o * dim * dim + i * dim;
                 for (l2, &j) in self.dirs.iter().enumerate() {
-                    t.h[row + j] = v.h[l][l2];
+                    t.h[row + j] = v.hessian(l, l2);
                 }
             }
         }
