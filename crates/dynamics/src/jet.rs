@@ -77,8 +77,9 @@ impl<const N: usize> AddAssign for Jet<N> {
 
 impl<const N: usize> Sub for Jet<N> {
     type Output = Self;
-    fn sub(self, o: Self) -> Self {
-        self + (-o)
+    fn sub(mut self, o: Self) -> Self {
+        self -= o;
+        self
     }
 }
 
@@ -137,7 +138,13 @@ impl<const N: usize> Mul<f64> for Jet<N> {
 
 impl<const N: usize> SubAssign for Jet<N> {
     fn sub_assign(&mut self, o: Self) {
-        *self += -o;
+        self.re -= o.re;
+        for i in 0..N {
+            self.g[i] -= o.g[i];
+            for j in i..N {
+                self.h[i][j] -= o.h[i][j];
+            }
+        }
     }
 }
 
