@@ -55,10 +55,16 @@ impl Expansion {
         let m = self.m;
         let geo = &self.geometry;
         let cc = cols * cols;
+        // Every Hessian below is symmetric: only its upper triangle is accumulated, and each is mirrored
+        // once at the end.
         // out += scale * H_q(f) in the leading n x n block.
         let add_q = |out: &mut [f64], f: usize, scale: f64| {
-            for (o, hf) in out.chunks_exact_mut(cols).zip(geo.h(f).chunks_exact(n)) {
-                for (o, e) in o.iter_mut().zip(hf) {
+            for (r, (o, hf)) in out
+                .chunks_exact_mut(cols)
+                .zip(geo.h(f).chunks_exact(n))
+                .enumerate()
+            {
+                for (o, e) in o[r..n].iter_mut().zip(&hf[r..]) {
                     *o += scale * e;
                 }
             }
@@ -70,9 +76,15 @@ impl Expansion {
                 if ai == 0.0 {
                     continue;
                 }
-                for (j, &b) in b.iter().enumerate() {
-                    out[i * cols + j] += ai * b;
+                for (j, &b) in b[..i].iter().enumerate() {
                     out[j * cols + i] += ai * b;
+                }
+                out[i * cols + i] += 2.0 * ai * b[i];
+                for (o, &b) in out[i * cols + i + 1..(i + 1) * cols]
+                    .iter_mut()
+                    .zip(&b[i + 1..])
+                {
+                    *o += ai * b;
                 }
             }
         };
@@ -98,7 +110,7 @@ impl Expansion {
             }
             let (hm, dim) = (self.forces.h(i), self.forces.dim());
             for a in 0..dim {
-                for b in 0..dim {
+                for b in a..dim {
                     e[a * cols + b] -= h * hm[a * dim + b];
                 }
             }
@@ -137,7 +149,7 @@ impl Expansion {
                     let jet = NcpFunction::Logistic { sigma }.jet(p[n + k], w0);
                     let gl = row(n + k);
                     for a in 0..cols {
-                        for b in 0..cols {
+                        for b in a..cols {
                             e[a * cols + b] = jet.db * hw[a * cols + b]
                                 + jet.daa * gl[a] * gl[b]
                                 + jet.dab * (gl[a] * gw[b] + gw[a] * gl[b])
@@ -146,6 +158,13 @@ impl Expansion {
                     }
                 }
                 _ => unreachable!("logistic and hard rows are fixed, contact or logistic"),
+            }
+        }
+        for e in out.chunks_exact_mut(cc) {
+            for a in 1..cols {
+                for b in 0..a {
+                    e[a * cols + b] = e[b * cols + a];
+                }
             }
         }
         out
