@@ -57,6 +57,7 @@ impl<const N: usize> From<f64> for Jet<N> {
 
 impl<const N: usize> Add for Jet<N> {
     type Output = Self;
+    #[inline]
     fn add(mut self, o: Self) -> Self {
         self += o;
         self
@@ -64,6 +65,7 @@ impl<const N: usize> Add for Jet<N> {
 }
 
 impl<const N: usize> AddAssign for Jet<N> {
+    #[inline]
     fn add_assign(&mut self, o: Self) {
         self.re += o.re;
         for i in 0..N {
@@ -77,6 +79,7 @@ impl<const N: usize> AddAssign for Jet<N> {
 
 impl<const N: usize> Sub for Jet<N> {
     type Output = Self;
+    #[inline]
     fn sub(mut self, o: Self) -> Self {
         self -= o;
         self
@@ -85,6 +88,7 @@ impl<const N: usize> Sub for Jet<N> {
 
 impl<const N: usize> Neg for Jet<N> {
     type Output = Self;
+    #[inline]
     fn neg(mut self) -> Self {
         self.re = -self.re;
         for i in 0..N {
@@ -99,6 +103,7 @@ impl<const N: usize> Neg for Jet<N> {
 
 impl<const N: usize> Mul for Jet<N> {
     type Output = Self;
+    #[inline]
     fn mul(self, o: Self) -> Self {
         let mut out = Jet::from(self.re * o.re);
         for i in 0..N {
@@ -116,6 +121,7 @@ impl<const N: usize> Mul for Jet<N> {
 
 impl<const N: usize> Add<f64> for Jet<N> {
     type Output = Self;
+    #[inline]
     fn add(mut self, o: f64) -> Self {
         self.re += o;
         self
@@ -124,6 +130,7 @@ impl<const N: usize> Add<f64> for Jet<N> {
 
 impl<const N: usize> Mul<f64> for Jet<N> {
     type Output = Self;
+    #[inline]
     fn mul(mut self, o: f64) -> Self {
         self.re *= o;
         for i in 0..N {
@@ -137,6 +144,7 @@ impl<const N: usize> Mul<f64> for Jet<N> {
 }
 
 impl<const N: usize> SubAssign for Jet<N> {
+    #[inline]
     fn sub_assign(&mut self, o: Self) {
         self.re -= o.re;
         for i in 0..N {
@@ -150,6 +158,7 @@ impl<const N: usize> SubAssign for Jet<N> {
 
 impl<const N: usize> Div for Jet<N> {
     type Output = Self;
+    #[inline]
     fn div(self, o: Self) -> Self {
         let r = 1.0 / o.re;
         self * o.chain(r, -r * r, 2.0 * r * r * r)
@@ -158,6 +167,7 @@ impl<const N: usize> Div for Jet<N> {
 
 impl<const N: usize> Div<f64> for Jet<N> {
     type Output = Self;
+    #[inline]
     fn div(self, o: f64) -> Self {
         self * (1.0 / o)
     }

@@ -23,19 +23,23 @@ impl<T: DualNum<Primitive = f64> + Copy> Scalar for T {}
 pub use geometry::Forward as Ring;
 
 /// `(-x_y, x_x)`.
+#[inline]
 pub fn perp<T: Ring>(x: [T; 2]) -> [T; 2] {
     [-x[1], x[0]]
 }
 
+#[inline]
 fn rotate<T: Ring>(phi: T, x: [f64; 2]) -> [T; 2] {
     let (s, c) = phi.sin_and_cos();
     [c * x[0] - s * x[1], s * x[0] + c * x[1]]
 }
 
+#[inline]
 fn add<T: Ring>(a: [T; 2], b: [T; 2]) -> [T; 2] {
     [a[0] + b[0], a[1] + b[1]]
 }
 
+#[inline]
 fn sub<T: Ring>(a: [T; 2], b: [T; 2]) -> [T; 2] {
     [a[0] - b[0], a[1] - b[1]]
 }
