@@ -1,5 +1,5 @@
 //! `cargo xtask seeds`: the claim of docs/results.md over library seeds. For seeds 1-8 (the kick seeds of
-//! the build) it builds the paper's recipe, the default and the default with four growth rounds, derives
+//! the build) it builds the paper's recipe, the default and the default with eight growth rounds, derives
 //! two ablations from the default (its entries before growth; its nearest controller alone), and runs each
 //! policy from rest for 200 s on the four worlds of `cargo xtask evaluate` with and without kicks. Its
 //! table says how many seeds keep a steady cycle, the spread of the spin, and how many kicks each recovers
@@ -135,15 +135,15 @@ const RECIPES: [&str; 5] = [
     "paper (N = 75, kicked chain, first controllers, nearest)",
     "default without growth",
     "default, nearest controller only",
-    "default with 4 growth rounds",
-    "default (N = 90, cycle first, 4 per trajectory, 8 ranked by value, 8 growth rounds)",
+    "default with 8 growth rounds",
+    "default (N = 90, cycle first, 4 per trajectory, 8 ranked by value, 12 growth rounds)",
 ];
 
 /// The seed sweep: for each seed the paper's recipe and the default, and two libraries derived from the
 /// default (its entries before growth; its nearest controller alone), each on the four worlds with and
 /// without kicks. Builds run on two threads, the longest (the default recipe's) first.
 fn seed_sweep(args: &Args, bars: &MultiProgress) -> anyhow::Result<Vec<SeedRun>> {
-    // (seed, recipe): 0 the default, 1 the paper's, 2 the default with 4 growth rounds.
+    // (seed, recipe): 0 the default, 1 the paper's, 2 the default with 8 growth rounds.
     let jobs: Vec<(u64, usize)> = [0, 2, 1]
         .into_iter()
         .flat_map(|recipe| (1..=args.seeds).map(move |seed| (seed, recipe)))
@@ -159,7 +159,7 @@ fn seed_sweep(args: &Args, bars: &MultiProgress) -> anyhow::Result<Vec<SeedRun>>
         let base = match recipe {
             1 => LibrarySettings::paper(),
             2 => LibrarySettings {
-                growth: 4,
+                growth: 8,
                 ..LibrarySettings::default()
             },
             _ => LibrarySettings::default(),
@@ -256,5 +256,18 @@ pub(crate) fn seed_rows(t: &mut String, runs: &[SeedRun], recipes: &[&str]) {
                 kicked.len()
             );
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn the_default_recipes_label_names_the_default_growth_rounds() {
+        let growth = library::LibrarySettings::default().growth;
+        assert!(
+            super::DEFAULT_RECIPE.contains(&format!(" {growth} growth rounds")),
+            "{} does not say {growth} growth rounds",
+            super::DEFAULT_RECIPE
+        );
     }
 }

@@ -38,7 +38,7 @@ pub struct Args {
     warm_passes: usize,
     /// The paper's recipe (horizon 75, one chain kicked every 15 steps, the first controller of each
     /// trajectory, the nearest controller's law) instead of the default (horizon 90, the cycle first and
-    /// branches off it, four controllers per trajectory, the best of eight by value, eight growth rounds).
+    /// branches off it, four controllers per trajectory, the best of eight by value, twelve growth rounds).
     #[arg(long)]
     paper: bool,
     /// Optimisation horizon in steps (default: 90, the paper's recipe 75).

@@ -146,7 +146,7 @@ impl Default for LibrarySettings {
             tolerance: 1e-5,
             keep: 4,
             neighbours: 8,
-            growth: 8,
+            growth: 12,
             growth_time_steps: vec![0.05, 0.03],
         }
     }
