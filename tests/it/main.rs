@@ -10,6 +10,7 @@ mod geometry_reference;
 mod library_anneal;
 mod library_files;
 mod library_policy;
+mod library_tasks;
 mod ncp_functions;
 mod ncp_solvers;
 mod support;

@@ -47,10 +47,15 @@ pub struct Args {
     /// Simulator options (finger only).
     #[command(flatten)]
     sim: SimArgs,
-    /// Horizon N (1 to 100000).
-    #[arg(long, default_value_t = 75,
+    /// A task of the scene file (its `[task.NAME]` table; the finger's is `spin`): its cost, initial
+    /// state, time step, horizon, contact model and control limits; a flag given on the command line
+    /// overrides the task's value.
+    #[arg(long)]
+    task: Option<String>,
+    /// Horizon N (1 to 100000) [default: 75, or the --task's].
+    #[arg(long,
           value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=100_000))]
-    horizon: usize,
+    horizon: Option<usize>,
     /// Passes at most (up to 100000).
     #[arg(long, default_value_t = 300,
           value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(0..=100_000))]
@@ -109,8 +114,9 @@ struct Report<'a> {
     solution: &'a Solution,
 }
 
-/// The optimiser's settings from the command line.
-fn settings(args: &Args, m: usize) -> DdpSettings {
+/// The optimiser's settings from the command line (and a task's control limits unless `--limit` is
+/// given).
+fn settings(args: &Args, m: usize, task: Option<&library::Task>) -> DdpSettings {
     DdpSettings {
         method: match args.method {
             MethodArg::Full => Method::Full,
@@ -122,10 +128,13 @@ fn settings(args: &Args, m: usize) -> DdpSettings {
         },
         max_iterations: args.iterations,
         adaptive_line_search: args.adaptive_line_search,
-        control_limits: args.limit.map(|l| ControlLimits {
-            lower: vec![-l; m],
-            upper: vec![l; m],
-        }),
+        control_limits: match args.limit {
+            Some(l) => Some(ControlLimits {
+                lower: vec![-l; m],
+                upper: vec![l; m],
+            }),
+            None => task.and_then(|t| t.control_limits.clone()),
+        },
         ..DdpSettings::default()
     }
 }
@@ -156,7 +165,31 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         }
     };
     let start = Instant::now();
+    let horizon = args.horizon.unwrap_or(75);
     let (solution, problem) = match args.problem {
+        Problem::Finger if args.task.is_some() => {
+            let file = args.sim.problem_file()?;
+            let task = file.task(args.task.as_deref())?;
+            let sim = args.sim.simulator_of(file.scene.clone(), Some(&task))?;
+            let m = file.scene.n_controls;
+            let x0 = args.x0.clone().unwrap_or_else(|| task.x0.clone());
+            let horizon = args.horizon.unwrap_or(task.horizon);
+            println!(
+                "task {}: h = {}, N = {horizon}, {:?}, x0 = {x0:?}",
+                task.name,
+                sim.settings().h,
+                sim.settings().model
+            );
+            let ddp = Ddp::new(settings(args, m, Some(&task)))?;
+            let sol = ddp.solve_observed(
+                &mut FingerDynamics::new(sim),
+                &task.cost,
+                &x0,
+                &vec![vec![0.0; m]; horizon],
+                observe,
+            )?;
+            (sol, "task")
+        }
         Problem::Finger => {
             let sim = args.sim.simulator()?;
             let scene = sim.scene().clone();
@@ -172,24 +205,28 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                 .context("the scene has no unactuated joint to spin")?;
             let cost = finger_cost(n, free, m);
             let mut dynamics = FingerDynamics::new(sim);
-            let ddp = Ddp::new(settings(args, m))?;
+            let ddp = Ddp::new(settings(args, m, None))?;
             let sol = ddp.solve_observed(
                 &mut dynamics,
                 &cost,
                 &x0,
-                &vec![vec![0.0; m]; args.horizon],
+                &vec![vec![0.0; m]; horizon],
                 observe,
             )?;
             (sol, "finger")
         }
         Problem::Unicycle => {
+            anyhow::ensure!(
+                args.task.is_none(),
+                "--task belongs to scene files; the unicycle has none"
+            );
             let x0 = args.x0.clone().unwrap_or_else(|| Unicycle::X0.to_vec());
-            let ddp = Ddp::new(settings(args, 2))?;
+            let ddp = Ddp::new(settings(args, 2, None))?;
             let sol = ddp.solve_observed(
                 &mut Unicycle { dt: 0.1 },
                 &Unicycle::benchmark_cost(),
                 &x0,
-                &vec![vec![0.0; 2]; args.horizon],
+                &vec![vec![0.0; 2]; horizon],
                 observe,
             )?;
             (sol, "unicycle")

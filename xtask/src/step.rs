@@ -20,15 +20,15 @@ pub enum Model {
 /// Options shared by `step` and `simulate`.
 #[derive(Debug, clap::Args)]
 pub struct SimArgs {
-    /// Complementarity model.
-    #[arg(long, value_enum, default_value = "logistic")]
-    model: Model,
-    /// Noise scale of the smoothed models.
-    #[arg(long, default_value_t = 0.1, allow_negative_numbers = true)]
-    sigma: f64,
-    /// Time step.
-    #[arg(long, default_value_t = 0.05, allow_negative_numbers = true)]
-    h: f64,
+    /// Complementarity model [default: logistic; with `optimize --task`, the task's].
+    #[arg(long, value_enum)]
+    model: Option<Model>,
+    /// Noise scale of the smoothed models [default: 0.1; with `optimize --task`, the task's].
+    #[arg(long, allow_negative_numbers = true)]
+    sigma: Option<f64>,
+    /// Time step [default: 0.05; with `optimize --task`, the task's].
+    #[arg(long, allow_negative_numbers = true)]
+    h: Option<f64>,
     /// Scene file (TOML); default: the flicking finger of SCENE.md (scenes/finger.toml).
     #[arg(long)]
     scene: Option<PathBuf>,
@@ -70,16 +70,42 @@ impl SimArgs {
                 Scene::from_toml_str(&text).with_context(|| format!("scene {}", path.display()))?
             }
         };
-        let model = match self.model {
-            Model::Hard => Complementarity::Hard,
-            Model::Logistic => Complementarity::Logistic { sigma: self.sigma },
-            Model::Normal => Complementarity::Normal { sigma: self.sigma },
+        self.simulator_of(scene, None)
+    }
+
+    /// The scene file of `--scene` with its tasks (the flicking finger's, scenes/finger.toml, without it).
+    pub fn problem_file(&self) -> anyhow::Result<library::ProblemFile> {
+        Ok(match &self.scene {
+            None => library::ProblemFile::from_toml_str(FINGER_FILE)?,
+            Some(path) => library::ProblemFile::load(path)
+                .with_context(|| format!("scene {}", path.display()))?,
+        })
+    }
+
+    /// A simulator of `scene` with the model and time step of `task` (when given) unless the command line
+    /// names its own.
+    pub fn simulator_of(
+        &self,
+        scene: Scene,
+        task: Option<&library::Task>,
+    ) -> anyhow::Result<Simulator> {
+        let sigma = self.sigma.unwrap_or(0.1);
+        let model = match (self.model, task) {
+            (Some(Model::Hard), _) => Complementarity::Hard,
+            (Some(Model::Logistic), _) => Complementarity::Logistic { sigma },
+            (Some(Model::Normal), _) => Complementarity::Normal { sigma },
+            (None, Some(task)) => match (task.model, self.sigma) {
+                (library::Model::Logistic(_), Some(sigma)) => Complementarity::Logistic { sigma },
+                (library::Model::Normal(_), Some(sigma)) => Complementarity::Normal { sigma },
+                (model, _) => model.complementarity(),
+            },
+            (None, None) => Complementarity::Logistic { sigma },
         };
         Ok(Simulator::new(
             scene,
             StepSettings {
                 model,
-                h: self.h,
+                h: self.h.or(task.map(|t| t.h)).unwrap_or(0.05),
                 drag: self.drag.into(),
                 recovery: self.recovery,
                 ..StepSettings::default()
@@ -87,6 +113,9 @@ impl SimArgs {
         )?)
     }
 }
+
+/// scenes/finger.toml: the flicking finger of SCENE.md with the paper's task.
+pub const FINGER_FILE: &str = include_str!("../../scenes/finger.toml");
 
 #[derive(Debug, clap::Args)]
 pub struct StepArgs {
@@ -410,9 +439,9 @@ mod tests {
 
     fn sim(model: Model) -> Simulator {
         SimArgs {
-            model,
-            sigma: 0.1,
-            h: 0.05,
+            model: Some(model),
+            sigma: Some(0.1),
+            h: Some(0.05),
             scene: None,
             drag: DragArg::Explicit,
             recovery: None,

@@ -268,9 +268,17 @@ impl Scene {
     }
 
     /// Parse and check a TOML scene.
+    ///
+    /// A scene file may also hold `[task.NAME]` tables: they belong to the crates above (the `library`
+    /// crate's `ProblemFile` reads them) and are left out here, unchecked.
     pub fn from_toml_str(text: &str) -> Result<Self, DynamicsError> {
-        let spec: SceneSpec =
-            toml::from_str(text).map_err(|e| DynamicsError::Parse(e.to_string()))?;
+        let mut table: toml::Table = text
+            .parse()
+            .map_err(|e: toml::de::Error| DynamicsError::Parse(e.to_string()))?;
+        table.remove("task");
+        let spec: SceneSpec = toml::Value::Table(table)
+            .try_into()
+            .map_err(|e: toml::de::Error| DynamicsError::Parse(e.to_string()))?;
         Self::new(spec)
     }
 
@@ -341,6 +349,15 @@ impl Scene {
     /// Number of state entries `[q; v]`.
     pub fn n_state(&self) -> usize {
         2 * self.n_dof()
+    }
+
+    /// The name of each joint coordinate, in the order of `q` (and of `v`): `<body>.<coordinate>`, a
+    /// hinge's being `<body>.angle`. Tasks name the coordinates their costs and initial states act on.
+    pub fn coordinate_names(&self) -> Vec<String> {
+        self.bodies
+            .iter()
+            .map(|b| format!("{}.angle", b.name))
+            .collect()
     }
 
     /// Number of unilateral constraint rows: two per joint with limits, two per contact pair.

@@ -75,7 +75,26 @@ pub enum LibraryError {
     /// The payload does not decode, or decodes to something inconsistent.
     #[error("invalid library: {0}")]
     Invalid(String),
+    /// A task of a scene file is malformed or does not fit its scene.
+    #[error("{}", task_message(task, field, problem))]
+    Task {
+        /// The task's name (empty when the file's task tables as a whole are at fault).
+        task: String,
+        /// The field at fault (empty when the task as a whole is).
+        field: String,
+        /// What is wrong.
+        problem: String,
+    },
     /// The library was built for another scene than the one it is used with.
     #[error("the library was built for another scene ({0})")]
     SceneMismatch(String),
+}
+
+fn task_message(task: &str, field: &str, problem: &str) -> String {
+    match (task.is_empty(), field.is_empty()) {
+        (true, true) => format!("tasks: {problem}"),
+        (true, false) => format!("tasks, {field}: {problem}"),
+        (false, true) => format!("task {task}: {problem}"),
+        (false, false) => format!("task {task}, {field}: {problem}"),
+    }
 }

@@ -10,6 +10,7 @@ mod error;
 mod evaluate;
 mod file;
 mod policy;
+mod problem;
 mod task;
 
 pub use anneal::{AnnealStep, anneal};
@@ -23,6 +24,7 @@ pub use evaluate::{
 };
 pub use file::{Library, MAGIC, VERSION};
 pub use policy::Policy;
+pub use problem::{ProblemFile, Task, TaskCost, TaskSpec, Term, TermSpec};
 pub use task::{CONTROL_WEIGHT, FingerDynamics, StepData, TaskError, finger_cost};
 
 /// `Err` unless `v` has `len` finite entries.

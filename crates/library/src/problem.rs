@@ -1,0 +1,455 @@
+//! Tasks as data: a scene file's `[task.NAME]` tables (one or several), each an optimal control problem on
+//! the scene: where it starts, the time step and horizon, the contact model the optimiser sees, and a cost
+//! made of terms on named coordinates (docs/tasks.md).
+//!
+//! ```toml
+//! [task.spin]
+//! h = 0.05
+//! horizon = 75
+//! model = "logistic"
+//! sigma = 0.1
+//! x0 = { "link1.angle" = -0.785, "link2.angle" = -0.524 }
+//! control_weight = 0.05
+//! periods = { "ellipse.angle" = 3.141592653589793 }
+//! running = [{ coordinate = "ellipse.angle", linear = -1.0 }]
+//! final = [{ coordinate = "ellipse.angle", linear = -1.0 }]
+//! ```
+//!
+//! A coordinate is named `<body>.<coordinate of its joint>` ([`dynamics::Scene::coordinate_names`]); a
+//! term acts on its value, or on its velocity with `velocity = true`. Coordinates the task does not name
+//! start at rest at their reference (zero). Every field is checked, and a bad one is refused with an error
+//! that names the task and the field.
+
+use crate::LibraryError;
+use crate::build::Model;
+use ddp::{ControlLimits, Cost, CostDerivatives};
+use dynamics::Scene;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+
+/// One cost term as a task table writes it: `linear * y + quadratic / 2 * (y - target)^2` on the
+/// coordinate (or its velocity) `y`, the difference wrapped into `[-period / 2, period / 2)` when the
+/// coordinate has a period.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TermSpec {
+    /// The coordinate's name, `<body>.<coordinate>`.
+    pub coordinate: String,
+    /// Whether the term acts on the coordinate's velocity instead of its value.
+    #[serde(default)]
+    pub velocity: bool,
+    /// Linear weight.
+    #[serde(default)]
+    pub linear: f64,
+    /// Quadratic weight (at least zero).
+    #[serde(default)]
+    pub quadratic: f64,
+    /// Target of the quadratic term.
+    #[serde(default)]
+    pub target: f64,
+}
+
+/// A task as a scene file's `[task.NAME]` table describes it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TaskSpec {
+    /// Time step (s).
+    pub h: f64,
+    /// Optimisation horizon (steps).
+    pub horizon: usize,
+    /// The optimiser's contact model: `"hard"`, `"logistic"` or `"normal"`.
+    pub model: String,
+    /// Noise scale of the smoothed models (required for them, refused for the hard one).
+    #[serde(default)]
+    pub sigma: Option<f64>,
+    /// Initial coordinates by name; the others start at zero.
+    #[serde(default)]
+    pub x0: BTreeMap<String, f64>,
+    /// Initial velocities by coordinate name; the others start at rest.
+    #[serde(default)]
+    pub v0: BTreeMap<String, f64>,
+    /// Weight `c_u` of `c_u |u|^2` per step.
+    pub control_weight: f64,
+    /// Bounds `[lower, upper]` on every control, if any.
+    #[serde(default)]
+    pub control_limits: Option<[f64; 2]>,
+    /// Periodic coordinates and their periods (an angle whose body is symmetric under a half turn has
+    /// period pi): quadratic terms wrap their differences, and the library's policy and metrics measure
+    /// distances along them modulo the period.
+    #[serde(default)]
+    pub periods: BTreeMap<String, f64>,
+    /// Terms of the running cost, charged at every step.
+    #[serde(default)]
+    pub running: Vec<TermSpec>,
+    /// Terms of the final cost, charged at the end of the horizon.
+    #[serde(default, rename = "final")]
+    pub final_terms: Vec<TermSpec>,
+}
+
+/// A checked term: the state entry it reads and its weights.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Term {
+    /// Index into the state `x = [q; v]`.
+    pub index: usize,
+    /// Linear weight.
+    pub linear: f64,
+    /// Quadratic weight.
+    pub quadratic: f64,
+    /// Target of the quadratic term.
+    pub target: f64,
+    /// Period of the difference to the target, if the entry is periodic.
+    pub period: Option<f64>,
+}
+
+impl Term {
+    /// `y - target`, wrapped into `[-period / 2, period / 2)` for a periodic entry.
+    fn offset(&self, y: f64) -> f64 {
+        let d = y - self.target;
+        match self.period {
+            Some(p) => d - p * (d / p + 0.5).floor(),
+            None => d,
+        }
+    }
+
+    fn value(&self, x: &[f64]) -> f64 {
+        let y = x[self.index];
+        let d = self.offset(y);
+        self.linear * y + 0.5 * self.quadratic * d * d
+    }
+}
+
+/// A task's cost: `sum of running terms + c_u |u|^2` per step, the final terms at the end. Its
+/// derivatives are exact (a wrapped difference has slope one away from its jump, half a period from the
+/// target).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TaskCost {
+    /// Running terms.
+    pub running: Vec<Term>,
+    /// Final terms.
+    pub final_terms: Vec<Term>,
+    /// `c_u`.
+    pub control_weight: f64,
+}
+
+impl TaskCost {
+    fn terms_value(terms: &[Term], x: &[f64]) -> f64 {
+        terms.iter().map(|t| t.value(x)).sum()
+    }
+
+    fn terms_derivatives(terms: &[Term], x: &[f64], lx: &mut [f64], lxx: &mut [f64]) {
+        let n = x.len();
+        lx.iter_mut().for_each(|e| *e = 0.0);
+        lxx.iter_mut().for_each(|e| *e = 0.0);
+        for t in terms {
+            lx[t.index] += t.linear + t.quadratic * t.offset(x[t.index]);
+            lxx[t.index * n + t.index] += t.quadratic;
+        }
+    }
+}
+
+impl Cost for TaskCost {
+    fn running(&self, _i: usize, x: &[f64], u: &[f64]) -> f64 {
+        Self::terms_value(&self.running, x)
+            + self.control_weight * u.iter().map(|e| e * e).sum::<f64>()
+    }
+
+    fn terminal(&self, x: &[f64]) -> f64 {
+        Self::terms_value(&self.final_terms, x)
+    }
+
+    fn running_derivatives(&self, _i: usize, x: &[f64], u: &[f64], out: &mut CostDerivatives) {
+        Self::terms_derivatives(&self.running, x, &mut out.lx, &mut out.lxx);
+        let m = u.len();
+        for (a, &e) in u.iter().enumerate() {
+            out.lu[a] = 2.0 * self.control_weight * e;
+            for b in 0..m {
+                out.luu[a * m + b] = if a == b {
+                    2.0 * self.control_weight
+                } else {
+                    0.0
+                };
+            }
+        }
+        out.lux.iter_mut().for_each(|e| *e = 0.0);
+    }
+
+    fn terminal_derivatives(&self, x: &[f64], lx: &mut [f64], lxx: &mut [f64]) {
+        Self::terms_derivatives(&self.final_terms, x, lx, lxx);
+    }
+}
+
+/// A checked task on a scene.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Task {
+    /// Its name in the scene file.
+    pub name: String,
+    /// Time step.
+    pub h: f64,
+    /// Optimisation horizon.
+    pub horizon: usize,
+    /// The optimiser's contact model.
+    pub model: Model,
+    /// Initial state `[q; v]`.
+    pub x0: Vec<f64>,
+    /// The cost.
+    pub cost: TaskCost,
+    /// Bounds on the controls, if any.
+    pub control_limits: Option<ControlLimits>,
+    /// The period of each state entry (`None`: not periodic); velocities are never periodic.
+    pub periods: Vec<Option<f64>>,
+}
+
+impl Task {
+    /// Check `spec` (the task called `name`) against `scene`.
+    pub fn new(scene: &Scene, name: &str, spec: &TaskSpec) -> Result<Self, LibraryError> {
+        let bad = |field: &str, problem: String| LibraryError::Task {
+            task: name.to_string(),
+            field: field.to_string(),
+            problem,
+        };
+        let n = scene.n_dof();
+        let names = scene.coordinate_names();
+        let index = |field: &str, coordinate: &str| -> Result<usize, LibraryError> {
+            names.iter().position(|c| c == coordinate).ok_or_else(|| {
+                bad(
+                    field,
+                    format!(
+                        "the scene has no coordinate \"{coordinate}\" (it has {})",
+                        names.join(", ")
+                    ),
+                )
+            })
+        };
+        let finite = |field: &str, v: f64| -> Result<f64, LibraryError> {
+            if v.is_finite() {
+                Ok(v)
+            } else {
+                Err(bad(field, format!("{v} is not a finite number")))
+            }
+        };
+        if !(spec.h.is_finite() && spec.h > 0.0 && spec.h <= 1.0) {
+            return Err(bad("h", format!("{} must be in (0, 1] s", spec.h)));
+        }
+        if !(1..=100_000).contains(&spec.horizon) {
+            return Err(bad(
+                "horizon",
+                format!("{} must be 1 to 100000 steps", spec.horizon),
+            ));
+        }
+        let sigma = |model: &str| -> Result<f64, LibraryError> {
+            match spec.sigma {
+                Some(s) if s.is_finite() && s > 0.0 => Ok(s),
+                Some(s) => Err(bad("sigma", format!("{s} must be positive and finite"))),
+                None => Err(bad(
+                    "sigma",
+                    format!("the {model} model needs a noise scale sigma"),
+                )),
+            }
+        };
+        let model = match spec.model.as_str() {
+            "hard" => match spec.sigma {
+                None => Model::Hard,
+                Some(_) => {
+                    return Err(bad(
+                        "sigma",
+                        "the hard model has no noise scale; remove sigma".into(),
+                    ));
+                }
+            },
+            "logistic" => Model::Logistic(sigma("logistic")?),
+            "normal" => Model::Normal(sigma("normal")?),
+            other => {
+                return Err(bad(
+                    "model",
+                    format!("\"{other}\" is not one of \"hard\", \"logistic\", \"normal\""),
+                ));
+            }
+        };
+        let mut periods = vec![None; 2 * n];
+        for (c, &p) in &spec.periods {
+            let i = index("periods", c)?;
+            if !(p.is_finite() && p > 0.0) {
+                return Err(bad(
+                    "periods",
+                    format!("the period of {c} is {p}, it must be positive"),
+                ));
+            }
+            periods[i] = Some(p);
+        }
+        let mut x0 = vec![0.0; 2 * n];
+        for (c, &v) in &spec.x0 {
+            x0[index("x0", c)?] = finite("x0", v)?;
+        }
+        for (c, &v) in &spec.v0 {
+            x0[n + index("v0", c)?] = finite("v0", v)?;
+        }
+        let terms = |field: &str, specs: &[TermSpec]| -> Result<Vec<Term>, LibraryError> {
+            specs
+                .iter()
+                .map(|t| {
+                    let i = index(field, &t.coordinate)?;
+                    let linear = finite(field, t.linear)?;
+                    let quadratic = finite(field, t.quadratic)?;
+                    if quadratic < 0.0 {
+                        return Err(bad(
+                            field,
+                            format!(
+                                "the quadratic weight on {} is {quadratic}; a negative one has no minimum",
+                                t.coordinate
+                            ),
+                        ));
+                    }
+                    Ok(Term {
+                        index: if t.velocity { n + i } else { i },
+                        linear,
+                        quadratic,
+                        target: finite(field, t.target)?,
+                        period: if t.velocity { None } else { periods[i] },
+                    })
+                })
+                .collect()
+        };
+        let control_weight = finite("control_weight", spec.control_weight)?;
+        if control_weight < 0.0 {
+            return Err(bad(
+                "control_weight",
+                format!("{control_weight} must be at least zero"),
+            ));
+        }
+        let control_limits = match spec.control_limits {
+            None => None,
+            Some([lo, hi]) => {
+                if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+                    return Err(bad(
+                        "control_limits",
+                        format!("[{lo}, {hi}] must be finite with lower < upper"),
+                    ));
+                }
+                let m = scene.n_controls;
+                Some(ControlLimits {
+                    lower: vec![lo; m],
+                    upper: vec![hi; m],
+                })
+            }
+        };
+        // A state entry with a period is a coordinate (never a velocity).
+        Ok(Task {
+            name: name.to_string(),
+            h: spec.h,
+            horizon: spec.horizon,
+            model,
+            x0,
+            cost: TaskCost {
+                running: terms("running", &spec.running)?,
+                final_terms: terms("final", &spec.final_terms)?,
+                control_weight,
+            },
+            control_limits,
+            periods,
+        })
+    }
+}
+
+/// A scene file with its tasks: the scene checked by [`dynamics::Scene`], the `[task.NAME]` tables kept
+/// as written until one is asked for.
+#[derive(Debug, Clone)]
+pub struct ProblemFile {
+    /// The scene.
+    pub scene: Scene,
+    /// The tasks by name.
+    pub tasks: BTreeMap<String, TaskSpec>,
+}
+
+impl ProblemFile {
+    /// Parse a scene file and its tasks (every task table strictly: unknown keys are refused).
+    pub fn from_toml_str(text: &str) -> Result<Self, LibraryError> {
+        let mut table: toml::Table = text.parse().map_err(|e: toml::de::Error| {
+            LibraryError::Dynamics(dynamics::DynamicsError::Parse(e.to_string()))
+        })?;
+        let tasks = match table.remove("task") {
+            None => BTreeMap::new(),
+            Some(value) => {
+                let tasks: toml::Table =
+                    value
+                        .try_into()
+                        .map_err(|e: toml::de::Error| LibraryError::Task {
+                            task: String::new(),
+                            field: "task".into(),
+                            problem: format!("must be tables [task.NAME]: {e}"),
+                        })?;
+                let mut out = BTreeMap::new();
+                for (name, value) in tasks {
+                    let spec: TaskSpec =
+                        value
+                            .try_into()
+                            .map_err(|e: toml::de::Error| LibraryError::Task {
+                                task: name.clone(),
+                                field: String::new(),
+                                problem: e.message().to_string(),
+                            })?;
+                    out.insert(name, spec);
+                }
+                out
+            }
+        };
+        let spec: dynamics::SceneSpec =
+            toml::Value::Table(table)
+                .try_into()
+                .map_err(|e: toml::de::Error| {
+                    LibraryError::Dynamics(dynamics::DynamicsError::Parse(e.to_string()))
+                })?;
+        let scene = Scene::new(spec)?;
+        // Check every task now, so that a bad one is reported whichever is asked for.
+        for (name, spec) in &tasks {
+            Task::new(&scene, name, spec)?;
+        }
+        Ok(ProblemFile { scene, tasks })
+    }
+
+    /// Read and parse a scene file.
+    pub fn load(path: &std::path::Path) -> Result<Self, LibraryError> {
+        let text = std::fs::read_to_string(path).map_err(|source| LibraryError::Io {
+            path: path.display().to_string(),
+            source,
+        })?;
+        Self::from_toml_str(&text)
+    }
+
+    /// The task called `name`, or with `None` the file's only task.
+    pub fn task(&self, name: Option<&str>) -> Result<Task, LibraryError> {
+        let listed = || {
+            if self.tasks.is_empty() {
+                "the file has no [task.NAME] table".to_string()
+            } else {
+                format!(
+                    "it has {}",
+                    self.tasks.keys().cloned().collect::<Vec<_>>().join(", ")
+                )
+            }
+        };
+        let (name, spec) = match name {
+            Some(name) => self
+                .tasks
+                .get_key_value(name)
+                .ok_or_else(|| LibraryError::Task {
+                    task: name.to_string(),
+                    field: String::new(),
+                    problem: format!("no such task ({})", listed()),
+                })?,
+            None => {
+                let mut it = self.tasks.iter();
+                match (it.next(), it.next()) {
+                    (Some(only), None) => only,
+                    _ => {
+                        return Err(LibraryError::Task {
+                            task: String::new(),
+                            field: String::new(),
+                            problem: format!("name the task to use ({})", listed()),
+                        });
+                    }
+                }
+            }
+        };
+        Task::new(&self.scene, name, spec)
+    }
+}

@@ -1,0 +1,248 @@
+//! Tasks as data (`[task.NAME]` tables of a scene file, `library::ProblemFile`): the finger's task read
+//! from scenes/finger.toml is the paper's cost in code; the cost's derivatives are exact, its periodic
+//! targets wrap; every malformed task is refused with an error naming the task and the field.
+
+use ddp::{Cost, CostDerivatives};
+use dynamics::Scene;
+use library::{LibraryError, Model, ProblemFile, finger_cost};
+use proptest::prelude::*;
+
+const FINGER: &str = include_str!("../../scenes/finger.toml");
+
+/// The finger's scene with `task` as its only task.
+fn finger_with(task: &str) -> Result<ProblemFile, LibraryError> {
+    let scene = FINGER.split("\n[task.").next().expect("the scene part");
+    ProblemFile::from_toml_str(&format!("{scene}\n{task}"))
+}
+
+fn derivatives(c: &dyn Cost, x: &[f64], u: &[f64]) -> CostDerivatives {
+    let mut d = CostDerivatives::zeros(x.len(), u.len());
+    // Garbage in every entry: the cost must write all of them.
+    d.lx.iter_mut().for_each(|e| *e = 7.0);
+    d.lxx.iter_mut().for_each(|e| *e = 7.0);
+    d.lux.iter_mut().for_each(|e| *e = 7.0);
+    d.luu.iter_mut().for_each(|e| *e = 7.0);
+    c.running_derivatives(0, x, u, &mut d);
+    d
+}
+
+#[test]
+fn the_finger_file_carries_the_papers_task() {
+    let file = ProblemFile::from_toml_str(FINGER).unwrap();
+    assert_eq!(file.scene.spec(), Scene::flicking_finger().spec());
+    // The dynamics crate reads the same file, leaving the tasks to this one.
+    assert_eq!(
+        Scene::from_toml_str(FINGER).unwrap().spec(),
+        Scene::flicking_finger().spec()
+    );
+    let task = file.task(None).unwrap();
+    assert_eq!(task.name, "spin");
+    assert_eq!((task.h, task.horizon), (0.05, 75));
+    assert_eq!(task.model, Model::Logistic(0.1));
+    assert_eq!(task.x0, dynamics::FLICKING_FINGER_X0.to_vec());
+    assert_eq!(
+        task.periods,
+        vec![None, None, Some(std::f64::consts::PI), None, None, None]
+    );
+    assert!(task.control_limits.is_none());
+    assert_eq!(file.task(Some("spin")).unwrap(), task);
+}
+
+proptest! {
+    #[test]
+    fn the_finger_tasks_cost_is_the_papers_cost(
+        x in proptest::collection::vec(-10.0..10.0f64, 6),
+        u in proptest::collection::vec(-10.0..10.0f64, 2),
+    ) {
+        let task = ProblemFile::from_toml_str(FINGER).unwrap().task(None).unwrap();
+        let paper = finger_cost(3, 2, 2);
+        let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * (1.0 + a.abs());
+        prop_assert!(close(task.cost.running(3, &x, &u), paper.running(3, &x, &u)));
+        prop_assert!(close(task.cost.terminal(&x), paper.terminal(&x)));
+        let (a, b) = (derivatives(&task.cost, &x, &u), derivatives(&paper, &x, &u));
+        for (p, q) in [(&a.lx, &b.lx), (&a.lu, &b.lu), (&a.lxx, &b.lxx), (&a.luu, &b.luu), (&a.lux, &b.lux)] {
+            prop_assert!(p.iter().zip(q.iter()).all(|(p, q)| close(*p, *q)), "{p:?} against {q:?}");
+        }
+        let (mut gx, mut hx) = (vec![7.0; 6], vec![7.0; 36]);
+        let (mut gp, mut hp) = (vec![0.0; 6], vec![0.0; 36]);
+        task.cost.terminal_derivatives(&x, &mut gx, &mut hx);
+        paper.terminal_derivatives(&x, &mut gp, &mut hp);
+        prop_assert_eq!(gx, gp);
+        prop_assert_eq!(hx, hp);
+    }
+
+    /// A target angle with a period wraps: the cost is periodic, and its derivatives are those of the
+    /// wrapped difference (central differences away from the jump half a period from the target).
+    #[test]
+    fn a_periodic_target_wraps(theta in -20.0..20.0f64, turns in -3i32..3) {
+        let file = finger_with(
+            "[task.hold]\nh = 0.05\nhorizon = 10\nmodel = \"hard\"\ncontrol_weight = 0.0\n\
+             periods = { \"ellipse.angle\" = 3.141592653589793 }\n\
+             running = [{ coordinate = \"ellipse.angle\", quadratic = 2.0, target = 0.5 }]\n",
+        ).unwrap();
+        let task = file.task(Some("hold")).unwrap();
+        let pi = std::f64::consts::PI;
+        let x = |t: f64| vec![0.0, 0.0, t, 0.0, 0.0, 0.0];
+        let u = [0.0, 0.0];
+        let c = |t: f64| task.cost.running(0, &x(t), &u);
+        prop_assert!((c(theta) - c(theta + f64::from(turns) * pi)).abs() < 1e-9);
+        // Within a quarter period of the target the wrapped difference is the plain one.
+        let near = 0.5 + theta.rem_euclid(pi / 2.0) - pi / 4.0;
+        prop_assert!((c(near) - (near - 0.5).powi(2)).abs() < 1e-12);
+        // Derivatives against central differences, away from the jump at 0.5 +- pi / 2.
+        let offset = (theta - 0.5).rem_euclid(pi);
+        prop_assume!((offset - pi / 2.0).abs() > 1e-3);
+        let d = derivatives(&task.cost, &x(theta), &u);
+        let eps = 1e-6;
+        let fd = (c(theta + eps) - c(theta - eps)) / (2.0 * eps);
+        prop_assert!((d.lx[2] - fd).abs() < 1e-6, "{} against {fd}", d.lx[2]);
+        prop_assert_eq!(d.lxx[2 * 6 + 2], 2.0);
+    }
+}
+
+#[test]
+fn a_task_may_start_anywhere_and_act_on_velocities() {
+    let file = finger_with(
+        "[task.brake]\nh = 0.02\nhorizon = 50\nmodel = \"normal\"\nsigma = 0.05\n\
+         x0 = { \"ellipse.angle\" = 1.0 }\nv0 = { \"ellipse.angle\" = 3.0 }\ncontrol_weight = 0.1\n\
+         control_limits = [-2.0, 2.0]\n\
+         running = [{ coordinate = \"ellipse.angle\", velocity = true, quadratic = 1.0 }]\n\
+         final = [{ coordinate = \"link1.angle\", linear = 0.5 }]\n",
+    )
+    .unwrap();
+    let task = file.task(None).unwrap();
+    assert_eq!(task.x0, vec![0.0, 0.0, 1.0, 0.0, 0.0, 3.0]);
+    assert_eq!(task.model, Model::Normal(0.05));
+    let limits = task.control_limits.as_ref().unwrap();
+    assert_eq!(
+        (limits.lower.clone(), limits.upper.clone()),
+        (vec![-2.0; 2], vec![2.0; 2])
+    );
+    // 1/2 * 1 * 3^2 + 0.1 * (1 + 4), and the final term 0.5 * link1.
+    assert!((task.cost.running(0, &task.x0, &[1.0, 2.0]) - (4.5 + 0.5)).abs() < 1e-12);
+    assert!((task.cost.terminal(&[2.0, 0.0, 0.0, 0.0, 0.0, 0.0]) - 1.0).abs() < 1e-12);
+}
+
+/// Each malformed task is refused, and the message names the task and the field (or lists what exists).
+#[test]
+fn malformed_tasks_are_refused_with_the_field_named() {
+    let base = "h = 0.05\nhorizon = 10\nmodel = \"logistic\"\nsigma = 0.1\ncontrol_weight = 0.05\n";
+    let check = |extra: &str, replace: Option<(&str, &str)>, expected: &str| {
+        let mut body = format!("{base}{extra}");
+        if let Some((from, to)) = replace {
+            body = body.replace(from, to);
+        }
+        let err = finger_with(&format!("[task.t]\n{body}"))
+            .expect_err(expected)
+            .to_string();
+        assert!(err.contains(expected), "{err:?} does not say {expected:?}");
+        assert!(err.starts_with("task t"), "{err:?} does not name the task");
+    };
+    check("speed = 3.0\n", None, "unknown field `speed`");
+    check(
+        "running = [{ coordinate = \"ellipse.angle\", lineer = 1.0 }]\n",
+        None,
+        "unknown field `lineer`",
+    );
+    check(
+        "running = [{ coordinate = \"ellipse\", linear = -1.0 }]\n",
+        None,
+        "task t, running: the scene has no coordinate \"ellipse\" (it has link1.angle, link2.angle, ellipse.angle)",
+    );
+    check(
+        "final = [{ coordinate = \"ellipse.angle\", quadratic = -1.0 }]\n",
+        None,
+        "task t, final: the quadratic weight on ellipse.angle is -1",
+    );
+    check(
+        "x0 = { \"link3.angle\" = 0.0 }\n",
+        None,
+        "task t, x0: the scene has no coordinate \"link3.angle\"",
+    );
+    check(
+        "v0 = { \"link1.angle\" = nan }\n",
+        None,
+        "task t, v0: NaN is not a finite number",
+    );
+    check(
+        "periods = { \"ellipse.angle\" = 0.0 }\n",
+        None,
+        "task t, periods: the period of ellipse.angle is 0",
+    );
+    check(
+        "control_limits = [2.0, -2.0]\n",
+        None,
+        "task t, control_limits: [2, -2] must be finite with lower < upper",
+    );
+    check(
+        "",
+        Some(("h = 0.05", "h = -0.05")),
+        "task t, h: -0.05 must be in (0, 1] s",
+    );
+    check(
+        "",
+        Some(("horizon = 10", "horizon = 0")),
+        "task t, horizon: 0 must be 1 to 100000 steps",
+    );
+    check(
+        "",
+        Some(("model = \"logistic\"", "model = \"soft\"")),
+        "task t, model: \"soft\" is not one of",
+    );
+    check(
+        "",
+        Some(("sigma = 0.1\n", "")),
+        "task t, sigma: the logistic model needs a noise scale sigma",
+    );
+    check(
+        "",
+        Some(("model = \"logistic\"", "model = \"hard\"")),
+        "task t, sigma: the hard model has no noise scale",
+    );
+    check(
+        "",
+        Some(("sigma = 0.1", "sigma = -1.0")),
+        "task t, sigma: -1 must be positive and finite",
+    );
+    check(
+        "",
+        Some(("control_weight = 0.05", "control_weight = -1.0")),
+        "task t, control_weight: -1 must be at least zero",
+    );
+    check(
+        "",
+        Some(("control_weight = 0.05\n", "")),
+        "missing field `control_weight`",
+    );
+}
+
+#[test]
+fn choosing_among_several_tasks_names_them() {
+    let task = |name: &str| {
+        format!("[task.{name}]\nh = 0.05\nhorizon = 10\nmodel = \"hard\"\ncontrol_weight = 0.0\n")
+    };
+    let file = finger_with(&format!("{}\n{}", task("a"), task("b"))).unwrap();
+    let err = file.task(None).unwrap_err().to_string();
+    assert!(err.contains("name the task to use (it has a, b)"), "{err}");
+    let err = file.task(Some("c")).unwrap_err().to_string();
+    assert!(err.contains("task c: no such task (it has a, b)"), "{err}");
+    assert_eq!(file.task(Some("b")).unwrap().name, "b");
+    // A file without tasks is a scene still; asking it for a task says so.
+    let bare = finger_with("").unwrap();
+    assert!(bare.tasks.is_empty());
+    assert!(
+        bare.task(None)
+            .unwrap_err()
+            .to_string()
+            .contains("the file has no [task.NAME] table")
+    );
+    // A task table that is not a table of tasks.
+    let scene = FINGER.split("\n[task.").next().expect("the scene part");
+    let err = ProblemFile::from_toml_str(&format!("task = 3\n{scene}"))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.starts_with("tasks, task: must be tables [task.NAME]"),
+        "{err}"
+    );
+}
