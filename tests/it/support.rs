@@ -45,7 +45,7 @@ fn built_once(
 }
 
 /// The default library (`cargo xtask train`'s: 400 trajectories, the cycle first, growth on the policy's
-/// stalls); about 15 s.
+/// stalls); about 30 s.
 pub fn finger_library() -> &'static library::Library {
     static LIB: std::sync::OnceLock<library::Library> = std::sync::OnceLock::new();
     built_once(&LIB, library::LibrarySettings::default)

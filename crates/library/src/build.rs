@@ -69,9 +69,10 @@ pub struct LibrarySettings {
     /// Passes at most for each warm-started re-solve.
     pub warm_passes: usize,
     /// The optimiser's stopping tolerance on the relative cost change (`DdpSettings::tol_cost`). The
-    /// default 1e-5 builds the library about 1.3 times faster than 1e-7 with the same closed-loop
-    /// quality within the spread between seeds (docs/benchmarks.md, "library tolerance"); 1e-4 saves
-    /// little more, spins slower and resumes after fewer kicks on the hard world.
+    /// default 1e-5 builds the library 1.3 to 1.7 times faster than 1e-7 (two regenerations of the
+    /// table) with the same closed-loop quality within the spread between seeds (docs/benchmarks.md,
+    /// "library tolerance"); 1e-4 saves nothing more (its libraries stall more, so growth adds more),
+    /// spins slower and resumes after fewer kicks.
     pub tolerance: f64,
     /// Local controllers kept per trajectory: the paper keeps the first (1); up to `shift` keeps
     /// `u_t + K_t (x - x_t)` for `t < keep` as well, the controllers the trajectory runs before the next one
@@ -433,7 +434,7 @@ pub fn build_entries(
     progress: impl FnMut(usize, &Entry) + Send,
 ) -> Result<Vec<Entry>, LibraryError> {
     settings.validate(scene)?;
-    let task = Task::new(scene, settings)?;
+    let task = Build::new(scene, settings)?;
     let done = std::sync::Mutex::new((0usize, progress));
     let report = |entry: &Entry| {
         let mut guard = done.lock().unwrap_or_else(|e| e.into_inner());
@@ -452,7 +453,7 @@ pub fn build_entries(
 }
 
 /// What every chain of a build shares.
-struct Task<'a> {
+struct Build<'a> {
     scene: &'a Scene,
     settings: &'a LibrarySettings,
     cost: ddp::QuadraticCost,
@@ -475,10 +476,10 @@ impl Built {
     }
 }
 
-impl<'a> Task<'a> {
+impl<'a> Build<'a> {
     fn new(scene: &'a Scene, settings: &'a LibrarySettings) -> Result<Self, LibraryError> {
         let free = free_joint(scene)?;
-        Ok(Task {
+        Ok(Build {
             scene,
             settings,
             cost: finger_cost(scene.n_dof(), free, scene.n_controls),
@@ -628,7 +629,7 @@ fn in_parallel<T: Send>(
 
 /// The paper's exploration: `chains` kicked chains (chain `c` with kick seed `seed + c`), in chain order.
 fn kicked_chains(
-    task: &Task,
+    task: &Build,
     report: &(dyn Fn(&Entry) + Sync),
 ) -> Result<Vec<Entry>, LibraryError> {
     let s = task.settings;
@@ -659,7 +660,7 @@ fn kicked_chains(
 
 /// The cycle-first exploration of [`Exploration::Branches`], then growth.
 fn branched(
-    task: &Task,
+    task: &Build,
     trunk: usize,
     settle: usize,
     length: usize,
@@ -711,7 +712,7 @@ fn branched(
 
 /// One growth round (see [`Exploration::Branches`]): the number of branches added.
 fn grow(
-    task: &Task,
+    task: &Build,
     dynamics: &mut FingerDynamics,
     built: &mut Built,
     length: usize,

@@ -332,7 +332,6 @@ impl Task {
                 })
             }
         };
-        // A state entry with a period is a coordinate (never a velocity).
         Ok(Task {
             name: name.to_string(),
             h: spec.h,
