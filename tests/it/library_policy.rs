@@ -101,11 +101,13 @@ fn the_default_recipe_spins_faster_than_the_papers_with_and_without_kicks() {
         );
         assert!(p.spin_rate < 0.8 * d.spin_rate, "{p:?} vs {d:?}");
     }
-    // Ranking by value is what turns the same controllers into a cycle: the nearest alone stalls more.
+    // Ranking by value is what turns the same controllers into a cycle: the nearest alone stalls more,
+    // above all at the time step no trajectory was optimised at (`cargo xtask seeds`: on the smoothed
+    // world at h = 0.03, 2 of 8 seeds steady with the nearest controller, 8 of 8 ranked).
     let mut nearest = default.clone();
     nearest.settings.neighbours = 1;
-    let ranked = run(default, Model::Hard, 0.05, 0.0);
-    let alone = run(&nearest, Model::Hard, 0.05, 0.0);
+    let ranked = run(default, Model::Logistic(0.1), 0.03, 0.0);
+    let alone = run(&nearest, Model::Logistic(0.1), 0.03, 0.0);
     assert!(
         ranked.final_spin_rate > alone.final_spin_rate,
         "{ranked:?} vs {alone:?}"
