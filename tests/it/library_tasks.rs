@@ -246,3 +246,53 @@ fn choosing_among_several_tasks_names_them() {
         "{err}"
     );
 }
+
+/// The example scenes' tasks, solved from their initial states by full second-order DDP through the same
+/// path as `cargo xtask optimize --task`: the two fingers turn the ellipse to its target and hold it; the
+/// three-link finger spins it.
+#[test]
+fn the_example_scenes_tasks_are_solved_from_rest() {
+    use ddp::{Ddp, DdpSettings};
+    let solve = |text: &str, max_iterations: usize| {
+        let file = ProblemFile::from_toml_str(text).unwrap();
+        let task = file.task(None).unwrap();
+        let sim = dynamics::Simulator::new(
+            file.scene.clone(),
+            dynamics::StepSettings {
+                model: task.model.complementarity(),
+                h: task.h,
+                ..dynamics::StepSettings::default()
+            },
+        )
+        .unwrap();
+        let m = file.scene.n_controls;
+        let sol = Ddp::new(DdpSettings {
+            max_iterations,
+            ..DdpSettings::default()
+        })
+        .unwrap()
+        .solve(
+            &mut library::FingerDynamics::new(sim),
+            &task.cost,
+            &task.x0,
+            &vec![vec![0.0; m]; task.horizon],
+        )
+        .unwrap();
+        (task.name, sol)
+    };
+    let (_, sol) = solve(include_str!("../../scenes/two_fingers.toml"), 300);
+    assert!(sol.status.converged(), "{:?}", sol.status);
+    let end = sol.states.last().unwrap();
+    assert!(
+        (end[4] - 0.5).abs() < 0.05,
+        "the ellipse ends at {}",
+        end[4]
+    );
+    assert!(end[9].abs() < 0.1, "and turns at {}", end[9]);
+    let (_, sol) = solve(include_str!("../../scenes/three_link_finger.toml"), 300);
+    let turned = sol.states.last().unwrap()[3] - sol.states[0][3];
+    assert!(
+        turned > 1.0,
+        "the three-link finger turned the ellipse {turned} rad"
+    );
+}
