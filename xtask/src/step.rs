@@ -97,7 +97,11 @@ impl SimArgs {
             (None, Some(task)) => match (task.model, self.sigma) {
                 (library::Model::Logistic(_), Some(sigma)) => Complementarity::Logistic { sigma },
                 (library::Model::Normal(_), Some(sigma)) => Complementarity::Normal { sigma },
-                (model, _) => model.complementarity(),
+                (library::Model::Hard, Some(_)) => anyhow::bail!(
+                    "--sigma: task {}'s model is hard, which has no noise scale (give --model too)",
+                    task.name
+                ),
+                (model, None) => model.complementarity(),
             },
             (None, None) => Complementarity::Logistic { sigma },
         };
@@ -436,6 +440,51 @@ pub fn run_simulate(args: &SimulateArgs) -> anyhow::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A task supplies the model, sigma and time step; a flag given on the command line overrides it, and
+    /// a noise scale given for a hard task is refused.
+    #[test]
+    fn a_tasks_settings_yield_to_the_command_lines() {
+        let file = library::ProblemFile::from_toml_str(FINGER_FILE).unwrap();
+        let task = file.task(Some("spin")).unwrap();
+        let args = |model, sigma, h| SimArgs {
+            model,
+            sigma,
+            h,
+            scene: None,
+            drag: DragArg::Explicit,
+            recovery: None,
+        };
+        let settings = |a: SimArgs, task: &library::Task| {
+            let sim = a.simulator_of(file.scene.clone(), Some(task)).unwrap();
+            (sim.settings().model, sim.settings().h)
+        };
+        assert_eq!(
+            settings(args(None, None, None), &task),
+            (Complementarity::Logistic { sigma: 0.1 }, 0.05)
+        );
+        assert_eq!(
+            settings(args(None, Some(0.2), Some(0.03)), &task),
+            (Complementarity::Logistic { sigma: 0.2 }, 0.03)
+        );
+        assert_eq!(
+            settings(args(Some(Model::Hard), None, None), &task),
+            (Complementarity::Hard, 0.05)
+        );
+        let hard = library::Task {
+            model: library::Model::Hard,
+            ..task.clone()
+        };
+        assert_eq!(
+            settings(args(None, None, None), &hard),
+            (Complementarity::Hard, 0.05)
+        );
+        let err = args(None, Some(0.2), None)
+            .simulator_of(file.scene.clone(), Some(&hard))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("has no noise scale"), "{err}");
+    }
 
     fn sim(model: Model) -> Simulator {
         SimArgs {
