@@ -139,14 +139,60 @@ const RECIPES: [&str; 5] = [
     "default (N = 90, cycle first, 4 per trajectory, 8 ranked by value, 12 growth rounds)",
 ];
 
+/// A library the seed sweep builds (the other rows of its table derive from the default's).
+#[derive(Debug, Clone, Copy)]
+enum Build {
+    /// The default recipe; its entries before growth and its nearest controller alone derive from it.
+    Default,
+    /// The default recipe stopped after eight growth rounds.
+    EightRounds,
+    /// The paper's recipe.
+    Paper,
+}
+
+impl Build {
+    /// The settings it builds with for `seed`.
+    fn settings(self, seed: u64) -> LibrarySettings {
+        let base = match self {
+            Build::Default => LibrarySettings::default(),
+            Build::EightRounds => LibrarySettings {
+                growth: 8,
+                ..LibrarySettings::default()
+            },
+            Build::Paper => LibrarySettings::paper(),
+        };
+        LibrarySettings { seed, ..base }
+    }
+
+    /// The rows of the table that `lib` (built as `self`) gives: its recipe's label and the library.
+    fn variants(self, lib: Library) -> Vec<(&'static str, Library)> {
+        match self {
+            Build::Paper => vec![(RECIPES[0], lib)],
+            Build::EightRounds => vec![(RECIPES[3], lib)],
+            Build::Default => {
+                let mut ungrown = lib.clone();
+                ungrown
+                    .entries
+                    .truncate(lib.settings.trajectories * lib.settings.keep);
+                let mut nearest = lib.clone();
+                nearest.settings.neighbours = 1;
+                vec![
+                    (RECIPES[1], ungrown),
+                    (RECIPES[2], nearest),
+                    (RECIPES[4], lib),
+                ]
+            }
+        }
+    }
+}
+
 /// The seed sweep: for each seed the paper's recipe and the default, and two libraries derived from the
 /// default (its entries before growth; its nearest controller alone), each on the four worlds with and
 /// without kicks. Builds run on two threads, the longest (the default recipe's) first.
 fn seed_sweep(args: &Args, bars: &MultiProgress) -> anyhow::Result<Vec<SeedRun>> {
-    // (seed, recipe): 0 the default, 1 the paper's, 2 the default with 8 growth rounds.
-    let jobs: Vec<(u64, usize)> = [0, 2, 1]
+    let jobs: Vec<(u64, Build)> = [Build::Default, Build::EightRounds, Build::Paper]
         .into_iter()
-        .flat_map(|recipe| (1..=args.seeds).map(move |seed| (seed, recipe)))
+        .flat_map(|build| (1..=args.seeds).map(move |seed| (seed, build)))
         .collect();
     let bar = bars.add(ProgressBar::new(jobs.len() as u64));
     bar.set_style(
@@ -155,35 +201,10 @@ fn seed_sweep(args: &Args, bars: &MultiProgress) -> anyhow::Result<Vec<SeedRun>>
         )
         .expect("a valid template"),
     );
-    let run_job = |&(seed, recipe): &(u64, usize)| -> anyhow::Result<Vec<SeedRun>> {
-        let base = match recipe {
-            1 => LibrarySettings::paper(),
-            2 => LibrarySettings {
-                growth: 8,
-                ..LibrarySettings::default()
-            },
-            _ => LibrarySettings::default(),
-        };
-        let settings = LibrarySettings { seed, ..base };
-        let lib = Library::build(&Scene::flicking_finger(), &settings, |_, _| {})?;
-        let mut variants = Vec::new();
-        if recipe == 1 {
-            variants.push((RECIPES[0], lib));
-        } else if recipe == 2 {
-            variants.push((RECIPES[3], lib));
-        } else {
-            let mut ungrown = lib.clone();
-            ungrown
-                .entries
-                .truncate(settings.trajectories * settings.keep);
-            let mut nearest = lib.clone();
-            nearest.settings.neighbours = 1;
-            variants.push((RECIPES[1], ungrown));
-            variants.push((RECIPES[2], nearest));
-            variants.push((RECIPES[4], lib));
-        }
+    let run_job = |&(seed, build): &(u64, Build)| -> anyhow::Result<Vec<SeedRun>> {
+        let lib = Library::build(&Scene::flicking_finger(), &build.settings(seed), |_, _| {})?;
         let mut runs = Vec::new();
-        for (recipe, lib) in variants {
+        for (recipe, lib) in build.variants(lib) {
             runs.extend(runs_of(seed, recipe, &lib, args.seconds)?);
         }
         bar.inc(1);
