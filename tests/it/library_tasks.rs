@@ -11,8 +11,12 @@ const FINGER: &str = include_str!("../../scenes/finger.toml");
 
 /// The finger's scene with `task` as its only task.
 fn finger_with(task: &str) -> Result<ProblemFile, LibraryError> {
-    let scene = FINGER.split("\n[task.").next().expect("the scene part");
-    ProblemFile::from_toml_str(&format!("{scene}\n{task}"))
+    ProblemFile::from_toml_str(&format!("{}\n{task}", finger_scene()))
+}
+
+/// scenes/finger.toml without its tasks.
+fn finger_scene() -> &'static str {
+    FINGER.split("\n[task.").next().expect("the scene part")
 }
 
 fn derivatives(c: &dyn Cost, x: &[f64], u: &[f64]) -> CostDerivatives {
@@ -123,11 +127,96 @@ fn a_task_may_start_anywhere_and_act_on_velocities() {
     assert!((task.cost.terminal(&[2.0, 0.0, 0.0, 0.0, 0.0, 0.0]) - 1.0).abs() < 1e-12);
 }
 
+/// A line added to a valid task, a replacement in it, and what the error then says.
+type Malformed = (
+    &'static str,
+    Option<(&'static str, &'static str)>,
+    &'static str,
+);
+
 /// Each malformed task is refused, and the message names the task and the field (or lists what exists).
 #[test]
 fn malformed_tasks_are_refused_with_the_field_named() {
     let base = "h = 0.05\nhorizon = 10\nmodel = \"logistic\"\nsigma = 0.1\ncontrol_weight = 0.05\n";
-    let check = |extra: &str, replace: Option<(&str, &str)>, expected: &str| {
+    let cases: [Malformed; 16] = [
+        ("speed = 3.0\n", None, "unknown field `speed`"),
+        (
+            "running = [{ coordinate = \"ellipse.angle\", lineer = 1.0 }]\n",
+            None,
+            "unknown field `lineer`",
+        ),
+        (
+            "running = [{ coordinate = \"ellipse\", linear = -1.0 }]\n",
+            None,
+            "task t, running: the scene has no coordinate \"ellipse\" (it has link1.angle, link2.angle, ellipse.angle)",
+        ),
+        (
+            "final = [{ coordinate = \"ellipse.angle\", quadratic = -1.0 }]\n",
+            None,
+            "task t, final: the quadratic weight on ellipse.angle is -1",
+        ),
+        (
+            "x0 = { \"link3.angle\" = 0.0 }\n",
+            None,
+            "task t, x0: the scene has no coordinate \"link3.angle\"",
+        ),
+        (
+            "v0 = { \"link1.angle\" = nan }\n",
+            None,
+            "task t, v0: NaN is not a finite number",
+        ),
+        (
+            "periods = { \"ellipse.angle\" = 0.0 }\n",
+            None,
+            "task t, periods: the period of ellipse.angle is 0",
+        ),
+        (
+            "control_limits = [2.0, -2.0]\n",
+            None,
+            "task t, control_limits: [2, -2] must be finite with lower < upper",
+        ),
+        (
+            "",
+            Some(("h = 0.05", "h = -0.05")),
+            "task t, h: -0.05 must be in (0, 1] s",
+        ),
+        (
+            "",
+            Some(("horizon = 10", "horizon = 0")),
+            "task t, horizon: 0 must be 1 to 100000 steps",
+        ),
+        (
+            "",
+            Some(("model = \"logistic\"", "model = \"soft\"")),
+            "task t, model: \"soft\" is not one of",
+        ),
+        (
+            "",
+            Some(("sigma = 0.1\n", "")),
+            "task t, sigma: the logistic model needs a noise scale sigma",
+        ),
+        (
+            "",
+            Some(("model = \"logistic\"", "model = \"hard\"")),
+            "task t, sigma: the hard model has no noise scale",
+        ),
+        (
+            "",
+            Some(("sigma = 0.1", "sigma = -1.0")),
+            "task t, sigma: -1 must be positive and finite",
+        ),
+        (
+            "",
+            Some(("control_weight = 0.05", "control_weight = -1.0")),
+            "task t, control_weight: -1 must be at least zero",
+        ),
+        (
+            "",
+            Some(("control_weight = 0.05\n", "")),
+            "missing field `control_weight`",
+        ),
+    ];
+    for (extra, replace, expected) in cases {
         let mut body = format!("{base}{extra}");
         if let Some((from, to)) = replace {
             body = body.replace(from, to);
@@ -137,83 +226,7 @@ fn malformed_tasks_are_refused_with_the_field_named() {
             .to_string();
         assert!(err.contains(expected), "{err:?} does not say {expected:?}");
         assert!(err.starts_with("task t"), "{err:?} does not name the task");
-    };
-    check("speed = 3.0\n", None, "unknown field `speed`");
-    check(
-        "running = [{ coordinate = \"ellipse.angle\", lineer = 1.0 }]\n",
-        None,
-        "unknown field `lineer`",
-    );
-    check(
-        "running = [{ coordinate = \"ellipse\", linear = -1.0 }]\n",
-        None,
-        "task t, running: the scene has no coordinate \"ellipse\" (it has link1.angle, link2.angle, ellipse.angle)",
-    );
-    check(
-        "final = [{ coordinate = \"ellipse.angle\", quadratic = -1.0 }]\n",
-        None,
-        "task t, final: the quadratic weight on ellipse.angle is -1",
-    );
-    check(
-        "x0 = { \"link3.angle\" = 0.0 }\n",
-        None,
-        "task t, x0: the scene has no coordinate \"link3.angle\"",
-    );
-    check(
-        "v0 = { \"link1.angle\" = nan }\n",
-        None,
-        "task t, v0: NaN is not a finite number",
-    );
-    check(
-        "periods = { \"ellipse.angle\" = 0.0 }\n",
-        None,
-        "task t, periods: the period of ellipse.angle is 0",
-    );
-    check(
-        "control_limits = [2.0, -2.0]\n",
-        None,
-        "task t, control_limits: [2, -2] must be finite with lower < upper",
-    );
-    check(
-        "",
-        Some(("h = 0.05", "h = -0.05")),
-        "task t, h: -0.05 must be in (0, 1] s",
-    );
-    check(
-        "",
-        Some(("horizon = 10", "horizon = 0")),
-        "task t, horizon: 0 must be 1 to 100000 steps",
-    );
-    check(
-        "",
-        Some(("model = \"logistic\"", "model = \"soft\"")),
-        "task t, model: \"soft\" is not one of",
-    );
-    check(
-        "",
-        Some(("sigma = 0.1\n", "")),
-        "task t, sigma: the logistic model needs a noise scale sigma",
-    );
-    check(
-        "",
-        Some(("model = \"logistic\"", "model = \"hard\"")),
-        "task t, sigma: the hard model has no noise scale",
-    );
-    check(
-        "",
-        Some(("sigma = 0.1", "sigma = -1.0")),
-        "task t, sigma: -1 must be positive and finite",
-    );
-    check(
-        "",
-        Some(("control_weight = 0.05", "control_weight = -1.0")),
-        "task t, control_weight: -1 must be at least zero",
-    );
-    check(
-        "",
-        Some(("control_weight = 0.05\n", "")),
-        "missing field `control_weight`",
-    );
+    }
 }
 
 #[test]
@@ -237,8 +250,7 @@ fn choosing_among_several_tasks_names_them() {
             .contains("the file has no [task.NAME] table")
     );
     // A task table that is not a table of tasks.
-    let scene = FINGER.split("\n[task.").next().expect("the scene part");
-    let err = ProblemFile::from_toml_str(&format!("task = 3\n{scene}"))
+    let err = ProblemFile::from_toml_str(&format!("task = 3\n{}", finger_scene()))
         .unwrap_err()
         .to_string();
     assert!(

@@ -391,13 +391,8 @@ impl ProblemFile {
                 out
             }
         };
-        let spec: dynamics::SceneSpec =
-            toml::Value::Table(table)
-                .try_into()
-                .map_err(|e: toml::de::Error| {
-                    LibraryError::Dynamics(dynamics::DynamicsError::Parse(e.to_string()))
-                })?;
-        let scene = Scene::new(spec)?;
+        // The scene as the dynamics crate reads it (it skips the task tables).
+        let scene = Scene::from_toml_str(text)?;
         // Check every task now, so that a bad one is reported whichever is asked for.
         for (name, spec) in &tasks {
             Task::new(&scene, name, spec)?;
