@@ -318,6 +318,13 @@ proptest! {
                 for (a, b) in h1.iter().zip(&h2) {
                     prop_assert!((a - b).abs() <= 1e-6 * hs, "model {}: {} vs {}", which, a, b);
                 }
+                // Written in place over whatever was there, the same bits; a buffer of the wrong size refused.
+                let mut into = vec![f64::NAN; h1.len()];
+                so.hessian_into(&c, &mut into).unwrap();
+                prop_assert_eq!(&into, &h1);
+                let mut short = vec![0.0; h1.len() - 1];
+                let refused = matches!(so.hessian_into(&c, &mut short), Err(DynamicsError::Input { what: "hess", .. }));
+                prop_assert!(refused, "a short buffer was accepted");
             }
         }
         // Linearising left the data as it was: its step is the one it computed.

@@ -166,7 +166,7 @@ impl SecondOrder<StepData> for FingerDynamics {
         let so = data.prepared.as_ref().expect("prepared above");
         fx.copy_from_slice(&so.derivatives.fx);
         fu.copy_from_slice(&so.derivatives.fu);
-        hess.copy_from_slice(&so.hessian(c)?);
+        so.hessian_into(c, hess)?;
         Ok(())
     }
 }

@@ -1,173 +1,240 @@
 //! Stage 3 of the derivatives: the second-order terms. With `K(p; y) = 0` the step's equations (stage 2)
 //! and `K_p^T mu = -g` for `g = (dx'/dp)^T c`, `d^2 (c^T f) / dy^2 = T^T (d^2 (mu^T K) / d(p, y)^2) T` with
-//! `T = [dp/dy; I]` (second-order adjoint). The Hessian of each equation along `T` is assembled from the
-//! ingredients' expansions (stage 1): in plain arrays for the logistic and hard models with a constant
-//! noise, in second-order vector duals otherwise (one pass per pair of blocks of directions beyond eight).
+//! `T = [dp/dy; I]` (second-order adjoint). For the logistic and hard models with a constant noise the
+//! weighted sum over the equations is contracted directly from the ingredients' expansions (stage 1) in
+//! plain arrays, never assembling one equation's Hessian ([`Structured`]); otherwise each equation's
+//! Hessian along `T` is assembled in second-order vector duals (one pass per pair of blocks of
+//! directions beyond eight) and the sum taken after.
 
 #![allow(non_snake_case)]
 
 use super::StepDerivatives;
 use super::expansion::{D2, DIRECTIONS, Expansion, block_pairs};
-use super::linearise::{RowKind, Source, system};
+use super::linearise::{Linearised, RowKind, Source, system};
 use crate::error::DynamicsError;
 use crate::step::{Complementarity, Model, Step};
 use nalgebra::SMatrix;
 use ncp::{DenseLu, NcpFunction};
 use num_dual::Derivative;
 
-impl Expansion {
-    /// The Hessians in `s` of the logistic and hard models' equations `K_i(p0 + dp s, y0 + s)` with a
-    /// constant sigma, row-major `cols x cols` each, assembled in plain arrays from the structure of
-    /// [`system`] instead of in eight-direction duals: every product there is of a function of `q` alone
-    /// (gradient and Hessian over the first `n` directions, from its expansion) and a function
-    /// affine in `s`, and each row is a function of two such quantities (`lambda_i`, `w_i`).
-    #[allow(clippy::too_many_arguments)]
-    pub(super) fn equation_hessians(
-        &self,
-        h: f64,
-        x: &[f64],
-        p: &[f64],
-        dp: &[f64],
-        cols: usize,
-        kinds: &[RowKind],
-        sigma: f64,
-    ) -> Vec<f64> {
-        // The finger's sizes compiled in (the same arithmetic, its loops unrolled); any other at run time.
-        match (self.n, cols) {
-            (3, 8) => self.equation_hessians_sized::<3, 8>(h, x, p, dp, kinds, sigma),
-            _ => self.equation_hessians_sized::<0, 0>(h, x, p, dp, kinds, sigma),
-        }
-    }
+/// The linearised step of the logistic or hard model with a constant sigma, kept to contract its
+/// equations' Hessians along `T` with any `mu` ([`Structured::contract`]) without assembling them: every
+/// product in the equations ([`system`]) is of a function of `q` alone (gradient and Hessian over the first
+/// `n` directions, from its expansion) and a function affine in `s`, and each complementarity row is a
+/// function of two such quantities (`lambda_k`, `w_k`).
+struct Structured {
+    expansion: Expansion,
+    h: f64,
+    /// The velocities `v` of `x`.
+    v: Vec<f64>,
+    p: Vec<f64>,
+    /// `dp/dy`, row-major `len(p) x cols`.
+    dp: Vec<f64>,
+    cols: usize,
+    /// Each complementarity row's weight on the curvature of `w_k`: `d phi / d w_k` for a logistic row,
+    /// 1 for an active hard row, 0 for a fixed one.
+    slope: Vec<f64>,
+    /// Each logistic row's curvature `c_k`: the logistic function's Hessian in `(lambda_k, w_k)` is
+    /// `-c_k [1, -1] [1, -1]^T`, so the row adds `-mu_k c_k b_k b_k^T` with `b_k` the gradient of
+    /// `lambda_k - w_k` along `T` (in `bend`, `cols` per row); 0 for the other rows.
+    curvature: Vec<f64>,
+    bend: Vec<f64>,
+}
 
-    /// [`Expansion::equation_hessians`] with `N` joints and `C` columns when they are not 0.
-    #[allow(clippy::too_many_arguments)]
-    fn equation_hessians_sized<const N: usize, const C: usize>(
-        &self,
+impl Structured {
+    /// Everything of the contraction that does not depend on `mu`, from the step's expansion and
+    /// linearisation (`p`, `dp` and the rows' kinds).
+    fn new(
+        expansion: Expansion,
         h: f64,
         x: &[f64],
-        p: &[f64],
-        dp: &[f64],
+        p: Vec<f64>,
+        dp: Vec<f64>,
         kinds: &[RowKind],
         sigma: f64,
-    ) -> Vec<f64> {
-        let n = if N > 0 { N } else { self.n };
-        let cols = if C > 0 { C } else { dp.len() / p.len() };
-        let m = self.m;
-        let geo = &self.geometry;
-        let cc = cols * cols;
-        // Every Hessian below is symmetric: only its upper triangle is accumulated, and each is mirrored
-        // once at the end.
-        // out += scale * H_q(f) in the leading n x n block.
-        let add_q = |out: &mut [f64], f: usize, scale: f64| {
-            for (r, (o, hf)) in out
-                .chunks_exact_mut(cols)
-                .zip(geo.h(f).chunks_exact(n))
-                .enumerate()
-            {
-                for (o, e) in o[r..n].iter_mut().zip(&hf[r..]) {
-                    *o += scale * e;
-                }
-            }
-        };
-        // out += scale * (a b^T + b a^T), a over the first n directions.
-        let add_sym = |out: &mut [f64], a: &[f64], b: &[f64], scale: f64| {
-            for (i, &a) in a.iter().enumerate() {
-                let ai = scale * a;
-                if ai == 0.0 {
-                    continue;
-                }
-                for (j, &b) in b[..i].iter().enumerate() {
-                    out[j * cols + i] += ai * b;
-                }
-                out[i * cols + i] += 2.0 * ai * b[i];
-                for (o, &b) in out[i * cols + i + 1..(i + 1) * cols]
-                    .iter_mut()
-                    .zip(&b[i + 1..])
-                {
-                    *o += ai * b;
-                }
-            }
-        };
-        let row = |i: usize| &dp[i * cols..(i + 1) * cols];
-        let mut out = vec![0.0; (n + m) * cc];
-        let mut dl = vec![0.0; cols];
-        let mut hw = vec![0.0; cc];
-        let mut gw = vec![0.0; cols];
-        // Equations of motion: sum_j M_ij (v'_j - v_j) - h r_i - sum_k J_ki lambda_k.
-        for i in 0..n {
-            let e = &mut out[i * cc..(i + 1) * cc];
-            for j in 0..n {
-                let f = self.mass(i, j);
-                dl.copy_from_slice(row(j));
-                dl[n + j] -= 1.0;
-                add_q(e, f, p[j] - x[n + j]);
-                add_sym(e, geo.g(f), &dl, 1.0);
-            }
-            for k in 0..m {
-                let f = self.jac(k, i);
-                add_q(e, f, -p[n + k]);
-                add_sym(e, geo.g(f), row(n + k), -1.0);
-            }
-            let (hm, dim) = (self.forces.h(i), self.forces.dim());
-            for a in 0..dim {
-                for b in a..dim {
-                    e[a * cols + b] -= h * hm[a * dim + b];
-                }
-            }
-        }
-        // Rows: w_k = d_k / h + sum_j J_kj v'_j, then lambda_k, w_k or phi(lambda_k, w_k).
+    ) -> Structured {
+        let (n, m) = (expansion.n, expansion.m);
+        let cols = dp.len() / p.len();
+        let geo = &expansion.geometry;
+        let mut slope = vec![0.0; m];
+        let mut curvature = vec![0.0; m];
+        let mut bend = vec![0.0; m * cols];
         for k in 0..m {
-            if kinds[k] == RowKind::Fixed {
-                continue;
-            }
-            hw.iter_mut().for_each(|e| *e = 0.0);
-            gw.iter_mut().for_each(|e| *e = 0.0);
-            let gd = geo.g(self.dist(k));
-            add_q(&mut hw, self.dist(k), 1.0 / h);
-            for i in 0..n {
-                gw[i] += gd[i] / h;
-            }
-            for j in 0..n {
-                let f = self.jac(k, j);
-                let gf = geo.g(f);
-                add_q(&mut hw, f, p[j]);
-                add_sym(&mut hw, gf, row(j), 1.0);
-                for i in 0..n {
-                    gw[i] += p[j] * gf[i];
-                }
-                let re = geo.re(f);
-                for (g, d) in gw.iter_mut().zip(row(j)) {
-                    *g += re * d;
-                }
-            }
-            let e = &mut out[(n + k) * cc..(n + k + 1) * cc];
             match kinds[k] {
-                RowKind::Contact => e.copy_from_slice(&hw),
+                RowKind::Fixed => {}
+                RowKind::Contact => slope[k] = 1.0,
                 RowKind::Logistic => {
-                    let w0 = geo.re(self.dist(k)) / h
-                        + (0..n).map(|j| geo.re(self.jac(k, j)) * p[j]).sum::<f64>();
+                    let w0 = geo.re(expansion.dist(k)) / h
+                        + (0..n)
+                            .map(|j| geo.re(expansion.jac(k, j)) * p[j])
+                            .sum::<f64>();
                     let jet = NcpFunction::Logistic { sigma }.jet(p[n + k], w0);
-                    let gl = row(n + k);
-                    for a in 0..cols {
-                        for b in a..cols {
-                            e[a * cols + b] = jet.db * hw[a * cols + b]
-                                + jet.daa * gl[a] * gl[b]
-                                + jet.dab * (gl[a] * gw[b] + gw[a] * gl[b])
-                                + jet.dbb * gw[a] * gw[b];
+                    debug_assert!(jet.daa == -jet.dab && jet.dbb == -jet.dab);
+                    slope[k] = jet.db;
+                    curvature[k] = jet.dab;
+                    // b_k = grad lambda_k - grad w_k, w_k = d_k / h + sum_j J_kj v'_j.
+                    let b = &mut bend[k * cols..(k + 1) * cols];
+                    b.copy_from_slice(&dp[(n + k) * cols..(n + k + 1) * cols]);
+                    for (e, g) in b.iter_mut().zip(geo.g(expansion.dist(k))) {
+                        *e -= g / h;
+                    }
+                    for j in 0..n {
+                        let f = expansion.jac(k, j);
+                        for (e, g) in b.iter_mut().zip(geo.g(f)) {
+                            *e -= p[j] * g;
+                        }
+                        let re = geo.re(f);
+                        for (e, d) in b.iter_mut().zip(&dp[j * cols..(j + 1) * cols]) {
+                            *e -= re * d;
                         }
                     }
                 }
-                _ => unreachable!("logistic and hard rows are fixed, contact or logistic"),
-            }
-        }
-        for e in out.chunks_exact_mut(cc) {
-            for a in 1..cols {
-                for b in 0..a {
-                    e[a * cols + b] = e[b * cols + a];
+                RowKind::Stationary => {
+                    unreachable!("logistic and hard rows are fixed, contact or logistic")
                 }
             }
         }
-        out
+        Structured {
+            v: x[n..2 * n].to_vec(),
+            expansion,
+            h,
+            p,
+            dp,
+            cols,
+            slope,
+            curvature,
+            bend,
+        }
+    }
+
+    /// `sum_k mu_k H_k` into `out` (row-major `cols x cols`), `H_k` the Hessian in `s` of equation `k`
+    /// at `(p0 + dp s, y0 + s)`. The equations are weighted as they are accumulated, and the products
+    /// that share a row of `dp` are summed before they are multiplied out, so the contraction costs about
+    /// as much as one equation's Hessian.
+    fn contract(&self, mu: &[f64], out: &mut [f64]) {
+        // The finger's sizes compiled in (the same arithmetic, its loops unrolled); any other at run time.
+        match (self.expansion.n, self.cols) {
+            (3, 8) => self.contract_sized::<3, 8>(mu, out),
+            _ => self.contract_sized::<0, 0>(mu, out),
+        }
+    }
+
+    /// [`Structured::contract`] with `N` joints and `C` columns when they are not 0.
+    fn contract_sized<const N: usize, const C: usize>(&self, mu: &[f64], out: &mut [f64]) {
+        let ex = &self.expansion;
+        let n = if N > 0 { N } else { ex.n };
+        let cols = if C > 0 { C } else { self.cols };
+        let (m, h, p, v) = (ex.m, self.h, &self.p, &self.v);
+        let geo = &ex.geometry;
+        let row = |t: usize| &self.dp[t * cols..(t + 1) * cols];
+        // The sum has three parts, each accumulated in its own place:
+        // - second derivatives in q of functions of q, weighted: `hq`, the leading n x n block;
+        // - products of a gradient in q with a row t of dp (or a unit vector): the gradients that meet
+        //   row t are summed over all equations first, in `a[t n..(t + 1) n]`, and the products
+        //   `P = sum_t a_t row(t)^T` (n x cols) enter as `P + P^T`;
+        // - the forces' curvature in (q, v) and the logistic rows' in (lambda_k, w_k), directly in the
+        //   upper triangle of `out`.
+        // Every slice below is cut to its length first, so that with the sizes compiled in the loops
+        // have constant trip counts and no bounds checks.
+        let (nn, nc) = (n * n, n * cols);
+        let mut scratch = vec![0.0; nn + nc + (n + m) * n];
+        let (hq, rest) = scratch.split_at_mut(nn);
+        let (pm, a) = rest.split_at_mut(nc);
+        let pm = &mut pm[..nc];
+        let out = &mut out[..cols * cols];
+        let add_q = |hq: &mut [f64], f: usize, scale: f64| {
+            let (hq, hf) = (&mut hq[..nn], &geo.h(f)[..nn]);
+            for e in 0..nn {
+                hq[e] += scale * hf[e];
+            }
+        };
+        let add_g = |a: &mut [f64], f: usize, scale: f64| {
+            let (a, g) = (&mut a[..n], &geo.g(f)[..n]);
+            for e in 0..n {
+                a[e] += scale * g[e];
+            }
+        };
+        out.fill(0.0);
+        // Equations of motion: sum_j M_ij (v'_j - v_j) - h r_i - sum_k J_ki lambda_k.
+        let dim = 2 * n;
+        for (i, &w) in mu[..n].iter().enumerate() {
+            if w == 0.0 {
+                continue;
+            }
+            for j in 0..n {
+                let f = ex.mass(i, j);
+                add_q(hq, f, w * (p[j] - v[j]));
+                add_g(&mut a[j * n..], f, w);
+                // The -v_j of (v'_j - v_j): direction n + j of y.
+                let g = &geo.g(f)[..n];
+                for t in 0..n {
+                    pm[t * cols + n + j] -= w * g[t];
+                }
+            }
+            for k in 0..m {
+                let f = ex.jac(k, i);
+                add_q(hq, f, -w * p[n + k]);
+                add_g(&mut a[(n + k) * n..], f, -w);
+            }
+            debug_assert_eq!(ex.forces.dim(), dim);
+            let hm = &ex.forces.h(i)[..dim * dim];
+            let wh = w * h;
+            for r in 0..dim {
+                for c in r..dim {
+                    out[r * cols + c] -= wh * hm[r * dim + c];
+                }
+            }
+        }
+        // Rows: w_k = d_k / h + sum_j J_kj v'_j, then lambda_k (no curvature), w_k or phi(lambda_k, w_k).
+        for k in 0..m {
+            let s = mu[n + k] * self.slope[k];
+            if s == 0.0 {
+                continue;
+            }
+            add_q(hq, ex.dist(k), s / h);
+            for j in 0..n {
+                let f = ex.jac(k, j);
+                add_q(hq, f, s * p[j]);
+                add_g(&mut a[j * n..], f, s);
+            }
+            let c = -mu[n + k] * self.curvature[k];
+            if c != 0.0 {
+                let b = &self.bend[k * cols..(k + 1) * cols];
+                for r in 0..cols {
+                    let cb = c * b[r];
+                    for q in r..cols {
+                        out[r * cols + q] += cb * b[q];
+                    }
+                }
+            }
+        }
+        for t in 0..n + m {
+            let (rt, at) = (row(t), &a[t * n..(t + 1) * n]);
+            for i in 0..n {
+                let ai = at[i];
+                if ai != 0.0 {
+                    let prow = &mut pm[i * cols..(i + 1) * cols];
+                    for q in 0..cols {
+                        prow[q] += ai * rt[q];
+                    }
+                }
+            }
+        }
+        // The upper triangle of hq + P + P^T.
+        for i in 0..n {
+            for j in i..cols {
+                let mut e = pm[i * cols + j];
+                if j < n {
+                    e += hq[i * n + j] + pm[j * cols + i];
+                }
+                out[i * cols + j] += e;
+            }
+        }
+        for r in 1..cols {
+            for c in 0..r {
+                out[r * cols + c] = out[c * cols + r];
+            }
+        }
     }
 }
 
@@ -193,12 +260,19 @@ impl Model {
             Complementarity::Logistic { sigma } if !self.has_state_covariance() => Some(sigma),
             _ => None,
         };
-        let equations = match structured {
-            Some(sigma) => ing.equation_hessians(h, x, &lin.p, &lin.dp, cols, &lin.kinds, sigma),
+        let assembled = match structured {
+            Some(_) => None,
             None => {
                 let normal = matches!(model, Complementarity::Normal { .. });
-                general_hessians(&ing, h, x, &lin, cols, normal)
+                Some(general_hessians(&ing, h, x, &lin, cols, normal))
             }
+        };
+        let Linearised { p, lu, dp, kinds } = lin;
+        let equations = match (structured, assembled) {
+            (Some(sigma), _) => {
+                Equations::Structured(Structured::new(ing, h, x, p, dp, &kinds, sigma))
+            }
+            (None, assembled) => Equations::Assembled(assembled.expect("assembled above")),
         };
         Ok(SecondOrderStep {
             step: source.data().step().expect("linearised above").clone(),
@@ -206,10 +280,20 @@ impl Model {
             n,
             cols,
             h,
-            adjoint: std::cell::RefCell::new(lin.lu),
+            adjoint: std::cell::RefCell::new(lu),
             equations,
         })
     }
+}
+
+/// What the second-order adjoint contracts with `mu`: the Hessians of the step's equations along `T`.
+// One per knot, kept with the knot's data: the variants' sizes do not matter, an allocation would.
+#[allow(clippy::large_enum_variant)]
+enum Equations {
+    /// Each equation's Hessian, row-major `cols x cols`, one after the other (the general path).
+    Assembled(Vec<f64>),
+    /// The ingredients they are assembled from, contracted directly ([`Structured::contract`]).
+    Structured(Structured),
 }
 
 /// The Hessians along `T` of the step's equations ([`system`]) in second-order vector duals: one pass
@@ -218,7 +302,7 @@ fn general_hessians(
     ing: &Expansion,
     h: f64,
     x: &[f64],
-    lin: &super::linearise::Linearised,
+    lin: &Linearised,
     cols: usize,
     normal: bool,
 ) -> Vec<f64> {
@@ -276,9 +360,8 @@ pub struct SecondOrderStep {
     cols: usize,
     h: f64,
     adjoint: std::cell::RefCell<DenseLu>,
-    /// The Hessian of each of the step's equations along `T` (row-major `cols x cols` each, one after
-    /// the other).
-    equations: Vec<f64>,
+    /// The Hessians of the step's equations along `T`, or what they are made of.
+    equations: Equations,
 }
 
 impl std::fmt::Debug for SecondOrderStep {
@@ -293,6 +376,13 @@ impl std::fmt::Debug for SecondOrderStep {
 impl SecondOrderStep {
     /// The Hessian of `c^T f(x, u)` with respect to `(x, u)`, row-major `(2n + n_u)^2`.
     pub fn hessian(&self, c: &[f64]) -> Result<Vec<f64>, DynamicsError> {
+        let mut hess = vec![0.0; self.cols * self.cols];
+        self.hessian_into(c, &mut hess)?;
+        Ok(hess)
+    }
+
+    /// [`SecondOrderStep::hessian`] written into `hess` (`(2n + n_u)^2` entries), which is overwritten.
+    pub fn hessian_into(&self, c: &[f64], hess: &mut [f64]) -> Result<(), DynamicsError> {
         let (n, cols, h) = (self.n, self.cols, self.h);
         if c.len() != 2 * n || !c.iter().all(|e| e.is_finite()) {
             return Err(DynamicsError::Input {
@@ -300,28 +390,42 @@ impl SecondOrderStep {
                 problem: format!("needs {} finite entries", 2 * n),
             });
         }
-        let np = self.equations.len() / (cols * cols);
+        if hess.len() != cols * cols {
+            return Err(DynamicsError::Input {
+                what: "hess",
+                problem: format!("needs {} entries, has {}", cols * cols, hess.len()),
+            });
+        }
+        let np = match &self.equations {
+            Equations::Assembled(e) => e.len() / (cols * cols),
+            Equations::Structured(s) => s.p.len(),
+        };
         // g = (dx'/dp)^T c with x' = [q + h v'; v'], and mu from K_p^T mu = -g.
         let mut mu = vec![0.0; np];
         for i in 0..n {
             mu[i] = -(h * c[i] + c[n + i]);
         }
         self.adjoint.borrow_mut().solve_transposed(&mut mu);
-        let mut hess = vec![0.0; cols * cols];
-        for (e, w) in self.equations.chunks_exact(cols * cols).zip(&mu) {
-            for (a, b) in hess.iter_mut().zip(e) {
-                *a += w * b;
+        match &self.equations {
+            Equations::Structured(s) => s.contract(&mu, hess),
+            Equations::Assembled(equations) => {
+                hess.fill(0.0);
+                for (e, w) in equations.chunks_exact(cols * cols).zip(&mu) {
+                    for (a, b) in hess.iter_mut().zip(e) {
+                        *a += w * b;
+                    }
+                }
+                // Symmetric to rounding; make it exactly so.
+                for i in 0..cols {
+                    for j in 0..i {
+                        let v = 0.5 * (hess[i * cols + j] + hess[j * cols + i]);
+                        hess[i * cols + j] = v;
+                        hess[j * cols + i] = v;
+                    }
+                }
             }
         }
-        // Symmetric to rounding; make it exactly so.
-        for i in 0..cols {
-            for j in 0..i {
-                let v = 0.5 * (hess[i * cols + j] + hess[j * cols + i]);
-                hess[i * cols + j] = v;
-                hess[j * cols + i] = v;
-            }
-        }
-        Ok(hess)
+        Ok(())
     }
 }
 
@@ -350,7 +454,7 @@ mod tests {
             cols,
             h,
             adjoint: std::cell::RefCell::new(lin.lu),
-            equations,
+            equations: Equations::Assembled(equations),
         };
         (
             structured.hessian(c).unwrap(),

@@ -112,8 +112,9 @@ impl Model {
 
     /// The first derivatives of the step `data` holds and everything its second derivatives need except
     /// the vector they are contracted with (any scene): the step's linearisation, the factors of `K_p^T`,
-    /// and the Hessians of the step's equations. Each [`SecondOrderStep::hessian`] is the rest. Linearises
-    /// the stored step as [`Model::derivatives`] does; `Err` when `data` holds no step.
+    /// and the Hessians of the step's equations (for the logistic and hard models with a constant noise,
+    /// what they are made of). Each [`SecondOrderStep::hessian`] is the rest. Linearises the stored step
+    /// as [`Model::derivatives`] does; `Err` when `data` holds no step.
     #[tracing::instrument(name = "dynamics.second_order", level = "debug", skip_all)]
     pub fn second_order(&self, data: &StepData) -> Result<SecondOrderStep, DynamicsError> {
         let (x, u) = self.stored_point(data)?;
