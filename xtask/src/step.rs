@@ -23,7 +23,7 @@ pub struct SimArgs {
     /// Complementarity model [default: logistic; with `optimize --task`, the task's].
     #[arg(long, value_enum)]
     model: Option<Model>,
-    /// Noise scale of the smoothed models [default: 0.1; with `optimize --task`, the task's].
+    /// Noise scale of the smoothed models [default: with `optimize --task`, the task's when its model has one; otherwise 0.1].
     #[arg(long, allow_negative_numbers = true)]
     sigma: Option<f64>,
     /// Time step [default: 0.05; with `optimize --task`, the task's].
@@ -89,7 +89,12 @@ impl SimArgs {
         scene: Scene,
         task: Option<&library::Task>,
     ) -> anyhow::Result<Simulator> {
-        let sigma = self.sigma.unwrap_or(0.1);
+        // A noise scale the command line does not give is the task's, when its model has one.
+        let task_sigma = task.and_then(|t| match t.model {
+            library::Model::Logistic(s) | library::Model::Normal(s) => Some(s),
+            library::Model::Hard => None,
+        });
+        let sigma = self.sigma.or(task_sigma).unwrap_or(0.1);
         let model = match (self.model, task) {
             (Some(Model::Hard), _) => Complementarity::Hard,
             (Some(Model::Logistic), _) => Complementarity::Logistic { sigma },
@@ -478,6 +483,19 @@ mod tests {
         assert_eq!(
             settings(args(None, None, None), &hard),
             (Complementarity::Hard, 0.05)
+        );
+        // A model named without its noise scale takes the task's, not the default 0.1.
+        let sharp = library::Task {
+            model: library::Model::Logistic(0.03),
+            ..task.clone()
+        };
+        assert_eq!(
+            settings(args(Some(Model::Normal), None, None), &sharp),
+            (Complementarity::Normal { sigma: 0.03 }, 0.05)
+        );
+        assert_eq!(
+            settings(args(Some(Model::Logistic), None, None), &hard),
+            (Complementarity::Logistic { sigma: 0.1 }, 0.05)
         );
         let err = args(None, Some(0.2), None)
             .simulator_of(file.scene.clone(), Some(&hard))
