@@ -308,3 +308,95 @@ fn the_example_scenes_tasks_are_solved_from_rest() {
         "the three-link finger turned the ellipse {turned} rad"
     );
 }
+
+/// A small library of the paper's recipe (one kicked chain) on a task of a scene file.
+fn small_settings(task: &library::Task, trajectories: usize) -> library::LibrarySettings {
+    library::LibrarySettings {
+        trajectories,
+        first_passes: 60,
+        warm_passes: 20,
+        ..library::LibrarySettings::paper().for_task(task)
+    }
+}
+
+#[test]
+fn a_library_is_built_for_a_task_of_a_scene_file_and_keeps_it() {
+    // The two fingers' turning task: a target angle, so no direction of progress.
+    let file = ProblemFile::from_toml_str(include_str!("../../scenes/two_fingers.toml")).unwrap();
+    let task = file.task(Some("turn")).unwrap();
+    let ellipse = file
+        .scene
+        .coordinate_names()
+        .iter()
+        .position(|c| c == "ellipse.angle")
+        .unwrap();
+    let progress = library::Progress::of_task(&task).unwrap();
+    assert_eq!(progress.coordinate, ellipse);
+    assert_eq!(progress.period, std::f64::consts::PI);
+    assert_eq!(progress.forward, None);
+    // Growth needs a direction of progress: refused, by name, before any work.
+    let growing = library::LibrarySettings {
+        growth: 2,
+        ..small_settings(&task, 3)
+    };
+    let err = library::Library::build_task(&file, Some("turn"), &growing, |_, _| {}).unwrap_err();
+    assert!(
+        matches!(err, LibraryError::Setting { name: "growth", .. }),
+        "{err}"
+    );
+    let settings = small_settings(&task, 3);
+    let lib = library::Library::build_task(&file, Some("turn"), &settings, |_, _| {}).unwrap();
+    assert_eq!(lib.entries.len(), 3);
+    assert_eq!(lib.entries[0].x, task.x0);
+    assert_eq!(lib.task().map(|t| t.name.as_str()), Some("turn"));
+    assert_eq!(lib.progress().unwrap(), progress);
+    // The task travels with the file, checked again on loading.
+    let again = library::Library::from_bytes(&lib.to_bytes().unwrap()).unwrap();
+    assert_eq!(again, lib);
+    // Its policy answers at the task's initial state, and a closed loop runs from there.
+    let policy = lib.policy().unwrap();
+    let mut u = vec![0.0; file.scene.n_controls];
+    policy.control(&task.x0, &mut u).unwrap();
+    assert!(u.iter().all(|v| v.is_finite()));
+    let e = library::evaluate(
+        &lib,
+        &policy,
+        &library::EvaluationSettings {
+            model: task.model,
+            h: task.h,
+            seconds: 2.0,
+            kick_every: 0.0,
+            x0: task.x0.clone(),
+            ..library::EvaluationSettings::default()
+        },
+    )
+    .unwrap();
+    assert_eq!(e.unconverged_steps, 0);
+    assert!(e.final_angle.is_finite());
+}
+
+#[test]
+fn a_task_library_needs_exactly_one_periodic_coordinate() {
+    for periods in [
+        "periods = {}",
+        r#"periods = { "ellipse.angle" = 3.14, "link1.angle" = 6.28 }"#,
+    ] {
+        let file = finger_with(&format!(
+            "[task.t]\nh = 0.05\nhorizon = 10\nmodel = \"hard\"\ncontrol_weight = 0.05\n{periods}\nrunning = [{{ coordinate = \"ellipse.angle\", linear = -1.0 }}]\n"
+        ))
+        .unwrap();
+        let task = file.task(None).unwrap();
+        let err = library::Progress::of_task(&task).unwrap_err();
+        assert!(
+            matches!(&err, LibraryError::Task { field, .. } if field == "periods"),
+            "{err}"
+        );
+        let err = library::Library::build_task(&file, None, &small_settings(&task, 2), |_, _| {})
+            .unwrap_err();
+        assert!(matches!(err, LibraryError::Task { .. }), "{err}");
+    }
+    // The paper's task on the finger spins forward: growth has its direction.
+    let file = ProblemFile::from_toml_str(FINGER).unwrap();
+    let p = library::Progress::of_task(&file.task(None).unwrap()).unwrap();
+    assert_eq!(p, library::Progress::finger(&file.scene).unwrap());
+}

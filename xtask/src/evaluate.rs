@@ -81,18 +81,23 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let library = Library::load(&args.library)
         .with_context(|| format!("loading {}", args.library.display()))?;
     let policy = library.policy()?;
+    let progress = library.progress()?;
+    let watched = &library.scene().coordinate_names()[progress.coordinate];
     let mut out = String::new();
     let _ = writeln!(
         out,
-        "library {}: {} controllers, built on {:?} at h = {}",
+        "library {}: {} controllers for task {}, built on {:?} at h = {}; rates are of {watched}, from the library's initial state",
         args.library.display(),
         library.entries.len(),
+        library
+            .task()
+            .map_or("the finger's (built in)".to_string(), |t| t.name.clone()),
         library.settings.model,
         library.settings.h
     );
     let _ = writeln!(
         out,
-        "| world | h | spin rate (rad/s) | last quarter | after kicks | contacts per half-turn | contacts/s | in contact | kicks recovered | quarter turn resumed (mean time) |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+        "| world | h | rate (rad/s) | last quarter | after kicks | contacts per half-turn | contacts/s | in contact | kicks recovered | quarter turn resumed (mean time) |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
     );
     if !emit(&mut out) {
         return Ok(());
@@ -106,7 +111,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             kick_every: args.kick_every,
             kick_std: args.kick_std,
             seed: args.seed,
-            ..EvaluationSettings::default()
+            x0: library.settings.x0.clone(),
         };
         let e = evaluate(&library, &policy, &settings)?;
         let kicked = e.kicks > 0;

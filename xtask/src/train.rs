@@ -1,5 +1,5 @@
-//! `cargo xtask train`: build the flicking finger's controller library (paper section IV-C) behind a
-//! progress bar and save it.
+//! `cargo xtask train`: build a controller library (paper section IV-C), the flicking finger's or one
+//! for a task of a scene file, behind a progress bar and save it.
 
 use anyhow::Context;
 use dynamics::Scene;
@@ -14,15 +14,16 @@ pub struct Args {
     /// Where to save the library.
     #[arg(long, default_value = "results/finger.lib")]
     out: PathBuf,
-    /// Contact model of the optimiser's dynamics.
-    #[arg(long, value_enum, default_value = "logistic")]
-    model: crate::step::Model,
-    /// Noise scale of the smoothed models.
-    #[arg(long, default_value_t = 0.1)]
-    sigma: f64,
-    /// Time step.
-    #[arg(long, default_value_t = 0.05)]
-    h: f64,
+    /// Contact model of the optimiser's dynamics [default: the task's with --task, else logistic].
+    #[arg(long, value_enum)]
+    model: Option<crate::step::Model>,
+    /// Noise scale of the smoothed models [default: the task's with --task when its model has one, else
+    /// 0.1].
+    #[arg(long)]
+    sigma: Option<f64>,
+    /// Time step [default: the task's with --task, else 0.05].
+    #[arg(long)]
+    h: Option<f64>,
     /// Number of trajectories (stored controllers).
     #[arg(long, default_value_t = 400)]
     trajectories: usize,
@@ -41,7 +42,7 @@ pub struct Args {
     /// branches off it, four controllers per trajectory, the best of eight by value, twelve growth rounds).
     #[arg(long)]
     paper: bool,
-    /// Optimisation horizon in steps (default: 90, the paper's recipe 75).
+    /// Optimisation horizon in steps (default: the task's with --task, else 90, the paper's recipe 75).
     #[arg(long)]
     horizon: Option<usize>,
     /// Nearest controllers the policy ranks by their value models (1: the nearest alone, eq. 20).
@@ -57,9 +58,15 @@ pub struct Args {
     /// default 4, the paper's recipe 1).
     #[arg(long)]
     keep: Option<usize>,
-    /// Scene file (TOML); default: the flicking finger of SCENE.md.
+    /// Scene file (TOML); default: the flicking finger of SCENE.md (scenes/finger.toml).
     #[arg(long)]
     scene: Option<PathBuf>,
+    /// A task of the scene file (`[task.NAME]`, docs/tasks.md): the library minimises its cost from its
+    /// initial state under its control limits, with its contact model, time step and horizon unless
+    /// given here, and its policy compares states modulo its one periodic coordinate. Without it, the
+    /// finger's built-in task (spin the last unactuated joint).
+    #[arg(long)]
+    task: Option<String>,
 }
 
 /// Run `cargo xtask train`.
@@ -72,26 +79,64 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     }
     Library::check_destination(&args.out)
         .with_context(|| format!("--out {} cannot be written", args.out.display()))?;
-    let scene = match &args.scene {
-        None => Scene::flicking_finger(),
+    let text = match &args.scene {
+        None => crate::step::FINGER_FILE.to_string(),
         Some(path) => {
-            let text = std::fs::read_to_string(path)
-                .with_context(|| format!("reading {}", path.display()))?;
-            Scene::from_toml_str(&text).with_context(|| format!("scene {}", path.display()))?
+            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?
         }
     };
-    let base = if args.paper {
+    let source = args
+        .scene
+        .as_ref()
+        .map_or("scenes/finger.toml".into(), |p| p.display().to_string());
+    let problem = match &args.task {
+        Some(_) => Some(
+            library::ProblemFile::from_toml_str(&text)
+                .with_context(|| format!("scene {source}"))?,
+        ),
+        None => None,
+    };
+    let task = match &problem {
+        Some(p) => Some(p.task(args.task.as_deref())?),
+        None => None,
+    };
+    let scene = match (&problem, &args.scene) {
+        (Some(p), _) => p.scene.clone(),
+        (None, None) => Scene::flicking_finger(),
+        (None, Some(_)) => {
+            Scene::from_toml_str(&text).with_context(|| format!("scene {source}"))?
+        }
+    };
+    let mut base = if args.paper {
         LibrarySettings::paper()
     } else {
         LibrarySettings::default()
     };
-    let settings = LibrarySettings {
-        model: match args.model {
-            crate::step::Model::Hard => Model::Hard,
-            crate::step::Model::Logistic => Model::Logistic(args.sigma),
-            crate::step::Model::Normal => Model::Normal(args.sigma),
+    if let Some(task) = &task {
+        base = base.for_task(task);
+    }
+    let task_sigma = match base.model {
+        Model::Logistic(s) | Model::Normal(s) if task.is_some() => Some(s),
+        _ => None,
+    };
+    let sigma = args.sigma.or(task_sigma).unwrap_or(0.1);
+    let model = match (args.model, &task) {
+        (Some(crate::step::Model::Hard), _) => Model::Hard,
+        (Some(crate::step::Model::Logistic), _) => Model::Logistic(sigma),
+        (Some(crate::step::Model::Normal), _) => Model::Normal(sigma),
+        (None, Some(_)) => match base.model {
+            Model::Logistic(_) => Model::Logistic(sigma),
+            Model::Normal(_) => Model::Normal(sigma),
+            Model::Hard if args.sigma.is_some() => anyhow::bail!(
+                "--sigma: the task's model is hard, which has no noise scale (give --model too)"
+            ),
+            Model::Hard => Model::Hard,
         },
-        h: args.h,
+        (None, None) => Model::Logistic(sigma),
+    };
+    let settings = LibrarySettings {
+        model,
+        h: args.h.unwrap_or(if task.is_some() { base.h } else { 0.05 }),
         trajectories: args.trajectories,
         seed: args.seed,
         chains: args.chains,
@@ -103,6 +148,11 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         tolerance: args.tolerance,
         ..base
     };
+    let progress = match &task {
+        Some(t) => library::Progress::of_task(t)?,
+        None => library::Progress::finger(&scene)?,
+    };
+    let watched = scene.coordinate_names()[progress.coordinate].clone();
     // One tick per optimised trajectory (each keeps `keep` controllers); growth adds trajectories beyond
     // the budget, and the bar grows with them.
     let bar = ProgressBar::new(settings.trajectories as u64);
@@ -113,13 +163,20 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         .expect("a valid template"),
     );
     let start = Instant::now();
-    let library = Library::build(&scene, &settings, |_, e| {
+    let tick = |_, e: &library::Entry| {
         if bar.position() >= bar.length().unwrap_or(0) {
             bar.set_length(bar.position() + 1);
         }
         bar.inc(1);
-        bar.set_message(format!("{} passes, theta3 {:.2}", e.passes, e.x[2]));
-    })?;
+        bar.set_message(format!(
+            "{} passes, {watched} {:.2}",
+            e.passes, e.x[progress.coordinate]
+        ));
+    };
+    let library = match &problem {
+        Some(p) => Library::build_task(p, args.task.as_deref(), &settings, tick)?,
+        None => Library::build(&scene, &settings, tick)?,
+    };
     bar.finish_and_clear();
     let seconds = start.elapsed().as_secs_f64();
     let firsts: Vec<_> = library.entries.iter().step_by(settings.keep).collect();

@@ -4,6 +4,7 @@
 
 use crate::error::LibraryError;
 use crate::policy::Policy;
+use crate::problem::{Task, TaskCost};
 use crate::task::{FingerDynamics, finger_cost};
 use ddp::{Ddp, DdpError, DdpSettings};
 use dynamics::{Complementarity, Scene, Simulator, StepSettings};
@@ -170,6 +171,23 @@ impl LibrarySettings {
 }
 
 impl LibrarySettings {
+    /// This recipe on `task`'s contact model, time step, horizon and initial state (growth's closed
+    /// loops, if any, at the task's time step alone).
+    pub fn for_task(self, task: &Task) -> Self {
+        LibrarySettings {
+            model: task.model,
+            h: task.h,
+            horizon: task.horizon,
+            x0: task.x0.clone(),
+            growth_time_steps: if self.growth_time_steps.is_empty() {
+                Vec::new()
+            } else {
+                vec![task.h]
+            },
+            ..self
+        }
+    }
+
     /// `Err` naming the first setting out of range.
     pub fn validate(&self, scene: &Scene) -> Result<(), LibraryError> {
         let bad = |name, value: f64, expected| {
@@ -425,6 +443,101 @@ pub fn free_joint(scene: &Scene) -> Result<usize, LibraryError> {
         .ok_or_else(|| LibraryError::Invalid("the scene has no unactuated joint to spin".into()))
 }
 
+/// The periodic state entry a library's policy compares states modulo, and the direction its task
+/// rewards along it (what growth rounds call progress).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Progress {
+    /// The state entry.
+    pub coordinate: usize,
+    /// Its period.
+    pub period: f64,
+    /// `1` or `-1`: the direction the running cost rewards motion along it (growth branches where the
+    /// policy stops moving that way); `None` when it rewards none (no stall criterion, so no growth).
+    pub forward: Option<f64>,
+}
+
+impl Progress {
+    /// The finger's (SCENE.md): the free joint's angle, period pi (the ellipse is symmetric under a half
+    /// turn), spun forward.
+    pub fn finger(scene: &Scene) -> Result<Progress, LibraryError> {
+        Ok(Progress {
+            coordinate: free_joint(scene)?,
+            period: std::f64::consts::PI,
+            forward: Some(1.0),
+        })
+    }
+
+    /// A task's: its one periodic coordinate (the policy compares states modulo exactly one), forward
+    /// where its running terms' linear weights on that coordinate sum to a reward.
+    pub fn of_task(task: &Task) -> Result<Progress, LibraryError> {
+        let periodic: Vec<(usize, f64)> = task
+            .periods
+            .iter()
+            .enumerate()
+            .filter_map(|(i, p)| p.map(|p| (i, p)))
+            .collect();
+        let &[(coordinate, period)] = periodic.as_slice() else {
+            return Err(LibraryError::Task {
+                task: task.name.clone(),
+                field: "periods".into(),
+                problem: format!(
+                    "a library's policy compares states modulo exactly one periodic coordinate; the task declares {}",
+                    periodic.len()
+                ),
+            });
+        };
+        let weight: f64 = task
+            .cost
+            .running
+            .iter()
+            .filter(|t| t.index == coordinate)
+            .map(|t| t.linear)
+            .sum();
+        Ok(Progress {
+            coordinate,
+            period,
+            forward: (weight != 0.0).then(|| -weight.signum()),
+        })
+    }
+}
+
+/// The cost a library's trajectories minimise: the finger's built in, or a task's from a scene file.
+#[derive(Debug, Clone)]
+pub(crate) enum Objective {
+    Finger(ddp::QuadraticCost),
+    Task(TaskCost),
+}
+
+impl ddp::Cost for Objective {
+    fn running(&self, i: usize, x: &[f64], u: &[f64]) -> f64 {
+        match self {
+            Objective::Finger(c) => c.running(i, x, u),
+            Objective::Task(c) => c.running(i, x, u),
+        }
+    }
+
+    fn terminal(&self, x: &[f64]) -> f64 {
+        match self {
+            Objective::Finger(c) => c.terminal(x),
+            Objective::Task(c) => c.terminal(x),
+        }
+    }
+
+    fn running_derivatives(&self, i: usize, x: &[f64], u: &[f64], out: &mut ddp::CostDerivatives) {
+        match self {
+            Objective::Finger(c) => c.running_derivatives(i, x, u, out),
+            Objective::Task(c) => c.running_derivatives(i, x, u, out),
+        }
+    }
+
+    fn terminal_derivatives(&self, x: &[f64], lx: &mut [f64], lxx: &mut [f64]) {
+        match self {
+            Objective::Finger(c) => c.terminal_derivatives(x, lx, lxx),
+            Objective::Task(c) => c.terminal_derivatives(x, lx, lxx),
+        }
+    }
+}
+
 /// Build the entries of a library (see the module documentation and [`Exploration`]): in an order that
 /// depends on the settings alone, whatever order threads finish in. `progress` sees each trajectory's
 /// first entry as it is made, with the number of trajectories done so far.
@@ -433,8 +546,20 @@ pub fn build_entries(
     settings: &LibrarySettings,
     progress: impl FnMut(usize, &Entry) + Send,
 ) -> Result<Vec<Entry>, LibraryError> {
+    build_entries_for(scene, None, settings, progress)
+}
+
+/// [`build_entries`] for `task`'s cost, control limits and periodic coordinate when given (the
+/// settings' `model`, `h`, `horizon` and `x0` still rule: [`LibrarySettings::for_task`] takes them
+/// from the task), the finger's otherwise.
+pub fn build_entries_for(
+    scene: &Scene,
+    task: Option<&Task>,
+    settings: &LibrarySettings,
+    progress: impl FnMut(usize, &Entry) + Send,
+) -> Result<Vec<Entry>, LibraryError> {
     settings.validate(scene)?;
-    let task = Build::new(scene, settings)?;
+    let task = Build::new(scene, task, settings)?;
     let done = std::sync::Mutex::new((0usize, progress));
     let report = |entry: &Entry| {
         let mut guard = done.lock().unwrap_or_else(|e| e.into_inner());
@@ -456,8 +581,9 @@ pub fn build_entries(
 struct Build<'a> {
     scene: &'a Scene,
     settings: &'a LibrarySettings,
-    cost: ddp::QuadraticCost,
-    free: usize,
+    cost: Objective,
+    progress: Progress,
+    control_limits: Option<ddp::ControlLimits>,
     kick: Normal<f64>,
 }
 
@@ -477,13 +603,44 @@ impl Built {
 }
 
 impl<'a> Build<'a> {
-    fn new(scene: &'a Scene, settings: &'a LibrarySettings) -> Result<Self, LibraryError> {
-        let free = free_joint(scene)?;
+    fn new(
+        scene: &'a Scene,
+        task: Option<&Task>,
+        settings: &'a LibrarySettings,
+    ) -> Result<Self, LibraryError> {
+        let (cost, progress, control_limits) = match task {
+            None => {
+                let free = free_joint(scene)?;
+                let cost = finger_cost(scene.n_dof(), free, scene.n_controls);
+                (Objective::Finger(cost), Progress::finger(scene)?, None)
+            }
+            Some(task) => {
+                if task.x0.len() != scene.n_state() {
+                    return Err(LibraryError::SceneMismatch(format!(
+                        "task {} has {} state entries, the scene {}",
+                        task.name,
+                        task.x0.len(),
+                        scene.n_state()
+                    )));
+                }
+                let progress = Progress::of_task(task)?;
+                if progress.forward.is_none() && settings.growth > 0 {
+                    return Err(LibraryError::Setting {
+                        name: "growth",
+                        value: settings.growth as f64,
+                        expected: "0 for a task that rewards no motion along its periodic coordinate (growth branches where the policy stops moving forward)",
+                    });
+                }
+                let cost = Objective::Task(task.cost.clone());
+                (cost, progress, task.control_limits.clone())
+            }
+        };
         Ok(Build {
             scene,
             settings,
-            cost: finger_cost(scene.n_dof(), free, scene.n_controls),
-            free,
+            cost,
+            progress,
+            control_limits,
             kick: Normal::new(0.0, settings.kick_variance.sqrt())
                 .map_err(|e| LibraryError::Invalid(e.to_string()))?,
         })
@@ -525,7 +682,8 @@ impl<'a> Build<'a> {
                 s.warm_passes
             };
             let sol = self.solve(dynamics, &x1, &controls, passes, k)?;
-            let values = local_values(&sol, &self.cost, s.keep, self.free, std::f64::consts::PI);
+            let p = self.progress;
+            let values = local_values(&sol, &self.cost, s.keep, p.coordinate, p.period);
             for (t, value) in values.into_iter().enumerate() {
                 let entry = Entry {
                     x: sol.states[t].clone(),
@@ -568,6 +726,7 @@ impl<'a> Build<'a> {
         let ddp = Ddp::new(DdpSettings {
             max_iterations: passes,
             tol_cost: self.settings.tolerance,
+            control_limits: self.control_limits.clone(),
             ..DdpSettings::default()
         })
         .map_err(failed)?;
@@ -720,13 +879,20 @@ fn grow(
     report: &(dyn Fn(&Entry) + Sync),
 ) -> Result<usize, LibraryError> {
     let s = task.settings;
-    let free = task.free;
+    let Progress {
+        coordinate: free,
+        period,
+        forward,
+    } = task.progress;
+    // Checked when the build was set up: growth needs a direction of progress.
+    let forward = forward.unwrap_or(1.0);
     let policy_of = |built: &Built| {
-        Policy::new(
+        Policy::with_period(
             &built.entries,
             task.scene.n_state(),
             task.scene.n_controls,
             free,
+            period,
         )?
         .with_neighbours(s.neighbours)
     };
@@ -769,7 +935,7 @@ fn grow(
             recent.pop_front();
         }
         let i = policy.control(&x, &mut u)?;
-        if recent.len() == window && x[free] - recent[0] < STALL_ADVANCE {
+        if recent.len() == window && forward * (x[free] - recent[0]) < STALL_ADVANCE {
             // Stalled: a branch from here, warm-started from the plan of the controller in use.
             let (trajectory, offset) = (i / s.keep, i % s.keep);
             let plan = ddp::shift_controls(&built.plans[trajectory], offset);

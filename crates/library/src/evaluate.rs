@@ -126,18 +126,21 @@ pub fn evaluate_in(
 ) -> Result<Evaluation, LibraryError> {
     let own = library.scene();
     let n = scene.n_dof();
-    let free = crate::free_joint(scene)?;
-    if scene.n_state() != own.n_state()
-        || scene.n_controls != own.n_controls
-        || free != crate::free_joint(own)?
+    // The library's periodic coordinate (its task's, or the finger's free joint, which the world must
+    // share).
+    let free = library.progress()?.coordinate;
+    let world_free = match library.task() {
+        Some(_) => free,
+        None => crate::free_joint(scene)?,
+    };
+    if scene.n_state() != own.n_state() || scene.n_controls != own.n_controls || free != world_free
     {
         return Err(LibraryError::SceneMismatch(format!(
-            "the world has {} states, {} controls and free joint {free}; the library {}, {} and {}",
+            "the world has {} states, {} controls and free joint {world_free}; the library {}, {} and {free}",
             scene.n_state(),
             scene.n_controls,
             own.n_state(),
             own.n_controls,
-            crate::free_joint(own)?
         )));
     }
     if !(settings.h.is_finite() && settings.h > 0.0) {

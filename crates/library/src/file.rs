@@ -6,12 +6,14 @@
 //! ```
 //!
 //! with the payload the `bincode` (2, standard configuration) encoding of the scene (as its TOML text),
-//! the settings and the controllers. Loading checks all of it before anything is decoded, then the decoded
+//! the task it was built for (its name and its table of the scene file; none for the finger's built-in
+//! task), the settings and the controllers. Loading checks all of it before anything is decoded, then the decoded
 //! library for consistency; a file that fails any check is refused whole.
 
-use crate::build::{Entry, LibrarySettings, build_entries, free_joint};
+use crate::build::{Entry, LibrarySettings, Progress, build_entries_for};
 use crate::error::LibraryError;
 use crate::policy::Policy;
+use crate::problem::{ProblemFile, Task, TaskSpec};
 use dynamics::{Scene, SceneSpec};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -19,13 +21,16 @@ use std::path::Path;
 /// The file's magic bytes.
 pub const MAGIC: &[u8; 8] = b"SLCPLIB\0";
 /// The format version this build writes and reads.
-pub const VERSION: u32 = 4;
+pub const VERSION: u32 = 5;
 const HEADER: usize = 8 + 4 + 8 + 4;
 
 /// A trajectory library: the scene and settings it was built with and its local controllers.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Library {
     scene: Scene,
+    /// The task of the scene file it was built for (`None`: the finger's, built in), checked against
+    /// the scene, with its name and text as the file gave them.
+    task: Option<(Task, TaskSpec)>,
     /// How it was built.
     pub settings: LibrarySettings,
     /// The controllers, in the order they were built.
@@ -35,6 +40,8 @@ pub struct Library {
 #[derive(Serialize, Deserialize)]
 struct Payload {
     scene_toml: String,
+    /// The task's name and its table from the scene file.
+    task: Option<(String, TaskSpec)>,
     settings: LibrarySettings,
     entries: Vec<Entry>,
 }
@@ -47,15 +54,37 @@ fn io(path: &Path) -> impl Fn(std::io::Error) -> LibraryError + '_ {
 }
 
 impl Library {
-    /// Build a library on `scene` (paper section IV-C); `progress` sees each controller as it is added.
+    /// Build a library on `scene` (paper section IV-C) for the finger's task; `progress` sees each
+    /// controller as it is added.
     pub fn build(
         scene: &Scene,
         settings: &LibrarySettings,
         progress: impl FnMut(usize, &Entry) + Send,
     ) -> Result<Self, LibraryError> {
-        let entries = build_entries(scene, settings, progress)?;
+        let entries = build_entries_for(scene, None, settings, progress)?;
         Ok(Library {
             scene: scene.clone(),
+            task: None,
+            settings: settings.clone(),
+            entries,
+        })
+    }
+
+    /// Build a library for the task `name` of a scene file (the only one when `None`): its cost,
+    /// control limits and periodic coordinate; `settings` as [`LibrarySettings::for_task`] makes them
+    /// (their `model`, `h`, `horizon` and `x0` are the ones used).
+    pub fn build_task(
+        problem: &ProblemFile,
+        name: Option<&str>,
+        settings: &LibrarySettings,
+        progress: impl FnMut(usize, &Entry) + Send,
+    ) -> Result<Self, LibraryError> {
+        let task = problem.task(name)?;
+        let spec = problem.tasks[&task.name].clone();
+        let entries = build_entries_for(&problem.scene, Some(&task), settings, progress)?;
+        Ok(Library {
+            scene: problem.scene.clone(),
+            task: Some((task, spec)),
             settings: settings.clone(),
             entries,
         })
@@ -66,11 +95,31 @@ impl Library {
         &self.scene
     }
 
+    /// The task it was built for (`None`: the finger's, built in).
+    pub fn task(&self) -> Option<&Task> {
+        self.task.as_ref().map(|(t, _)| t)
+    }
+
+    /// The periodic coordinate its policy compares states modulo, and the direction its task rewards.
+    pub fn progress(&self) -> Result<Progress, LibraryError> {
+        match self.task() {
+            Some(task) => Progress::of_task(task),
+            None => Progress::finger(&self.scene),
+        }
+    }
+
     /// The global policy (eq. 20) over its controllers.
     pub fn policy(&self) -> Result<Policy, LibraryError> {
         let s = &self.scene;
-        Policy::new(&self.entries, s.n_state(), s.n_controls, free_joint(s)?)?
-            .with_neighbours(self.settings.neighbours)
+        let p = self.progress()?;
+        Policy::with_period(
+            &self.entries,
+            s.n_state(),
+            s.n_controls,
+            p.coordinate,
+            p.period,
+        )?
+        .with_neighbours(self.settings.neighbours)
     }
 
     /// `Err` unless the library was built for `scene`.
@@ -92,6 +141,10 @@ impl Library {
         let payload = Payload {
             scene_toml: toml::to_string(self.scene.spec())
                 .map_err(|e| LibraryError::Invalid(format!("the scene does not serialise: {e}")))?,
+            task: self
+                .task
+                .as_ref()
+                .map(|(t, spec)| (t.name.clone(), spec.clone())),
             settings: self.settings.clone(),
             entries: self.entries.clone(),
         };
@@ -157,8 +210,13 @@ impl Library {
             .map_err(|e| LibraryError::Invalid(format!("its scene: {e}")))?;
         let scene = Scene::new(spec)?;
         payload.settings.validate(&scene)?;
+        let task = match payload.task {
+            Some((name, spec)) => Some((Task::new(&scene, &name, &spec)?, spec)),
+            None => None,
+        };
         let library = Library {
             scene,
+            task,
             settings: payload.settings,
             entries: payload.entries,
         };

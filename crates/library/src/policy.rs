@@ -125,6 +125,30 @@ impl Policy {
         m: usize,
         free: usize,
     ) -> Result<Self, LibraryError> {
+        Policy::with_period(entries, n_state, m, free, PI)
+    }
+
+    /// [`Policy::new`] with the periodic state entry `free` of period `period` (a task's, see
+    /// [`crate::Progress::of_task`]).
+    pub fn with_period(
+        entries: &[Entry],
+        n_state: usize,
+        m: usize,
+        free: usize,
+        period: f64,
+    ) -> Result<Self, LibraryError> {
+        if free >= n_state {
+            return Err(LibraryError::Invalid(format!(
+                "periodic state entry {free} of a state of {n_state}"
+            )));
+        }
+        if !(period.is_finite() && period > 0.0) {
+            return Err(LibraryError::Setting {
+                name: "period",
+                value: period,
+                expected: "finite and positive",
+            });
+        }
         if entries.is_empty() {
             return Err(LibraryError::Invalid(
                 "a library with no controllers".into(),
@@ -152,7 +176,6 @@ impl Policy {
             }
         }
         let n = n_state;
-        let period = PI;
         let count = entries.len() as f64;
         // The free angle's circular mean (period pi: angles doubled), then every state's free angle
         // unwrapped next to it.
