@@ -1,7 +1,7 @@
 //! `cargo xtask step` and `cargo xtask simulate`: the simulator from the command line.
 
 use anyhow::Context;
-use dynamics::{Complementarity, Scene, Simulator, StepSettings};
+use dynamics::{Scene, Simulator, StepSettings};
 use serde::{Deserialize, Serialize};
 use std::io::Write;
 use std::path::PathBuf;
@@ -89,27 +89,7 @@ impl SimArgs {
         scene: Scene,
         task: Option<&library::Task>,
     ) -> anyhow::Result<Simulator> {
-        // A noise scale the command line does not give is the task's, when its model has one.
-        let task_sigma = task.and_then(|t| match t.model {
-            library::Model::Logistic(s) | library::Model::Normal(s) => Some(s),
-            library::Model::Hard => None,
-        });
-        let sigma = self.sigma.or(task_sigma).unwrap_or(0.1);
-        let model = match (self.model, task) {
-            (Some(Model::Hard), _) => Complementarity::Hard,
-            (Some(Model::Logistic), _) => Complementarity::Logistic { sigma },
-            (Some(Model::Normal), _) => Complementarity::Normal { sigma },
-            (None, Some(task)) => match (task.model, self.sigma) {
-                (library::Model::Logistic(_), Some(sigma)) => Complementarity::Logistic { sigma },
-                (library::Model::Normal(_), Some(sigma)) => Complementarity::Normal { sigma },
-                (library::Model::Hard, Some(_)) => anyhow::bail!(
-                    "--sigma: task {}'s model is hard, which has no noise scale (give --model too)",
-                    task.name
-                ),
-                (model, None) => model.complementarity(),
-            },
-            (None, None) => Complementarity::Logistic { sigma },
-        };
+        let model = contact_model(self.model, self.sigma, task)?.complementarity();
         Ok(Simulator::new(
             scene,
             StepSettings {
@@ -121,6 +101,38 @@ impl SimArgs {
             },
         )?)
     }
+}
+
+/// The contact model a command runs: `--model` (with `--sigma`, else the task's noise scale when its
+/// model has one, else 0.1) if given, else the task's (with `--sigma` in place of its noise scale; refused
+/// for a hard task), else logistic.
+pub fn contact_model(
+    model: Option<Model>,
+    sigma: Option<f64>,
+    task: Option<&library::Task>,
+) -> anyhow::Result<library::Model> {
+    use library::Model as M;
+    // A noise scale the command line does not give is the task's, when its model has one.
+    let task_sigma = task.and_then(|t| match t.model {
+        M::Logistic(s) | M::Normal(s) => Some(s),
+        M::Hard => None,
+    });
+    let s = sigma.or(task_sigma).unwrap_or(0.1);
+    Ok(match (model, task) {
+        (Some(Model::Hard), _) => M::Hard,
+        (Some(Model::Logistic), _) => M::Logistic(s),
+        (Some(Model::Normal), _) => M::Normal(s),
+        (None, Some(task)) => match (task.model, sigma) {
+            (M::Logistic(_), Some(s)) => M::Logistic(s),
+            (M::Normal(_), Some(s)) => M::Normal(s),
+            (M::Hard, Some(_)) => anyhow::bail!(
+                "--sigma: task {}'s model is hard, which has no noise scale (give --model too)",
+                task.name
+            ),
+            (model, None) => model,
+        },
+        (None, None) => M::Logistic(s),
+    })
 }
 
 /// scenes/finger.toml: the flicking finger of SCENE.md with the paper's task.
@@ -445,6 +457,7 @@ pub fn run_simulate(args: &SimulateArgs) -> anyhow::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use dynamics::Complementarity;
 
     /// A task supplies the model, sigma and time step; a flag given on the command line overrides it, and
     /// a noise scale given for a hard task is refused.

@@ -4,7 +4,7 @@
 use anyhow::Context;
 use dynamics::Scene;
 use indicatif::{ProgressBar, ProgressStyle};
-use library::{Library, LibrarySettings, Model};
+use library::{Library, LibrarySettings};
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -115,28 +115,10 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     if let Some(task) = &task {
         base = base.for_task(task);
     }
-    let task_sigma = match base.model {
-        Model::Logistic(s) | Model::Normal(s) if task.is_some() => Some(s),
-        _ => None,
-    };
-    let sigma = args.sigma.or(task_sigma).unwrap_or(0.1);
-    let model = match (args.model, &task) {
-        (Some(crate::step::Model::Hard), _) => Model::Hard,
-        (Some(crate::step::Model::Logistic), _) => Model::Logistic(sigma),
-        (Some(crate::step::Model::Normal), _) => Model::Normal(sigma),
-        (None, Some(_)) => match base.model {
-            Model::Logistic(_) => Model::Logistic(sigma),
-            Model::Normal(_) => Model::Normal(sigma),
-            Model::Hard if args.sigma.is_some() => anyhow::bail!(
-                "--sigma: the task's model is hard, which has no noise scale (give --model too)"
-            ),
-            Model::Hard => Model::Hard,
-        },
-        (None, None) => Model::Logistic(sigma),
-    };
+    let model = crate::step::contact_model(args.model, args.sigma, task.as_ref())?;
     let settings = LibrarySettings {
         model,
-        h: args.h.unwrap_or(if task.is_some() { base.h } else { 0.05 }),
+        h: args.h.unwrap_or(base.h),
         trajectories: args.trajectories,
         seed: args.seed,
         chains: args.chains,
