@@ -6,7 +6,8 @@
 
 // The experiments allocate many small vectors per simulated step (the derivatives' ingredients, the
 // solver's trial data): mimalloc makes an optimiser pass about 8% faster than the system allocator
-// (`xtask optimize`, alternating binaries; docs/benchmarks.md).
+// (`xtask optimize`, alternating binaries; docs/benchmarks.md). Its v2 allocator: see the workspace
+// Cargo.toml.
 #[global_allocator]
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 

@@ -158,18 +158,22 @@ impl<T: Ring> Constraints<T> {
                 point_b: re(c.point_b),
                 witness_unique: c.witness_unique,
             });
-            let ja = kin.point_jacobian(scene, pair.a, c.point_a);
-            let jb = kin.point_jacobian(scene, pair.b, c.point_b);
+            // Per joint: the normal and tangential relative velocity of the witness points.
             let t = perp(c.normal);
-            let along = |dir: [T; 2], k: usize| {
-                dir[0] * (jb[0][k] - ja[0][k]) + dir[1] * (jb[1][k] - ja[1][k])
-            };
-            for sign in [1.0, -1.0] {
-                d.push(c.distance);
-                jacobian.extend(
-                    (0..n).map(|k| along(c.normal, k) + along(t, k) * (sign * pair.friction)),
-                );
+            let start = jacobian.len();
+            jacobian.resize(start + 2 * n, zero);
+            let (plus, minus) = jacobian[start..].split_at_mut(n);
+            for k in 0..n {
+                let ja = kin.point_jacobian_column(scene, pair.a, c.point_a, k);
+                let jb = kin.point_jacobian_column(scene, pair.b, c.point_b, k);
+                let rel = [jb[0] - ja[0], jb[1] - ja[1]];
+                let normal = c.normal[0] * rel[0] + c.normal[1] * rel[1];
+                let tangent = (t[0] * rel[0] + t[1] * rel[1]) * pair.friction;
+                plus[k] = normal + tangent;
+                minus[k] = normal + tangent * -1.0;
             }
+            d.push(c.distance);
+            d.push(c.distance);
         }
         Ok(Constraints {
             d,

@@ -85,13 +85,19 @@ impl<T: Ring> Kinematics<T> {
         let zero = T::from(0.0);
         let mut jac = [vec![zero; n], vec![zero; n]];
         for j in 0..n {
-            if scene.moves(j, body) {
-                let c = perp(sub(p, self.hinge[j]));
-                jac[0][j] = c[0];
-                jac[1][j] = c[1];
-            }
+            [jac[0][j], jac[1][j]] = self.point_jacobian_column(scene, body, p, j);
         }
         jac
+    }
+
+    /// Column `j` of [`Kinematics::point_jacobian`]: the velocity of that point per unit velocity of joint
+    /// `j` (zero when the joint does not move `body`).
+    pub fn point_jacobian_column(&self, scene: &Scene, body: usize, p: [T; 2], j: usize) -> [T; 2] {
+        if scene.moves(j, body) {
+            perp(sub(p, self.hinge[j]))
+        } else {
+            [T::from(0.0); 2]
+        }
     }
 
     /// The generalised forces (one per joint, `J_p^T F`) of the world force `force` acting on the material

@@ -263,12 +263,14 @@ pub fn signed_distance_dual<T: Forward>(
         _ => 3,
     };
     let delta = [pose_a[0] - pose_b[0], pose_a[1] - pose_b[1]];
+    // Each body's orientation as (sin, cos), shared by every support evaluation below.
+    let (turn_a, turn_b) = (pose_a[2].sin_and_cos(), pose_b[2].sin_and_cos());
     let mut phi = T::from(base.jet.phi);
     if base.jet.ddf > f64::EPSILON * (base.jet.a.rho + base.jet.b.rho + base.jet.f.abs()) {
         for _ in 0..steps {
             let (s, c) = phi.sin_and_cos();
-            let (_, ha, dha, ddha) = dual_support(a, pose_a[2], c, s);
-            let (_, hb, dhb, ddhb) = dual_support(b, pose_b[2], c, s);
+            let (_, ha, dha, ddha) = dual_support(a, turn_a, c, s);
+            let (_, hb, dhb, ddhb) = dual_support(b, turn_b, c, s);
             let f = c * delta[0] + s * delta[1] + ha + hb;
             let df = -s * delta[0] + c * delta[1] + dha + dhb;
             // F'' = rho_A + rho_B - F, with rho = h'' + h.
@@ -277,8 +279,8 @@ pub fn signed_distance_dual<T: Forward>(
         }
     }
     let (s, c) = phi.sin_and_cos();
-    let (la, ha, _, _) = dual_support(a, pose_a[2], c, s);
-    let (lb, hb, _, _) = dual_support(b, pose_b[2], -c, -s);
+    let (la, ha, _, _) = dual_support(a, turn_a, c, s);
+    let (lb, hb, _, _) = dual_support(b, turn_b, -c, -s);
     let f = c * delta[0] + s * delta[1] + ha + hb;
     Ok(DualContact {
         distance: -f,
@@ -289,10 +291,9 @@ pub fn signed_distance_dual<T: Forward>(
     })
 }
 
-/// World-frame support offset, value, and first two angle derivatives of an ellipse at orientation
-/// `theta` along the world direction `(c, s)`.
-fn dual_support<T: Forward>(e: &Ellipse, theta: T, c: T, s: T) -> ([T; 2], T, T, T) {
-    let (st, ct) = theta.sin_and_cos();
+/// World-frame support offset, value, and first two angle derivatives of an ellipse whose orientation
+/// has sine and cosine `(st, ct)`, along the world direction `(c, s)`.
+fn dual_support<T: Forward>(e: &Ellipse, (st, ct): (T, T), c: T, s: T) -> ([T; 2], T, T, T) {
     let bc = c * ct + s * st;
     let bs = s * ct - c * st;
     let (a2, b2) = (e.a() * e.a(), e.b() * e.b());

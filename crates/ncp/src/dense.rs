@@ -123,12 +123,12 @@ impl DenseLu {
         if a.len() != n * n {
             return Err(FactorError::Shape { len: a.len(), n });
         }
-        // The largest magnitude, NaN kept once seen (`f64::max` would drop it): one pass finds both.
-        let scale = a.iter().fold(0.0f64, |m, v| {
+        // The largest magnitude and whether every entry is finite, in one branch-free pass.
+        let (scale, finite) = a.iter().fold((0.0f64, true), |(m, ok), v| {
             let e = v.abs();
-            if e > m || e.is_nan() { e } else { m }
+            (if e > m { e } else { m }, ok & (e <= f64::MAX))
         });
-        if !scale.is_finite() {
+        if !finite {
             return Err(FactorError::NonFinite);
         }
         let tiny = (n as f64) * f64::EPSILON * scale;
@@ -138,44 +138,20 @@ impl DenseLu {
                 for (i, p) in perm.iter_mut().enumerate() {
                     *p = i;
                 }
-                for k in 0..n {
-                    let mut p = k;
-                    let mut best = lu[k * n + k].abs();
-                    for i in k + 1..n {
-                        let v = lu[i * n + k].abs();
-                        if v > best {
-                            best = v;
-                            p = i;
-                        }
-                    }
-                    if !(best > tiny) {
-                        return Err(FactorError::Singular {
-                            column: k,
-                            pivot: best,
-                            threshold: tiny,
-                        });
-                    }
-                    if p != k {
-                        let (top, bottom) = lu.split_at_mut(p * n);
-                        top[k * n..(k + 1) * n].swap_with_slice(&mut bottom[..n]);
-                        perm.swap(k, p);
-                    }
-                    // Eliminate below the pivot, row slices against the pivot row's tail.
-                    let (top, bottom) = lu.split_at_mut((k + 1) * n);
-                    let pivot_row = &top[k * n + k..(k + 1) * n];
-                    let inv = 1.0 / pivot_row[0];
-                    for row in bottom.chunks_exact_mut(n) {
-                        let tail = &mut row[k..];
-                        let l = tail[0] * inv;
-                        tail[0] = l;
-                        if l != 0.0 {
-                            for (r, u) in tail[1..].iter_mut().zip(&pivot_row[1..]) {
-                                *r -= l * u;
-                            }
-                        }
-                    }
+                // The scenes' sizes get a copy of the loop compiled for their size (no bounds checks,
+                // unrolled rows); any other size runs the same elimination on run-time lengths.
+                match n {
+                    4 => eliminate_fixed::<4>(lu, perm, tiny),
+                    5 => eliminate_fixed::<5>(lu, perm, tiny),
+                    6 => eliminate_fixed::<6>(lu, perm, tiny),
+                    7 => eliminate_fixed::<7>(lu, perm, tiny),
+                    8 => eliminate_fixed::<8>(lu, perm, tiny),
+                    9 => eliminate_fixed::<9>(lu, perm, tiny),
+                    10 => eliminate_fixed::<10>(lu, perm, tiny),
+                    11 => eliminate_fixed::<11>(lu, perm, tiny),
+                    12 => eliminate_fixed::<12>(lu, perm, tiny),
+                    _ => eliminate(lu, perm, n, tiny),
                 }
-                Ok(())
             }
             Backend::Faer {
                 lu,
@@ -294,7 +270,16 @@ impl DenseLu {
         debug_assert_eq!(rhs.len(), n * k);
         match &mut self.backend {
             Backend::Hand { lu, perm } => {
-                let b = rhs.to_vec();
+                // A copy of the right-hand sides (rows are read in pivot order), on the stack when small.
+                let mut stack = [0.0f64; 128];
+                let heap: Vec<f64>;
+                let b: &[f64] = if rhs.len() <= stack.len() {
+                    stack[..rhs.len()].copy_from_slice(rhs);
+                    &stack[..rhs.len()]
+                } else {
+                    heap = rhs.to_vec();
+                    &heap
+                };
                 for i in 0..n {
                     let (done, rest) = rhs.split_at_mut(i * k);
                     let xi = &mut rest[..k];
@@ -357,6 +342,94 @@ impl DenseLu {
             Backend::Faer { .. } => self.faer_solve(rhs, false),
         }
     }
+}
+
+/// Gaussian elimination with partial pivoting of the row-major `n x n` matrix in `lu`, in place (`L`'s
+/// multipliers below the diagonal, `U` on and above it), recording the row swaps in `perm`.
+fn eliminate(lu: &mut [f64], perm: &mut [usize], n: usize, tiny: f64) -> Result<(), FactorError> {
+    for k in 0..n {
+        let mut p = k;
+        let mut best = lu[k * n + k].abs();
+        for i in k + 1..n {
+            let v = lu[i * n + k].abs();
+            if v > best {
+                best = v;
+                p = i;
+            }
+        }
+        if !(best > tiny) {
+            return Err(FactorError::Singular {
+                column: k,
+                pivot: best,
+                threshold: tiny,
+            });
+        }
+        if p != k {
+            let (top, bottom) = lu.split_at_mut(p * n);
+            top[k * n..(k + 1) * n].swap_with_slice(&mut bottom[..n]);
+            perm.swap(k, p);
+        }
+        // Eliminate below the pivot, row slices against the pivot row's tail.
+        let (top, bottom) = lu.split_at_mut((k + 1) * n);
+        let pivot_row = &top[k * n + k..(k + 1) * n];
+        let inv = 1.0 / pivot_row[0];
+        for row in bottom.chunks_exact_mut(n) {
+            let tail = &mut row[k..];
+            let l = tail[0] * inv;
+            tail[0] = l;
+            if l != 0.0 {
+                for (r, u) in tail[1..].iter_mut().zip(&pivot_row[1..]) {
+                    *r -= l * u;
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// [`eliminate`] for `N x N`, the same arithmetic in the same order.
+fn eliminate_fixed<const N: usize>(
+    lu: &mut [f64],
+    perm: &mut [usize],
+    tiny: f64,
+) -> Result<(), FactorError> {
+    let (rows, _) = lu.as_chunks_mut::<N>();
+    let rows: &mut [[f64; N]; N] = rows.try_into().expect("an N x N matrix");
+    for k in 0..N {
+        let mut p = k;
+        let mut best = rows[k][k].abs();
+        for (i, row) in rows.iter().enumerate().skip(k + 1) {
+            let v = row[k].abs();
+            if v > best {
+                best = v;
+                p = i;
+            }
+        }
+        if !(best > tiny) {
+            return Err(FactorError::Singular {
+                column: k,
+                pivot: best,
+                threshold: tiny,
+            });
+        }
+        if p != k {
+            rows.swap(k, p);
+            perm.swap(k, p);
+        }
+        let (top, bottom) = rows.split_at_mut(k + 1);
+        let pivot_row = &top[k];
+        let inv = 1.0 / pivot_row[k];
+        for row in bottom.iter_mut() {
+            let l = row[k] * inv;
+            row[k] = l;
+            if l != 0.0 {
+                for j in k + 1..N {
+                    row[j] -= l * pivot_row[j];
+                }
+            }
+        }
+    }
+    Ok(())
 }
 
 fn substitute(lu: &[f64], perm: &[usize], b: &[f64], x: &mut [f64]) {
@@ -448,6 +521,67 @@ mod tests {
                     .zip(&y)
                     .fold(0.0f64, |m, (p, q)| m.max((p - q).abs()));
                 assert!(err < 1e-10, "{solver:?} n = {n}: error {err}");
+            }
+        }
+    }
+
+    #[test]
+    fn the_sized_eliminations_equal_the_general_one_bit_for_bit() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(17);
+        for n in 1usize..=14 {
+            for trial in 0..20 {
+                let mut a: Vec<f64> = (0..n * n).map(|_| rng.random_range(-1.0..1.0)).collect();
+                if trial % 4 == 1 && n > 1 {
+                    // Exact zeros below the diagonal (the multiplier-is-zero branch) ...
+                    for i in 1..n {
+                        a[i * n] = 0.0;
+                    }
+                }
+                if trial % 4 == 2 && n > 1 {
+                    // ... and a repeated row, singular in both.
+                    let row = a[..n].to_vec();
+                    a[(n - 1) * n..].copy_from_slice(&row);
+                }
+                let mut lu = DenseLu::new(n, LinearSolver::Hand);
+                let sized = lu.factor(&a);
+                let (mut general, mut perm) = (a.clone(), (0..n).collect::<Vec<_>>());
+                let scale = a.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+                let tiny = (n as f64) * f64::EPSILON * scale;
+                let reference = eliminate(&mut general, &mut perm, n, tiny);
+                assert_eq!(sized, reference, "n = {n}, trial {trial}");
+                if reference.is_ok() {
+                    let Backend::Hand {
+                        lu: factors,
+                        perm: p,
+                    } = &lu.backend
+                    else {
+                        unreachable!()
+                    };
+                    assert_eq!(factors, &general, "n = {n}, trial {trial}");
+                    assert_eq!(p, &perm, "n = {n}, trial {trial}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn infinite_entries_are_non_finite_and_huge_ones_are_not() {
+        for n in [3usize, 10, 13] {
+            let mut lu = DenseLu::new(n, LinearSolver::Hand);
+            let mut a: Vec<f64> = (0..n * n)
+                .map(|k| {
+                    if k % (n + 1) == 0 {
+                        f64::MAX / 2.0
+                    } else {
+                        0.0
+                    }
+                })
+                .collect();
+            a[n + 1] = f64::MAX;
+            lu.factor(&a).unwrap();
+            for bad in [f64::INFINITY, f64::NEG_INFINITY, f64::NAN] {
+                a[n * n - 2] = bad;
+                assert_eq!(lu.factor(&a), Err(FactorError::NonFinite), "n = {n}, {bad}");
             }
         }
     }

@@ -86,8 +86,7 @@ impl Taylor {
             g: Vec::with_capacity(len * dim),
             h: Vec::with_capacity(len * dim * dim),
         };
-        let mut first = true;
-        for dirs in block_pairs(dim, K) {
+        let mut pass = |dirs: &[usize], first: bool| -> Result<(), DynamicsError> {
             let args: Vec<Jet<K>> = at
                 .iter()
                 .enumerate()
@@ -96,12 +95,23 @@ impl Taylor {
                     None => Jet::from(v),
                 })
                 .collect();
-            f(&args, &mut Sink::new(&mut taylor, &dirs, first))?;
-            first = false;
+            f(&args, &mut Sink::new(&mut taylor, dirs, first))
+        };
+        const { assert!(K <= ALL_DIRECTIONS.len()) };
+        if dim <= K {
+            // The usual case, one pass over all arguments: no list of passes to build.
+            pass(&ALL_DIRECTIONS[..dim], true)?;
+        } else {
+            for (i, dirs) in block_pairs(dim, K).iter().enumerate() {
+                pass(dirs, i == 0)?;
+            }
         }
         Ok(taylor)
     }
 }
+
+/// The directions `0, 1, ...` of the one pass over all of at most `K` arguments.
+const ALL_DIRECTIONS: [usize; 16] = [0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15];
 
 /// The passes of directions that give every second derivative of `dim` arguments with `width` directions
 /// per pass: all of them in one pass when they fit, otherwise the arguments cut into blocks of `width / 2`
