@@ -373,6 +373,32 @@ fn a_library_is_built_for_a_task_of_a_scene_file_and_keeps_it() {
     .unwrap();
     assert_eq!(e.unconverged_steps, 0);
     assert!(e.final_angle.is_finite());
+    // By the task's own cost: no coordinate weighed linearly, two targets (the angle, which a running and
+    // a final term name, and the final velocity term), their distances wrapped by the angle's period.
+    assert!(e.task.rates.is_empty(), "{:?}", e.task.rates);
+    let names: Vec<(&str, f64, bool)> = e
+        .task
+        .targets
+        .iter()
+        .map(|t| (t.entry.as_str(), t.target, t.final_only))
+        .collect();
+    assert_eq!(
+        names,
+        [
+            ("ellipse.angle", 0.5, false),
+            ("ellipse.angle velocity", 0.0, true)
+        ]
+    );
+    let pi = std::f64::consts::PI;
+    let off = e.final_angle - 0.5;
+    let wrapped = (off - pi * (off / pi + 0.5).floor()).abs();
+    assert!((e.task.targets[0].last - wrapped).abs() < 1e-15);
+    for t in &e.task.targets {
+        assert!(t.mean >= 0.0 && t.final_mean <= t.final_worst && t.last <= t.final_worst);
+        assert!(t.final_worst.is_finite());
+    }
+    assert!(e.task.targets[0].final_worst <= pi / 2.0);
+    assert!(e.task.running_cost_per_second >= 0.0);
 }
 
 #[test]

@@ -145,6 +145,60 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             evaluation: e,
         });
     }
+    // What the task's own cost says (any task; for the finger's, the rate repeats the spin above).
+    let _ = writeln!(
+        out,
+        "\nby the task's cost: running cost per second (whole run / last quarter); each linearly weighted coordinate's rate (whole run / last quarter, weight); each quadratic target's distance (mean / last-quarter mean / last-quarter worst / at the end)\n| world | h | running cost per second | rates | distance to targets |\n|---|---:|---:|---|---|"
+    );
+    for row in &rows {
+        let t = &row.evaluation.task;
+        let rates: Vec<String> = t
+            .rates
+            .iter()
+            .map(|r| {
+                format!(
+                    "{}: {:.3} / {:.3} (weight {})",
+                    r.coordinate, r.rate, r.final_rate, r.weight
+                )
+            })
+            .collect();
+        let targets: Vec<String> = t
+            .targets
+            .iter()
+            .map(|d| {
+                format!(
+                    "{}{} -> {}: {:.3} / {:.3} / {:.3} / {:.3}",
+                    if d.final_only { "final " } else { "" },
+                    d.entry,
+                    d.target,
+                    d.mean,
+                    d.final_mean,
+                    d.final_worst,
+                    d.last
+                )
+            })
+            .collect();
+        let or_none = |v: Vec<String>| {
+            if v.is_empty() {
+                "-".to_string()
+            } else {
+                v.join("; ")
+            }
+        };
+        let _ = writeln!(
+            out,
+            "| {} | {} | {:.3} / {:.3} | {} | {} |",
+            row.world,
+            row.h,
+            t.running_cost_per_second,
+            t.final_running_cost_per_second,
+            or_none(rates),
+            or_none(targets)
+        );
+    }
+    if !emit(&mut out) {
+        return Ok(());
+    }
     if let Some(path) = &args.out {
         std::fs::write(path, serde_json::to_string_pretty(&rows)?)
             .with_context(|| format!("writing {}", path.display()))?;

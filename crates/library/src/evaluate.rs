@@ -1,6 +1,7 @@
 //! Running the global policy (paper section V-C): closed loop on a world simulator that may use another
 //! contact model or time step than the library was built with, with random velocity kicks, measuring how
-//! fast the ellipse spins, how often the finger touches it, and how the spin recovers after each kick.
+//! fast the ellipse spins, how often the finger touches it, and how the spin recovers after each kick;
+//! and, for any task, what its own cost says ([`TaskMeasures`]).
 
 use crate::error::LibraryError;
 use crate::file::Library;
@@ -76,6 +77,178 @@ pub struct Evaluation {
     pub unconverged_steps: usize,
     /// The free angle at the end.
     pub final_angle: f64,
+    /// The task-neutral measures, read off the library's task cost.
+    #[serde(default)]
+    pub task: TaskMeasures,
+}
+
+/// What a closed-loop run achieved by the measure of the library's own task cost (any scene and task;
+/// the finger's built-in task is `-theta3 + 0.05 |u|^2`).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct TaskMeasures {
+    /// The task's running cost (its running terms and the control cost) as the optimiser accrues it, once
+    /// per library time step, over the run and per second: each world step's cost counts `h / h_library`
+    /// times, so worlds of different time steps compare. A linear term on a position
+    /// keeps falling as its coordinate advances, so for a progress task [`TaskMeasures::rates`] is the
+    /// measure to compare.
+    pub running_cost_per_second: f64,
+    /// The same over the last quarter of the run.
+    pub final_running_cost_per_second: f64,
+    /// Each coordinate a linear term (running or final, on it or on its velocity) weighs: how fast it
+    /// moved.
+    pub rates: Vec<CoordinateRate>,
+    /// Each entry a quadratic term pulls to a target: its distance (wrapped for a periodic entry), once
+    /// per entry and target however many terms name them.
+    pub targets: Vec<TargetDistance>,
+}
+
+/// How fast a linearly weighted coordinate moved in a run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CoordinateRate {
+    /// Its name (`<body>.angle`).
+    pub coordinate: String,
+    /// The sum of the linear weights on it and on its velocity (negative: the task rewards increase).
+    pub weight: f64,
+    /// Mean rate of change over the run, per second.
+    pub rate: f64,
+    /// Mean rate of change over the last quarter of the run.
+    pub final_rate: f64,
+}
+
+/// How far a quadratic term's entry stayed from its target in a run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TargetDistance {
+    /// The entry's name (`<body>.angle`, or `<body>.angle velocity`).
+    pub entry: String,
+    /// Its target.
+    pub target: f64,
+    /// Whether only final terms name it (the optimiser weighs it at the horizon only).
+    pub final_only: bool,
+    /// Mean absolute distance over the run.
+    pub mean: f64,
+    /// Mean absolute distance over the last quarter.
+    pub final_mean: f64,
+    /// Largest absolute distance over the last quarter.
+    pub final_worst: f64,
+    /// Absolute distance at the end.
+    pub last: f64,
+}
+
+/// The state entry `index` of `scene` by name: its coordinate's, with " velocity" for a velocity.
+fn entry_name(scene: &dynamics::Scene, index: usize) -> String {
+    let names = scene.coordinate_names();
+    let n = scene.n_dof();
+    if index < n {
+        names[index].clone()
+    } else {
+        format!("{} velocity", names[index - n])
+    }
+}
+
+/// Accumulates [`TaskMeasures`] along a run.
+struct TaskMeter {
+    cost: crate::TaskCost,
+    n: usize,
+    h: f64,
+    quarter: usize,
+    /// The share of one optimiser step a world step is (`h / h_library`).
+    share: f64,
+    running: [f64; 2],
+    /// Per quadratic term: sums of the distance over the run and the last quarter, the worst in it.
+    targets: Vec<(crate::Term, bool, [f64; 2], f64)>,
+}
+
+impl TaskMeter {
+    fn new(cost: crate::TaskCost, n: usize, h: f64, h_library: f64, quarter: usize) -> Self {
+        let mut targets: Vec<(crate::Term, bool, [f64; 2], f64)> = Vec::new();
+        let terms = cost.running.iter().map(|t| (t, false));
+        for (t, fin) in terms.chain(cost.final_terms.iter().map(|t| (t, true))) {
+            let same = |(o, ..): &&(crate::Term, bool, [f64; 2], f64)| {
+                o.index == t.index && o.target == t.target && o.period == t.period
+            };
+            if t.quadratic != 0.0 && !targets.iter().any(|e| same(&e)) {
+                targets.push((*t, fin, [0.0; 2], 0.0));
+            }
+        }
+        TaskMeter {
+            cost,
+            n,
+            h,
+            quarter,
+            share: h / h_library,
+            running: [0.0; 2],
+            targets,
+        }
+    }
+
+    /// Step `k`'s state and control.
+    fn observe(&mut self, k: usize, x: &[f64], u: &[f64]) {
+        use ddp::Cost;
+        let late = k >= self.quarter;
+        let l = self.cost.running(k, x, u) * self.share;
+        self.running[0] += l;
+        for (t, _, sums, worst) in &mut self.targets {
+            let d = t.offset(x[t.index]).abs();
+            sums[0] += d;
+            if late {
+                sums[1] += d;
+                *worst = worst.max(d);
+            }
+        }
+        if late {
+            self.running[1] += l;
+        }
+    }
+
+    fn finish(
+        self,
+        scene: &dynamics::Scene,
+        steps: usize,
+        x0: &[f64],
+        at_quarter: &[f64],
+        x: &[f64],
+    ) -> TaskMeasures {
+        let time = steps as f64 * self.h;
+        let late_steps = steps - self.quarter;
+        let late_time = late_steps as f64 * self.h;
+        let mut weights: Vec<(usize, f64)> = Vec::new();
+        for t in self.cost.running.iter().chain(&self.cost.final_terms) {
+            if t.linear == 0.0 {
+                continue;
+            }
+            let j = t.index % self.n;
+            match weights.iter_mut().find(|(i, _)| *i == j) {
+                Some((_, w)) => *w += t.linear,
+                None => weights.push((j, t.linear)),
+            }
+        }
+        TaskMeasures {
+            running_cost_per_second: self.running[0] / time,
+            final_running_cost_per_second: self.running[1] / late_time,
+            rates: weights
+                .into_iter()
+                .map(|(j, weight)| CoordinateRate {
+                    coordinate: entry_name(scene, j),
+                    weight,
+                    rate: (x[j] - x0[j]) / time,
+                    final_rate: (x[j] - at_quarter[j]) / late_time,
+                })
+                .collect(),
+            targets: self
+                .targets
+                .into_iter()
+                .map(|(t, final_only, sums, worst)| TargetDistance {
+                    entry: entry_name(scene, t.index),
+                    target: t.target,
+                    final_only,
+                    mean: sums[0] / steps as f64,
+                    final_mean: sums[1] / late_steps as f64,
+                    final_worst: worst,
+                    last: t.offset(x[t.index]).abs(),
+                })
+                .collect(),
+        }
+    }
 }
 
 /// A contact impulse this large (in the normal direction, per step) counts as touching.
@@ -194,9 +367,12 @@ pub fn evaluate_in(
     let mut interval_start = x[free];
     let quarter = steps - steps / 4;
     let mut angle_at_quarter = x[free];
+    let mut meter = TaskMeter::new(library.cost()?, n, settings.h, library.settings.h, quarter);
+    let mut at_quarter = x.clone();
     for k in 0..steps {
         if k == quarter {
             angle_at_quarter = x[free];
+            at_quarter.copy_from_slice(&x);
         }
         // A kick with less than a whole interval left could not be judged: none is given.
         if k > 0 && k % kick_steps == 0 && k + kick_steps <= steps {
@@ -219,6 +395,7 @@ pub fn evaluate_in(
             }
         }
         policy.control(&x, &mut u)?;
+        meter.observe(k, &x, &u);
         let s = world.step(&x, &u)?;
         if s.info.status != ncp::Status::Converged {
             unconverged += 1;
@@ -239,6 +416,7 @@ pub fn evaluate_in(
         }
     }
     let (events, touching_steps) = (contacts.events, contacts.touching_steps);
+    let task = meter.finish(scene, steps, &settings.x0, &at_quarter, &x);
     let turned = x[free] - settings.x0[free];
     let time = steps as f64 * settings.h;
     Ok(Evaluation {
@@ -255,5 +433,75 @@ pub fn evaluate_in(
         spin_after_kicks: (after_time > 0.0).then(|| after_sum / after_time),
         unconverged_steps: unconverged,
         final_angle: x[free],
+        task,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{TaskCost, Term};
+
+    #[test]
+    fn the_task_meter_sums_costs_rates_and_wrapped_distances() {
+        // One joint: x = [q, v]. Running: -q (linear) and (q - 3)^2 / 2 wrapped by 2 pi; final: v^2.
+        let term = |index, linear, quadratic, target, period| Term {
+            index,
+            linear,
+            quadratic,
+            target,
+            period,
+        };
+        let cost = TaskCost {
+            running: vec![
+                term(0, -1.0, 0.0, 0.0, None),
+                term(0, 0.0, 1.0, 3.0, Some(std::f64::consts::TAU)),
+            ],
+            final_terms: vec![term(1, 0.0, 2.0, 0.0, None)],
+            control_weight: 0.5,
+        };
+        let scene = dynamics::Scene::new(dynamics::SceneSpec {
+            bodies: vec![dynamics::Scene::flicking_finger().spec().bodies[2].clone()],
+            contacts: vec![],
+            ..dynamics::Scene::flicking_finger().spec().clone()
+        })
+        .unwrap();
+        let name = scene.coordinate_names()[0].clone();
+        // Four world steps of h = 0.1 against a library step of 0.05: each step's cost counts twice.
+        let states = [[0.0, 1.0], [0.1, 1.0], [6.0, 1.0], [7.0, 2.0]];
+        let mut meter = TaskMeter::new(cost, 1, 0.1, 0.05, 3);
+        for (k, x) in states.iter().enumerate() {
+            meter.observe(k, x, &[1.0]);
+        }
+        let end = [7.5, 3.0];
+        let m = meter.finish(&scene, 4, &states[0], &states[3], &end);
+        // Distances to 3, the offsets wrapped into [-pi, pi): 3, 2.9, 3 (still inside), |7 - 3 - 2 pi|.
+        let d = [3.0, 2.9, 3.0, (7.0 - 3.0 - std::f64::consts::TAU).abs()];
+        let l: Vec<f64> = states
+            .iter()
+            .zip(d)
+            .map(|(x, d)| 2.0 * (-x[0] + 0.5 * d * d + 0.5))
+            .collect();
+        assert!((m.running_cost_per_second - l.iter().sum::<f64>() / 0.4).abs() < 1e-12);
+        assert!((m.final_running_cost_per_second - l[3] / 0.1).abs() < 1e-12);
+        let [rate] = m.rates.as_slice() else {
+            panic!("{:?}", m.rates)
+        };
+        assert_eq!(
+            (rate.coordinate.as_str(), rate.weight),
+            (name.as_str(), -1.0)
+        );
+        assert!((rate.rate - 7.5 / 0.4).abs() < 1e-12);
+        assert!((rate.final_rate - 0.5 / 0.1).abs() < 1e-12);
+        let [angle, speed] = m.targets.as_slice() else {
+            panic!("{:?}", m.targets)
+        };
+        assert!(!angle.final_only && speed.final_only);
+        assert_eq!(speed.entry, format!("{name} velocity"));
+        assert!((angle.mean - d.iter().sum::<f64>() / 4.0).abs() < 1e-12);
+        assert!((angle.final_mean - d[3]).abs() < 1e-12);
+        assert!((angle.final_worst - d[3]).abs() < 1e-12);
+        assert!((angle.last - (7.5 - 3.0 - std::f64::consts::TAU).abs()).abs() < 1e-12);
+        assert!((speed.mean - 1.25).abs() < 1e-12 && speed.last == 3.0 && speed.final_worst == 2.0);
+    }
 }

@@ -100,6 +100,25 @@ impl Library {
         self.task.as_ref().map(|(t, _)| t)
     }
 
+    /// The cost its trajectories minimise: its task's, or for the finger's built-in task `-theta3 +`
+    /// [`crate::CONTROL_WEIGHT`]` |u|^2` per step as a [`crate::TaskCost`].
+    pub fn cost(&self) -> Result<crate::TaskCost, LibraryError> {
+        match self.task() {
+            Some(task) => Ok(task.cost.clone()),
+            None => Ok(crate::TaskCost {
+                running: vec![crate::Term {
+                    index: crate::free_joint(&self.scene)?,
+                    linear: -1.0,
+                    quadratic: 0.0,
+                    target: 0.0,
+                    period: None,
+                }],
+                final_terms: Vec::new(),
+                control_weight: crate::CONTROL_WEIGHT,
+            }),
+        }
+    }
+
     /// The periodic coordinate its policy compares states modulo, and the direction its task rewards.
     pub fn progress(&self) -> Result<Progress, LibraryError> {
         match self.task() {

@@ -21,7 +21,8 @@ pub use build::{
 };
 pub use error::LibraryError;
 pub use evaluate::{
-    CONTACT_IMPULSE, ContactEvents, Evaluation, EvaluationSettings, evaluate, evaluate_in,
+    CONTACT_IMPULSE, ContactEvents, CoordinateRate, Evaluation, EvaluationSettings, TargetDistance,
+    TaskMeasures, evaluate, evaluate_in,
 };
 pub use file::{Library, MAGIC, VERSION};
 pub use policy::Policy;

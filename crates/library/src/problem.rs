@@ -103,7 +103,7 @@ pub struct Term {
 
 impl Term {
     /// `y - target`, wrapped into `[-period / 2, period / 2)` for a periodic entry.
-    fn offset(&self, y: f64) -> f64 {
+    pub fn offset(&self, y: f64) -> f64 {
         let d = y - self.target;
         match self.period {
             Some(p) => d - p * (d / p + 0.5).floor(),
