@@ -222,3 +222,107 @@ fn bad_input_is_a_typed_error() {
     }
     assert!(Ellipse::new(-1.0, 1.0).is_err());
 }
+
+fn half_plane() -> impl Strategy<Value = geometry::HalfPlane> {
+    (-2.0_f64..2.0, -2.0_f64..2.0, -4.0_f64..4.0, 0.1_f64..5.0).prop_map(|(x, y, angle, len)| {
+        geometry::HalfPlane::new([x, y], [len * angle.cos(), len * angle.sin()]).unwrap()
+    })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+
+    /// Against an oracle independent of the support formula: the ellipse's boundary scanned by its
+    /// parameter (then golden sections), the lowest point's height above the boundary line.
+    #[test]
+    fn a_half_plane_distance_is_the_height_of_the_lowest_boundary_point(
+        plane in half_plane(), e in ellipse(), p in pose()
+    ) {
+        let c = geometry::half_plane_distance_dual(&plane, &e, p).unwrap();
+        let [nx, ny] = plane.normal();
+        let q = plane.point();
+        let height = |t: f64| {
+            let (lx, ly) = (e.a() * t.cos(), e.b() * t.sin());
+            let (x, y) = (p[0] + p[2].cos() * lx - p[2].sin() * ly, p[1] + p[2].sin() * lx + p[2].cos() * ly);
+            nx * (x - q[0]) + ny * (y - q[1])
+        };
+        let n = 20_000;
+        let step = std::f64::consts::TAU / n as f64;
+        let k = (0..n).min_by(|&i, &j| height(i as f64 * step).total_cmp(&height(j as f64 * step))).unwrap();
+        let (mut lo, mut hi) = ((k as f64 - 1.0) * step, (k as f64 + 1.0) * step);
+        for _ in 0..100 {
+            let (m1, m2) = (lo + (hi - lo) * 0.382, lo + (hi - lo) * 0.618);
+            if height(m1) < height(m2) { hi = m2 } else { lo = m1 }
+        }
+        let oracle = height(0.5 * (lo + hi));
+        prop_assert!((c.distance - oracle).abs() < 1e-10 * (1.0 + oracle.abs()), "{} vs {oracle}", c.distance);
+        // Witnesses: A on the boundary line, B on the ellipse, B - A = d n, the normal the plane's.
+        prop_assert!((nx * (c.point_a[0] - q[0]) + ny * (c.point_a[1] - q[1])).abs() < 1e-12 * (1.0 + q[0].abs() + q[1].abs() + c.point_a[0].abs() + c.point_a[1].abs()));
+        let (rx, ry) = (c.point_b[0] - p[0], c.point_b[1] - p[1]);
+        let (lx, ly) = (p[2].cos() * rx + p[2].sin() * ry, -p[2].sin() * rx + p[2].cos() * ry);
+        prop_assert!(((lx / e.a()).powi(2) + (ly / e.b()).powi(2) - 1.0).abs() < 1e-12);
+        prop_assert!((c.point_b[0] - c.point_a[0] - c.distance * nx).abs() < 1e-12 * (1.0 + c.distance.abs()));
+        prop_assert!((c.point_b[1] - c.point_a[1] - c.distance * ny).abs() < 1e-12 * (1.0 + c.distance.abs()));
+        prop_assert_eq!(c.normal, [nx, ny]);
+        prop_assert!(c.witness_unique);
+    }
+
+    /// First and second derivatives through dual numbers against central differences of the values.
+    #[test]
+    fn half_plane_distance_derivatives_match_differences(
+        plane in half_plane(), e in ellipse(), p in pose()
+    ) {
+        let value = |p: [f64; 3]| geometry::half_plane_distance_dual(&plane, &e, p).unwrap();
+        let eps = 1e-5;
+        for k in 0..3 {
+            let mut dp = p.map(Dual64::from);
+            dp[k].eps = 1.0;
+            let dual = geometry::half_plane_distance_dual(&plane, &e, dp).unwrap();
+            let (mut pp, mut pm) = (p, p);
+            pp[k] += eps;
+            pm[k] -= eps;
+            let (cp, cm) = (value(pp), value(pm));
+            let fd = (cp.distance - cm.distance) / (2.0 * eps);
+            prop_assert!((fd - dual.distance.eps).abs() < 1e-7 * (1.0 + fd.abs()), "d/dp{k}: {fd} vs {}", dual.distance.eps);
+            for i in 0..2 {
+                let fd = (cp.point_b[i] - cm.point_b[i]) / (2.0 * eps);
+                prop_assert!((fd - dual.point_b[i].eps).abs() < 1e-6 * (1.0 + fd.abs()), "point_b {i} d/dp{k}");
+            }
+            // Second order: the (theta, k) entry through hyper-duals against differences of the first.
+            let mut hp = p.map(HyperDual64::from);
+            hp[2].eps1 = 1.0;
+            hp[k].eps2 = 1.0;
+            let hd = geometry::half_plane_distance_dual(&plane, &e, hp).unwrap();
+            let first = |p: [f64; 3]| {
+                let mut d = p.map(Dual64::from);
+                d[2].eps = 1.0;
+                geometry::half_plane_distance_dual(&plane, &e, d).unwrap().distance.eps
+            };
+            let fd2 = (first(pp) - first(pm)) / (2.0 * eps);
+            prop_assert!((fd2 - hd.distance.eps1eps2).abs() < 1e-6 * (1.0 + fd2.abs()), "d2/dtheta dp{k}: {fd2} vs {}", hd.distance.eps1eps2);
+        }
+    }
+}
+
+#[test]
+fn a_half_plane_needs_a_finite_point_and_a_non_zero_normal() {
+    for (point, normal) in [
+        ([0.0, 0.0], [0.0, 0.0]),
+        ([f64::NAN, 0.0], [0.0, 1.0]),
+        ([0.0, 0.0], [f64::INFINITY, 1.0]),
+    ] {
+        let e = geometry::HalfPlane::new(point, normal).unwrap_err();
+        assert!(e.to_string().contains("half-plane"), "{e}");
+    }
+    let plane = geometry::HalfPlane::new([0.0, -1.0], [0.0, 2.0]).unwrap();
+    assert_eq!(plane.normal(), [0.0, 1.0]);
+    let e = Ellipse::new(0.5, 0.2).unwrap();
+    assert!(geometry::half_plane_distance_dual(&plane, &e, [0.0f64, f64::NAN, 0.0]).is_err());
+    // An upright ellipse touching the ground, and one sunk into it by 0.1.
+    let c =
+        geometry::half_plane_distance_dual(&plane, &e, [3.0f64, -0.8, std::f64::consts::FRAC_PI_2])
+            .unwrap();
+    assert!((c.distance - (-0.3)).abs() < 1e-15, "{}", c.distance);
+    let c = geometry::half_plane_distance_dual(&plane, &e, [3.0f64, -0.8, 0.0]).unwrap();
+    assert!(c.distance.abs() < 1e-15 && (c.point_b[0] - 3.0).abs() < 1e-15);
+}

@@ -24,4 +24,14 @@ pub enum GeometryError {
         /// The offending value.
         value: f64,
     },
+    /// A half-plane's point was not finite, or its normal not finite and non-zero.
+    #[error(
+        "half-plane through {point:?} with normal {normal:?}: the point must be finite and the normal finite and non-zero"
+    )]
+    InvalidHalfPlane {
+        /// The point given.
+        point: [f64; 2],
+        /// The normal given.
+        normal: [f64; 2],
+    },
 }

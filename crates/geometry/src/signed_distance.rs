@@ -291,6 +291,67 @@ pub fn signed_distance_dual<T: Forward>(
     })
 }
 
+/// A half-plane `{x : n . (x - point) <= 0}`: everything on the far side of a line (ground, a wall), with
+/// `n` the unit normal out of it (towards the free side).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HalfPlane {
+    point: [f64; 2],
+    normal: [f64; 2],
+}
+
+impl HalfPlane {
+    /// The half-plane whose boundary passes through `point`, with outward normal along `normal` (any
+    /// length above zero; it is normalised). An error for a non-finite entry or a zero normal.
+    pub fn new(point: [f64; 2], normal: [f64; 2]) -> Result<Self, GeometryError> {
+        let len = normal[0].hypot(normal[1]);
+        if !(point.iter().all(|v| v.is_finite()) && len.is_finite() && len > 0.0) {
+            return Err(GeometryError::InvalidHalfPlane { point, normal });
+        }
+        Ok(HalfPlane {
+            point,
+            normal: [normal[0] / len, normal[1] / len],
+        })
+    }
+
+    /// A point of the boundary line.
+    pub fn point(&self) -> [f64; 2] {
+        self.point
+    }
+
+    /// The unit outward normal.
+    pub fn normal(&self) -> [f64; 2] {
+        self.normal
+    }
+}
+
+/// Signed distance from a half-plane (A) to an ellipse at `pose_b` (B), in any forward-mode scalar:
+/// `d = n . (c_B - p) - h_B(-n)`, the height above the boundary of the ellipse's lowest point, in closed
+/// form (no search: the pair is smooth everywhere, and the witness is always unique). The normal is the
+/// plane's, from A to B; the witness on B is the ellipse's support point along `-n`, the one on A its
+/// projection onto the boundary.
+pub fn half_plane_distance_dual<T: Forward>(
+    plane: &HalfPlane,
+    b: &Ellipse,
+    pose_b: [T; 3],
+) -> Result<DualContact<T>, GeometryError> {
+    check_pose(
+        "B",
+        [pose_b[0].value(), pose_b[1].value(), pose_b[2].value()],
+    )?;
+    let [nx, ny] = plane.normal;
+    let (c, s) = (T::from(-nx), T::from(-ny));
+    let (offset, h, _, _) = dual_support(b, pose_b[2].sin_and_cos(), c, s);
+    let lowest = [pose_b[0] + offset[0], pose_b[1] + offset[1]];
+    let distance = (pose_b[0] + (-plane.point[0])) * nx + (pose_b[1] + (-plane.point[1])) * ny - h;
+    Ok(DualContact {
+        distance,
+        point_a: [lowest[0] - distance * nx, lowest[1] - distance * ny],
+        point_b: lowest,
+        normal: [T::from(nx), T::from(ny)],
+        witness_unique: true,
+    })
+}
+
 /// World-frame support offset, value, and first two angle derivatives of an ellipse whose orientation
 /// has sine and cosine `(st, ct)`, along the world direction `(c, s)`.
 fn dual_support<T: Forward>(e: &Ellipse, (st, ct): (T, T), c: T, s: T) -> ([T; 2], T, T, T) {
