@@ -256,7 +256,7 @@ const TWO_FINGERS: &str = include_str!("../../scenes/two_fingers.toml");
 
 /// The Hessian of `c^T f` against central differences of the exact first derivatives, at each state of
 /// `states` (under `u`); returns how many of them were in contact (an impulse above 1e-3).
-fn hessians_match_differences(
+pub(crate) fn hessians_match_differences(
     scene: &Scene,
     model: Complementarity,
     states: &[Vec<f64>],

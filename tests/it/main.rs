@@ -5,6 +5,7 @@ mod ddp_solver;
 mod dynamics_hard_cases;
 mod dynamics_laws;
 mod dynamics_reference;
+mod dynamics_world;
 mod geometry_laws;
 mod geometry_reference;
 mod library_anneal;

@@ -7,7 +7,8 @@
 use crate::error::DynamicsError;
 use crate::kinematics::{Kinematics, Ring, perp};
 use crate::scene::Scene;
-use geometry::signed_distance_dual;
+use crate::scene::Side;
+use geometry::{DualContact, half_plane_distance_dual, signed_distance_dual};
 
 /// One contact pair's geometry at the start of a step.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -147,9 +148,40 @@ impl<T: Ring> Constraints<T> {
         }
         let mut contacts = Vec::with_capacity(scene.contacts.len());
         for pair in &scene.contacts {
-            let pose = |i: usize| [kin.centre[i][0], kin.centre[i][1], kin.phi[i]];
-            let (a, b) = (&scene.bodies[pair.a], &scene.bodies[pair.b]);
-            let c = signed_distance_dual(&a.shape, pose(pair.a), &b.shape, pose(pair.b))?;
+            // An ellipse side's shape and pose: a body's from the kinematics, a fixed one's constant.
+            let ellipse = |side: Side| match side {
+                Side::Body(i) => (
+                    &scene.bodies[i].shape,
+                    [kin.centre[i][0], kin.centre[i][1], kin.phi[i]],
+                ),
+                Side::Fixed(i) => {
+                    let f = &scene.fixed[i];
+                    (&f.shape, f.pose.map(T::from))
+                }
+                Side::Plane(_) => unreachable!("a half-plane side is handled before"),
+            };
+            let c = match (pair.a, pair.b) {
+                (Side::Plane(p), b) => {
+                    let (shape, pose) = ellipse(b);
+                    half_plane_distance_dual(&scene.planes[p].shape, shape, pose)?
+                }
+                (a, Side::Plane(p)) => {
+                    // The same contact seen from the ellipse: witnesses swapped, the normal reversed.
+                    let (shape, pose) = ellipse(a);
+                    let c = half_plane_distance_dual(&scene.planes[p].shape, shape, pose)?;
+                    DualContact {
+                        distance: c.distance,
+                        point_a: c.point_b,
+                        point_b: c.point_a,
+                        normal: [-c.normal[0], -c.normal[1]],
+                        witness_unique: c.witness_unique,
+                    }
+                }
+                (a, b) => {
+                    let ((sa, pa), (sb, pb)) = (ellipse(a), ellipse(b));
+                    signed_distance_dual(sa, pa, sb, pb)?
+                }
+            };
             let re = |p: [T; 2]| [p[0].value(), p[1].value()];
             contacts.push(ContactFrame {
                 distance: c.distance.value(),
@@ -164,8 +196,11 @@ impl<T: Ring> Constraints<T> {
             jacobian.resize(start + 2 * n, zero);
             let (plus, minus) = jacobian[start..].split_at_mut(n);
             for k in 0..n {
-                let ja = kin.point_jacobian_column(scene, pair.a, c.point_a, k);
-                let jb = kin.point_jacobian_column(scene, pair.b, c.point_b, k);
+                let column = |side: Side, p| match side.body() {
+                    Some(i) => kin.point_jacobian_column(scene, i, p, k),
+                    None => [zero; 2],
+                };
+                let (ja, jb) = (column(pair.a, c.point_a), column(pair.b, c.point_b));
                 let rel = [jb[0] - ja[0], jb[1] - ja[1]];
                 let normal = c.normal[0] * rel[0] + c.normal[1] * rel[1];
                 let tangent = (t[0] * rel[0] + t[1] * rel[1]) * pair.friction;

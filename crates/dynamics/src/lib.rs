@@ -41,7 +41,8 @@ pub use error::{DynamicsError, SceneProblem};
 pub use jet::{Jet, Jet1};
 pub use kinematics::{Kinematics, Ring, Scalar};
 pub use scene::{
-    Body, BodySpec, ContactPair, ContactSpec, FLICKING_FINGER_X0, JointSpec, Scene, SceneSpec,
+    Body, BodySpec, ContactPair, ContactSpec, FLICKING_FINGER_X0, Fixed, FixedSpec, JointSpec,
+    Plane, PlaneSpec, Scene, SceneSpec, Side,
 };
 pub use simulator::Simulator;
 pub use step::{Complementarity, Drag, Model, StateCovariance, Step, StepData, StepSettings};

@@ -1,5 +1,6 @@
 //! Scenes: planar rigid ellipses on hinge joints (to the world or to a parent body), with joint limits,
-//! viscous joint drag, gravity, actuated joints and an explicit list of contact pairs (SCENE.md).
+//! viscous joint drag, gravity, actuated joints, static world geometry (half-planes and fixed ellipses)
+//! and an explicit list of contact pairs (SCENE.md).
 //!
 //! A scene is data: [`SceneSpec`] is what a TOML file holds (`scenes/finger.toml`), [`Scene::new`] checks it
 //! and reports every problem with the field it is in, and [`Scene::flicking_finger`] builds SCENE.md.
@@ -79,6 +80,38 @@ pub struct ContactSpec {
     pub friction: f64,
 }
 
+/// A half-plane of the world (ground, a wall): everything on the far side of the line through `point`,
+/// `normal` pointing out of it into the free side.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlaneSpec {
+    /// Unique name (among bodies, planes and fixed ellipses), which contact pairs use.
+    pub name: String,
+    /// A point of the boundary line, in the world frame.
+    #[serde(deserialize_with = "strict_pair")]
+    pub point: [f64; 2],
+    /// The outward normal (any length above zero).
+    #[serde(deserialize_with = "strict_pair")]
+    pub normal: [f64; 2],
+}
+
+/// An ellipse fixed in the world (a peg, an obstacle): no joint, no coordinate.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FixedSpec {
+    /// Unique name (among bodies, planes and fixed ellipses), which contact pairs use.
+    pub name: String,
+    /// Semi-axes `[a, b]`.
+    #[serde(deserialize_with = "strict_pair")]
+    pub semi_axes: [f64; 2],
+    /// Centre in the world frame.
+    #[serde(deserialize_with = "strict_pair")]
+    pub centre: [f64; 2],
+    /// Angle of the ellipse's x axis from the world's.
+    #[serde(default)]
+    pub angle: f64,
+}
+
 /// A scene file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -92,6 +125,12 @@ pub struct SceneSpec {
     /// Contact pairs.
     #[serde(rename = "contact", default)]
     pub contacts: Vec<ContactSpec>,
+    /// Half-planes of the world.
+    #[serde(rename = "plane", default, skip_serializing_if = "Vec::is_empty")]
+    pub planes: Vec<PlaneSpec>,
+    /// Ellipses fixed in the world.
+    #[serde(rename = "fixed", default, skip_serializing_if = "Vec::is_empty")]
+    pub fixed: Vec<FixedSpec>,
 }
 
 /// A checked body.
@@ -119,13 +158,54 @@ pub struct Body {
     pub actuator: Option<usize>,
 }
 
+/// A checked half-plane of the world.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Plane {
+    /// Name.
+    pub name: String,
+    /// Shape.
+    pub shape: geometry::HalfPlane,
+}
+
+/// A checked ellipse fixed in the world.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Fixed {
+    /// Name.
+    pub name: String,
+    /// Shape.
+    pub shape: Ellipse,
+    /// Pose `[x, y, angle]` in the world frame.
+    pub pose: [f64; 3],
+}
+
+/// One side of a contact pair: a body on its joint, or a fixed part of the world.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Side {
+    /// The body of this index (it moves with its joint and its ancestors').
+    Body(usize),
+    /// The fixed ellipse of this index.
+    Fixed(usize),
+    /// The half-plane of this index.
+    Plane(usize),
+}
+
+impl Side {
+    /// The body, if this side is one.
+    pub fn body(self) -> Option<usize> {
+        match self {
+            Side::Body(i) => Some(i),
+            _ => None,
+        }
+    }
+}
+
 /// A checked contact pair.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ContactPair {
-    /// Body A.
-    pub a: usize,
-    /// Body B.
-    pub b: usize,
+    /// Side A (the normal points from A to B).
+    pub a: Side,
+    /// Side B.
+    pub b: Side,
     /// Friction coefficient.
     pub friction: f64,
 }
@@ -140,6 +220,10 @@ pub struct Scene {
     pub bodies: Vec<Body>,
     /// Contact pairs.
     pub contacts: Vec<ContactPair>,
+    /// Half-planes of the world.
+    pub planes: Vec<Plane>,
+    /// Ellipses fixed in the world.
+    pub fixed: Vec<Fixed>,
     /// Number of controls.
     pub n_controls: usize,
     /// What each complementarity row is.
@@ -227,19 +311,90 @@ impl Scene {
                 });
             }
         }
-        let index = |name: &str| spec.bodies.iter().position(|b| b.name == name);
+        let taken = |name: &str| {
+            name == "world"
+                || spec.bodies.iter().any(|o| o.name == name)
+                || spec.planes.iter().filter(|o| o.name == name).count()
+                    + spec.fixed.iter().filter(|o| o.name == name).count()
+                    > 1
+        };
+        let mut planes = Vec::new();
+        for (i, p) in spec.planes.iter().enumerate() {
+            let f = |name: &str| format!("plane[{i}].{name}");
+            if taken(&p.name) {
+                bad(
+                    f("name"),
+                    "must be unique among bodies, planes and fixed ellipses and not \"world\"",
+                );
+            }
+            match geometry::HalfPlane::new(p.point, p.normal) {
+                Ok(shape) => planes.push(Plane {
+                    name: p.name.clone(),
+                    shape,
+                }),
+                Err(_) => bad(
+                    f("point/normal"),
+                    "the point must be finite and the normal finite and non-zero",
+                ),
+            }
+        }
+        let mut fixed = Vec::new();
+        for (i, e) in spec.fixed.iter().enumerate() {
+            let f = |name: &str| format!("fixed[{i}].{name}");
+            if taken(&e.name) {
+                bad(
+                    f("name"),
+                    "must be unique among bodies, planes and fixed ellipses and not \"world\"",
+                );
+            }
+            if !(e.centre.iter().all(|v| v.is_finite()) && e.angle.is_finite()) {
+                bad(f("centre/angle"), "must be finite");
+            }
+            match Ellipse::new(e.semi_axes[0], e.semi_axes[1]) {
+                Ok(shape) => fixed.push(Fixed {
+                    name: e.name.clone(),
+                    shape,
+                    pose: [e.centre[0], e.centre[1], e.angle],
+                }),
+                Err(_) => bad(
+                    f("semi_axes"),
+                    "must be between 1e-6 and 1e6 (geometry::SEMI_AXIS_RANGE)",
+                ),
+            }
+        }
+        let index = |name: &str| {
+            if let Some(i) = spec.bodies.iter().position(|b| b.name == name) {
+                Some(Side::Body(i))
+            } else if let Some(i) = spec.fixed.iter().position(|b| b.name == name) {
+                Some(Side::Fixed(i))
+            } else {
+                spec.planes
+                    .iter()
+                    .position(|b| b.name == name)
+                    .map(Side::Plane)
+            }
+        };
         let mut contacts = Vec::new();
         for (k, c) in spec.contacts.iter().enumerate() {
             let f = |name: &str| format!("contact[{k}].{name}");
             let (a, b) = (index(&c.a), index(&c.b));
             if a.is_none() {
-                bad(f("a"), "names no body");
+                bad(f("a"), "names no body, plane or fixed ellipse");
             }
             if b.is_none() {
-                bad(f("b"), "names no body");
+                bad(f("b"), "names no body, plane or fixed ellipse");
             }
             if a.is_some() && a == b {
                 bad(f("b"), "a pair needs two different bodies");
+            }
+            if let (Some(a), Some(b)) = (a, b)
+                && a.body().is_none()
+                && b.body().is_none()
+            {
+                bad(
+                    f("b"),
+                    "a pair needs a moving body on one side (both are fixed parts of the world)",
+                );
             }
             if !(c.friction.is_finite() && c.friction >= 0.0) {
                 bad(f("friction"), "must be finite and non-negative");
@@ -259,6 +414,8 @@ impl Scene {
             gravity: spec.gravity,
             bodies,
             contacts,
+            planes,
+            fixed,
             n_controls,
             spec,
             rows: Vec::new(),
@@ -337,6 +494,8 @@ impl Scene {
                 b: "ellipse".into(),
                 friction: 0.5,
             }],
+            planes: Vec::new(),
+            fixed: Vec::new(),
         })
         .expect("SCENE.md is a valid scene")
     }
