@@ -532,10 +532,10 @@ fn constraint_rows_name_their_owner_and_steps_give_each_pairs_impulse() {
         for (k, row) in scene.rows().iter().enumerate() {
             let expected = match *row {
                 ConstraintRow::LowerLimit { joint } => {
-                    x[joint] - scene.bodies[joint].limits.unwrap()[0]
+                    x[joint] - scene.coordinates[joint].limits.unwrap()[0]
                 }
                 ConstraintRow::UpperLimit { joint } => {
-                    scene.bodies[joint].limits.unwrap()[1] - x[joint]
+                    scene.coordinates[joint].limits.unwrap()[1] - x[joint]
                 }
                 ConstraintRow::FrictionEdge { pair, .. } => step.contacts[pair].distance,
             };

@@ -3,6 +3,7 @@
 mod ddp_finger;
 mod ddp_solver;
 mod dynamics_hard_cases;
+mod dynamics_joints;
 mod dynamics_laws;
 mod dynamics_reference;
 mod dynamics_world;

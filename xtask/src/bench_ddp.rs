@@ -397,11 +397,7 @@ fn scenes_pass_table() -> anyhow::Result<String> {
     ];
     for (name, scene, x0) in cases {
         let (n, m) = (scene.n_dof(), scene.n_controls);
-        let free = scene
-            .bodies
-            .iter()
-            .rposition(|b| b.actuator.is_none())
-            .unwrap_or(n - 1);
+        let free = library::free_joint(&scene).unwrap_or(n - 1);
         let cost = finger_cost(n, free, m);
         let settings = StepSettings {
             model: Complementarity::Logistic { sigma: 0.1 },

@@ -69,7 +69,7 @@ fn contact_surface(scene: &Scene) -> Vec<[f64; 3]> {
             .ok()
             .and_then(|c| c.contacts.first().map(|f| f.distance))
     };
-    let (lo2, hi2) = scene.bodies[1]
+    let (lo2, hi2) = scene.coordinates[1]
         .limits
         .unwrap_or([-2.0 * PI / 3.0, 0.0])
         .into();
@@ -458,7 +458,10 @@ fn draw_frames<DB: DrawingBackend>(
             chart
                 .draw_series(LineSeries::new(outline, BLACK.stroke_width(1)))
                 .map_err(err)?;
-            if body.actuator.is_none() {
+            if scene.coordinates[body.coordinates.clone()]
+                .iter()
+                .all(|c| c.actuator.is_none())
+            {
                 // The free body's orientation: its major axis, one end marked.
                 let (c, phi) = (kin.centre[i], kin.phi[i]);
                 let tip = (c[0] + a * phi.cos(), c[1] + a * phi.sin());

@@ -199,10 +199,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                 .clone()
                 .unwrap_or_else(|| dynamics::FLICKING_FINGER_X0.to_vec());
             // The free body: the last unactuated joint (the finger's ellipse, theta3).
-            let free = (0..n)
-                .rev()
-                .find(|&j| scene.bodies[j].actuator.is_none())
-                .context("the scene has no unactuated joint to spin")?;
+            let free =
+                library::free_joint(&scene).context("the scene has no unactuated joint to spin")?;
             let cost = finger_cost(n, free, m);
             let mut dynamics = FingerDynamics::new(sim);
             let ddp = Ddp::new(settings(args, m, None))?;

@@ -30,14 +30,14 @@ pub struct ContactFrame {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum ConstraintRow {
-    /// Joint `joint`'s lower limit, `q_j - lo >= 0`.
+    /// Coordinate `joint`'s lower limit, `q_j - lo >= 0`.
     LowerLimit {
-        /// The joint (body index).
+        /// The coordinate (index into `q`; a hinge's is its body's index when every joint is a hinge).
         joint: usize,
     },
-    /// Joint `joint`'s upper limit, `hi - q_j >= 0`.
+    /// Coordinate `joint`'s upper limit, `hi - q_j >= 0`.
     UpperLimit {
-        /// The joint (body index).
+        /// The coordinate (index into `q`).
         joint: usize,
     },
     /// An edge of contact pair `pair`'s linearised friction cone: the row `J_n + mu J_t` (`positive`) or
@@ -55,8 +55,8 @@ impl ConstraintRow {
     /// then each contact pair's two friction-cone edges.
     pub(crate) fn of(scene: &Scene) -> Vec<ConstraintRow> {
         let mut rows = Vec::new();
-        for (joint, b) in scene.bodies.iter().enumerate() {
-            if b.limits.is_some() {
+        for (joint, c) in scene.coordinates.iter().enumerate() {
+            if c.limits.is_some() {
                 rows.push(ConstraintRow::LowerLimit { joint });
                 rows.push(ConstraintRow::UpperLimit { joint });
             }
@@ -138,8 +138,8 @@ impl<T: Ring> Constraints<T> {
         let (zero, one) = (T::from(0.0), T::from(1.0));
         let mut d = Vec::with_capacity(scene.n_constraints());
         let mut jacobian = Vec::with_capacity(scene.n_constraints() * n);
-        for (j, b) in scene.bodies.iter().enumerate() {
-            if let Some([lo, hi]) = b.limits {
+        for (j, c) in scene.coordinates.iter().enumerate() {
+            if let Some([lo, hi]) = c.limits {
                 d.push(q[j] + (-lo));
                 jacobian.extend((0..n).map(|k| if k == j { one } else { zero }));
                 d.push(-q[j] + hi);

@@ -1,16 +1,19 @@
 //! Positions, Jacobians, the mass matrix `M(q)` and the bias forces `r(q, v)` (gravity, joint drag,
 //! Coriolis and centripetal) of a scene (SCENE.md "Inertia, forces"), by the usual rigid-body equations.
 //!
-//! Every joint is a hinge, so the velocity that joint `j` gives a point `p` of a body it moves is
-//! `v_j perp(p - h_j)`, with `h_j` the joint's hinge and `perp(x) = (-x_y, x_x)`. Point Jacobians, the
-//! Jacobians of the centres (for `M`) and of the witness points (for the contact rows) all come from that.
+//! A coordinate either turns its body about the origin of the body's joint frame (a hinge, or a free
+//! joint's angle) or slides the frame along an axis of the parent's frame (a slider, or a free joint's x
+//! and y). The velocity a turning coordinate `j` gives a point `p` of a body it moves is `v_j perp(p - o_j)`,
+//! with `o_j` its body's frame origin (a hinge's pivot) and `perp(x) = (-x_y, x_x)`; a sliding one gives
+//! `v_j a_j`, its axis in the world. Point Jacobians, the Jacobians of the centres (for `M`) and of the
+//! witness points (for the contact rows) all come from that.
 //!
 //! Generic over the scalar (`f64` for the step, forward-mode dual numbers for its exact derivatives): this
 //! is the one place the step's ingredients are written, so the derivatives differentiate the same code.
 
 #![allow(non_snake_case)]
 
-use crate::scene::Scene;
+use crate::scene::{CoordinateKind, JointKind, Scene};
 use num_dual::DualNum;
 
 /// The scalars the step's equations run on: `f64` and `num-dual`'s forward-mode types over `f64` (the
@@ -44,38 +47,76 @@ fn sub<T: Ring>(a: [T; 2], b: [T; 2]) -> [T; 2] {
     [a[0] - b[0], a[1] - b[1]]
 }
 
-/// Absolute angles, hinge positions and centres of every body at `q`.
+/// Absolute angles, frame origins and centres of every body at `q`, and the sliding coordinates' axes.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Kinematics<T = f64> {
     /// Absolute angle of each body's joint frame.
     pub phi: Vec<T>,
-    /// Hinge position of each body.
+    /// Origin of each body's joint frame (a hinge's pivot).
     pub hinge: Vec<[T; 2]>,
     /// Centre of each body's ellipse.
     pub centre: Vec<[T; 2]>,
+    /// Each coordinate's axis in the world frame if it slides (empty when no coordinate does).
+    pub axis: Vec<[T; 2]>,
 }
 
 impl<T: Ring> Kinematics<T> {
     /// Forward kinematics (parents come before children in a scene).
     pub fn new(scene: &Scene, q: &[T]) -> Self {
-        let n = scene.n_dof();
+        let nb = scene.bodies.len();
         let zero = T::from(0.0);
         let (mut phi, mut hinge, mut centre) =
-            (vec![zero; n], vec![[zero; 2]; n], vec![[zero; 2]; n]);
+            (vec![zero; nb], vec![[zero; 2]; nb], vec![[zero; 2]; nb]);
+        let hinges_only = scene.bodies.iter().all(|b| b.joint == JointKind::Hinge);
+        let mut axis = if hinges_only {
+            Vec::new()
+        } else {
+            vec![[zero; 2]; scene.n_dof()]
+        };
         for (i, b) in scene.bodies.iter().enumerate() {
-            match b.parent {
-                None => {
-                    phi[i] = q[i];
-                    hinge[i] = [T::from(b.anchor[0]), T::from(b.anchor[1])];
+            let first = b.coordinates.start;
+            if b.joint == JointKind::Hinge {
+                match b.parent {
+                    None => {
+                        phi[i] = q[first];
+                        hinge[i] = [T::from(b.anchor[0]), T::from(b.anchor[1])];
+                    }
+                    Some(p) => {
+                        phi[i] = phi[p] + q[first];
+                        hinge[i] = add(hinge[p], rotate(phi[p], b.anchor));
+                    }
                 }
-                Some(p) => {
-                    phi[i] = phi[p] + q[i];
-                    hinge[i] = add(hinge[p], rotate(phi[p], b.anchor));
+            } else {
+                // The parent's frame (the world's for a root body), then the joint's coordinates in order:
+                // slides move the origin along their axes, an angle turns the frame.
+                let (mut angle, mut origin) = match b.parent {
+                    None => (zero, [T::from(b.anchor[0]), T::from(b.anchor[1])]),
+                    Some(p) => (phi[p], add(hinge[p], rotate(phi[p], b.anchor))),
+                };
+                for c in b.coordinates.clone() {
+                    match scene.coordinates[c].kind {
+                        CoordinateKind::Slide { axis: a } => {
+                            let world = match b.parent {
+                                None => [T::from(a[0]), T::from(a[1])],
+                                Some(p) => rotate(phi[p], a),
+                            };
+                            origin = add(origin, [world[0] * q[c], world[1] * q[c]]);
+                            axis[c] = world;
+                        }
+                        CoordinateKind::Angle => angle += q[c],
+                    }
                 }
+                phi[i] = angle;
+                hinge[i] = origin;
             }
             centre[i] = add(hinge[i], rotate(phi[i], b.centre));
         }
-        Kinematics { phi, hinge, centre }
+        Kinematics {
+            phi,
+            hinge,
+            centre,
+            axis,
+        }
     }
 
     /// Jacobian (rows `[dx/dq; dy/dq]`, each of length n) of the material point of `body` at world
@@ -92,12 +133,9 @@ impl<T: Ring> Kinematics<T> {
 
     /// Column `j` of [`Kinematics::point_jacobian`]: the velocity of that point per unit velocity of joint
     /// `j` (zero when the joint does not move `body`).
+    #[inline]
     pub fn point_jacobian_column(&self, scene: &Scene, body: usize, p: [T; 2], j: usize) -> [T; 2] {
-        if scene.moves(j, body) {
-            perp(sub(p, self.hinge[j]))
-        } else {
-            [T::from(0.0); 2]
-        }
+        self.lever(scene, j, body, p).unwrap_or([T::from(0.0); 2])
     }
 
     /// The generalised forces (one per joint, `J_p^T F`) of the world force `force` acting on the material
@@ -114,8 +152,7 @@ impl<T: Ring> Kinematics<T> {
     pub fn point_velocity(&self, scene: &Scene, body: usize, p: [T; 2], v: &[T]) -> [T; 2] {
         let mut out = [T::from(0.0); 2];
         for (j, vj) in v.iter().enumerate() {
-            if scene.moves(j, body) {
-                let c = perp(sub(p, self.hinge[j]));
+            if let Some(c) = self.lever(scene, j, body, p) {
                 out[0] += *vj * c[0];
                 out[1] += *vj * c[1];
             }
@@ -123,7 +160,8 @@ impl<T: Ring> Kinematics<T> {
         out
     }
 
-    /// The mass matrix `M(q) = sum_i m_i Jc_i^T Jc_i + I_i Jw_i^T Jw_i` (row-major `n x n`).
+    /// The mass matrix `M(q) = sum_i m_i Jc_i^T Jc_i + I_i Jw_i^T Jw_i` (row-major `n x n`; `Jw` is one for
+    /// the turning coordinates that move body `i`, zero for the sliding ones).
     pub fn mass_matrix(&self, scene: &Scene) -> Vec<T> {
         let n = scene.n_dof();
         let mut M = vec![T::from(0.0); n * n];
@@ -136,7 +174,13 @@ impl<T: Ring> Kinematics<T> {
                     let Some(lc) = self.lever(scene, c, i, self.centre[i]) else {
                         continue;
                     };
-                    M[r * n + c] += (lr[0] * lc[0] + lr[1] * lc[1]) * b.mass + b.inertia;
+                    let turning = |k: usize| scene.coordinates[k].kind == CoordinateKind::Angle;
+                    let inertia = if turning(r) && turning(c) {
+                        b.inertia
+                    } else {
+                        0.0
+                    };
+                    M[r * n + c] += (lr[0] * lc[0] + lr[1] * lc[1]) * b.mass + inertia;
                 }
             }
         }
@@ -148,46 +192,95 @@ impl<T: Ring> Kinematics<T> {
         M
     }
 
-    /// Column `j` of the Jacobian of the material point of `body` at `p`: `perp(p - h_j)` if joint `j`
-    /// moves the body, else `None`.
+    /// Column `j` of the Jacobian of the material point of `body` at `p`, if coordinate `j` moves the body:
+    /// `perp(p - o)` for a turning coordinate (`o` its body's frame origin), its world axis for a sliding
+    /// one.
+    #[inline(always)]
     pub fn lever(&self, scene: &Scene, j: usize, body: usize, p: [T; 2]) -> Option<[T; 2]> {
-        scene.moves(j, body).then(|| perp(sub(p, self.hinge[j])))
+        if !scene.moves(j, body) {
+            return None;
+        }
+        let c = &scene.coordinates[j];
+        Some(match c.kind {
+            CoordinateKind::Angle => perp(sub(p, self.hinge[c.body])),
+            CoordinateKind::Slide { .. } => self.axis[j],
+        })
     }
 
     /// The generalised forces of a step: `r(q, v) + B u`, the controls acting on their actuated joints.
     pub fn applied_forces(&self, scene: &Scene, v: &[T], u: &[T]) -> Vec<T> {
         let mut r = self.bias_forces(scene, v);
-        for (j, b) in scene.bodies.iter().enumerate() {
-            if let Some(k) = b.actuator {
+        for (j, c) in scene.coordinates.iter().enumerate() {
+            if let Some(k) = c.actuator {
                 r[j] += u[k];
             }
         }
         r
     }
 
-    /// Bias forces `r(q, v)`: gravity on every centre, `-damping * v` on every joint, and the Coriolis and
-    /// centripetal forces `-sum_i m_i Jc_i^T (dJc_i/dt v)`, with `dJc_i/dt v = sum_j v_j perp(dc_i/dt - dh_j/dt)`.
+    /// Bias forces `r(q, v)`: gravity on every centre, `-damping * v` on every coordinate, and the Coriolis
+    /// and centripetal forces `-sum_i m_i Jc_i^T (dJc_i/dt v)`, with `dJc_i/dt v = sum_j v_j dJ_j/dt`:
+    /// `perp(dc_i/dt - do_j/dt)` for a turning coordinate `j` (`o_j` its body's frame origin),
+    /// `omega perp(a_j)` for a sliding one (`omega` the angular velocity of its body's parent). In the plane
+    /// the rotational inertia adds no velocity term.
     pub fn bias_forces(&self, scene: &Scene, v: &[T]) -> Vec<T> {
         let n = scene.n_dof();
+        let zero = T::from(0.0);
         let mut r: Vec<T> = scene
-            .bodies
+            .coordinates
             .iter()
             .zip(v)
-            .map(|(b, vj)| *vj * (-b.damping))
+            .map(|(c, vj)| *vj * (-c.damping))
             .collect();
-        // Hinge velocities: the hinge of j is a point of j's parent.
-        let hinge_velocity: Vec<[T; 2]> = (0..n)
-            .map(|j| match scene.bodies[j].parent {
-                None => [T::from(0.0); 2],
-                Some(p) => self.point_velocity(scene, p, self.hinge[j], v),
+        // Frame origins' velocities: the origin of body j is a point of j's parent, moved along the
+        // joint's own sliding axes.
+        let origin_velocity: Vec<[T; 2]> = scene
+            .bodies
+            .iter()
+            .enumerate()
+            .map(|(j, b)| {
+                let mut w = match b.parent {
+                    None => [zero; 2],
+                    Some(p) => self.point_velocity(scene, p, self.hinge[j], v),
+                };
+                if b.joint != JointKind::Hinge {
+                    for c in b.coordinates.clone() {
+                        if let CoordinateKind::Slide { .. } = scene.coordinates[c].kind {
+                            w[0] += v[c] * self.axis[c][0];
+                            w[1] += v[c] * self.axis[c][1];
+                        }
+                    }
+                }
+                w
             })
             .collect();
+        // Each body's angular velocity (needed by sliding coordinates only).
+        let mut omega = Vec::new();
+        if !self.axis.is_empty() {
+            for b in &scene.bodies {
+                let mut w = b.parent.map_or(zero, |p| omega[p]);
+                for c in b.coordinates.clone() {
+                    if scene.coordinates[c].kind == CoordinateKind::Angle {
+                        w += v[c];
+                    }
+                }
+                omega.push(w);
+            }
+        }
         for (i, b) in scene.bodies.iter().enumerate() {
             let cdot = self.point_velocity(scene, i, self.centre[i], v);
             let mut accel = [T::from(0.0); 2];
             for j in 0..n {
                 if scene.moves(j, i) {
-                    let w = perp(sub(cdot, hinge_velocity[j]));
+                    let c = &scene.coordinates[j];
+                    let w = match c.kind {
+                        CoordinateKind::Angle => perp(sub(cdot, origin_velocity[c.body])),
+                        CoordinateKind::Slide { .. } => {
+                            let turn = scene.bodies[c.body].parent.map_or(zero, |p| omega[p]);
+                            let a = perp(self.axis[j]);
+                            [a[0] * turn, a[1] * turn]
+                        }
+                    };
                     accel[0] += v[j] * w[0];
                     accel[1] += v[j] * w[1];
                 }

@@ -1,5 +1,6 @@
 //! The time-stepping simulator of the paper (section III-A and IV): planar scenes of rigid ellipses on
-//! hinge joints, hard and stochastically smoothed contact with relaxed Coulomb friction (SCENE.md).
+//! hinge, slider and free joints with ground, walls and fixed ellipses (docs/scenes.md), hard and
+//! stochastically smoothed contact with relaxed Coulomb friction (SCENE.md).
 //!
 //! - [`Scene`]: checked, immutable scene data, from a TOML file ([`Scene::from_toml_str`],
 //!   `scenes/finger.toml`) or [`Scene::flicking_finger`].
@@ -41,8 +42,8 @@ pub use error::{DynamicsError, SceneProblem};
 pub use jet::{Jet, Jet1};
 pub use kinematics::{Kinematics, Ring, Scalar};
 pub use scene::{
-    Body, BodySpec, ContactPair, ContactSpec, FLICKING_FINGER_X0, Fixed, FixedSpec, JointSpec,
-    Plane, PlaneSpec, Scene, SceneSpec, Side,
+    Body, BodySpec, ContactPair, ContactSpec, Coordinate, CoordinateKind, FLICKING_FINGER_X0,
+    Fixed, FixedSpec, JointKind, JointSpec, Plane, PlaneSpec, Scene, SceneSpec, Side,
 };
 pub use simulator::Simulator;
 pub use step::{Complementarity, Drag, Model, StateCovariance, Step, StepData, StepSettings};

@@ -1,14 +1,14 @@
-//! Scenes: planar rigid ellipses on hinge joints (to the world or to a parent body), with joint limits,
-//! viscous joint drag, gravity, actuated joints, static world geometry (half-planes and fixed ellipses)
-//! and an explicit list of contact pairs (SCENE.md).
+//! Scenes: planar rigid ellipses on hinge, slider or free joints (to the world or to a parent body), with
+//! joint limits, viscous joint drag, gravity, actuated joints, static world geometry (half-planes and
+//! fixed ellipses) and an explicit list of contact pairs (SCENE.md, docs/scenes.md).
 //!
 //! A scene is data: [`SceneSpec`] is what a TOML file holds (`scenes/finger.toml`), [`Scene::new`] checks it
 //! and reports every problem with the field it is in, and [`Scene::flicking_finger`] builds SCENE.md.
 //!
-//! Frames: every body has a joint frame at its hinge, rotated by its absolute angle `phi` (the sum of its
-//! own and its ancestors' joint angles). A body's `anchor` (its hinge) is given in its parent's joint frame
-//! (the world frame for a root body) and its `centre` in its own joint frame; the ellipse's x axis is the
-//! joint frame's x axis.
+//! Frames: every body has a joint frame, rotated by its absolute angle `phi` (the sum of its own and its
+//! ancestors' turning coordinates), with its origin at its anchor (a hinge's pivot) moved by its sliding
+//! coordinates. A body's `anchor` is given in its parent's joint frame (the world frame for a root body) and
+//! its `centre` in its own joint frame; the ellipse's x axis is the joint frame's x axis.
 
 use crate::constraint::ConstraintRow;
 use crate::error::{DynamicsError, SceneProblem};
@@ -25,19 +25,77 @@ pub const FLICKING_FINGER_X0: [f64; 6] = [
     0.0,
 ];
 
-/// A hinge joint.
+/// How a body moves relative to its parent's joint frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum JointKind {
+    /// Turns about its anchor: one coordinate, `<body>.angle`.
+    #[default]
+    Hinge,
+    /// Slides along `axis` (in the parent's joint frame) from its anchor, without turning: one
+    /// coordinate, `<body>.position`.
+    Slider,
+    /// Moves freely in the plane: `<body>.x` and `<body>.y` (its frame's origin from the anchor, along the
+    /// parent frame's axes), then `<body>.angle` (about that origin).
+    Free,
+}
+
+/// A body's joint to its parent.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct JointSpec {
-    /// `[lower, upper]` on the joint angle (two unilateral constraints), or none.
+    /// The kind (default a hinge).
+    #[serde(default, rename = "type", skip_serializing_if = "is_hinge")]
+    pub kind: JointKind,
+    /// A slider's direction in the parent's joint frame (any non-zero length); only for sliders.
+    #[serde(
+        default,
+        deserialize_with = "strict_pair_option",
+        skip_serializing_if = "Option::is_none"
+    )]
+    pub axis: Option<[f64; 2]>,
+    /// `[lower, upper]` on the joint's coordinate (two unilateral constraints), or none; not for a free
+    /// joint.
     #[serde(default, deserialize_with = "strict_pair_option")]
     pub limits: Option<[f64; 2]>,
-    /// Viscous drag coefficient: the joint feels `-damping * dtheta`.
+    /// Viscous drag coefficient: each of the joint's coordinates feels `-damping * its velocity`.
     #[serde(default)]
     pub damping: f64,
-    /// Whether a control torque acts on this joint (controls are numbered in body order).
+    /// Whether controls act on this joint: one per coordinate (a free joint's force along x, along y,
+    /// then its torque), numbered in body order.
     #[serde(default)]
     pub actuated: bool,
+}
+
+fn is_hinge(kind: &JointKind) -> bool {
+    *kind == JointKind::Hinge
+}
+
+/// What a generalised coordinate does to its body.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum CoordinateKind {
+    /// Turns the body (and its descendants) about its frame's origin.
+    Angle,
+    /// Moves the body's frame along this unit axis of the parent's joint frame.
+    Slide {
+        /// The unit axis.
+        axis: [f64; 2],
+    },
+}
+
+/// A checked generalised coordinate: whose it is, what it does, its limits, drag and control.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Coordinate {
+    /// The body whose joint it belongs to.
+    pub body: usize,
+    /// What it does.
+    pub kind: CoordinateKind,
+    /// Limits, if any.
+    pub limits: Option<[f64; 2]>,
+    /// Viscous drag.
+    pub damping: f64,
+    /// Index of the control acting on it.
+    pub actuator: Option<usize>,
 }
 
 /// One body as a scene file describes it.
@@ -150,12 +208,10 @@ pub struct Body {
     pub anchor: [f64; 2],
     /// Centre in the body's joint frame.
     pub centre: [f64; 2],
-    /// Joint limits, if any.
-    pub limits: Option<[f64; 2]>,
-    /// Viscous drag.
-    pub damping: f64,
-    /// Index of the control acting on this joint.
-    pub actuator: Option<usize>,
+    /// Its joint's kind.
+    pub joint: JointKind,
+    /// Its joint's coordinates (indices into [`Scene::coordinates`], in `q`'s order).
+    pub coordinates: std::ops::Range<usize>,
 }
 
 /// A checked half-plane of the world.
@@ -218,6 +274,8 @@ pub struct Scene {
     pub gravity: [f64; 2],
     /// Bodies, parents first.
     pub bodies: Vec<Body>,
+    /// The generalised coordinates, body by body (`q`'s order).
+    pub coordinates: Vec<Coordinate>,
     /// Contact pairs.
     pub contacts: Vec<ContactPair>,
     /// Half-planes of the world.
@@ -228,6 +286,8 @@ pub struct Scene {
     pub n_controls: usize,
     /// What each complementarity row is.
     rows: Vec<ConstraintRow>,
+    /// `moves[j * bodies + i]`: whether coordinate `j` moves body `i` ([`Scene::moves`]).
+    moves: Vec<bool>,
 }
 
 impl Scene {
@@ -247,6 +307,7 @@ impl Scene {
             bad("body".into(), "a scene needs at least one body");
         }
         let mut bodies = Vec::new();
+        let mut coordinates = Vec::new();
         let mut n_controls = 0;
         for (i, b) in spec.bodies.iter().enumerate() {
             let f = |name: &str| format!("body[{i}].{name}");
@@ -291,10 +352,53 @@ impl Scene {
             if !(b.joint.damping.is_finite() && b.joint.damping >= 0.0) {
                 bad(f("joint.damping"), "must be finite and non-negative");
             }
-            let actuator = b.joint.actuated.then(|| {
-                n_controls += 1;
-                n_controls - 1
-            });
+            let axis = match (b.joint.kind, b.joint.axis) {
+                (JointKind::Slider, Some([x, y])) => {
+                    let len = x.hypot(y);
+                    if !(len.is_finite() && len > 0.0) {
+                        bad(f("joint.axis"), "must be finite and non-zero");
+                    }
+                    [x / len, y / len]
+                }
+                (JointKind::Slider, None) => {
+                    bad(f("joint.axis"), "a slider needs an axis");
+                    [1.0, 0.0]
+                }
+                (_, Some(_)) => {
+                    bad(f("joint.axis"), "only a slider has an axis");
+                    [1.0, 0.0]
+                }
+                (_, None) => [1.0, 0.0],
+            };
+            if b.joint.kind == JointKind::Free && b.joint.limits.is_some() {
+                bad(
+                    f("joint.limits"),
+                    "a free joint takes no limits (bound it with planes)",
+                );
+            }
+            let kinds = match b.joint.kind {
+                JointKind::Hinge => vec![CoordinateKind::Angle],
+                JointKind::Slider => vec![CoordinateKind::Slide { axis }],
+                JointKind::Free => vec![
+                    CoordinateKind::Slide { axis: [1.0, 0.0] },
+                    CoordinateKind::Slide { axis: [0.0, 1.0] },
+                    CoordinateKind::Angle,
+                ],
+            };
+            let first = coordinates.len();
+            for kind in kinds {
+                let actuator = b.joint.actuated.then(|| {
+                    n_controls += 1;
+                    n_controls - 1
+                });
+                coordinates.push(Coordinate {
+                    body: bodies.len(),
+                    kind,
+                    limits: b.joint.limits,
+                    damping: b.joint.damping,
+                    actuator,
+                });
+            }
             if let (Some(shape), Some(parent)) = (shape, parent) {
                 let mass = std::f64::consts::PI * b.semi_axes[0] * b.semi_axes[1] * b.density;
                 bodies.push(Body {
@@ -305,10 +409,12 @@ impl Scene {
                     parent,
                     anchor: b.anchor,
                     centre: b.centre,
-                    limits: b.joint.limits,
-                    damping: b.joint.damping,
-                    actuator,
+                    joint: b.joint.kind,
+                    coordinates: first..coordinates.len(),
                 });
+            } else {
+                // The scene is refused; keep the coordinates consistent with the bodies kept.
+                coordinates.truncate(first);
             }
         }
         let taken = |name: &str| {
@@ -413,14 +519,30 @@ impl Scene {
         let mut scene = Scene {
             gravity: spec.gravity,
             bodies,
+            coordinates,
             contacts,
             planes,
             fixed,
             n_controls,
             spec,
             rows: Vec::new(),
+            moves: Vec::new(),
         };
         scene.rows = ConstraintRow::of(&scene);
+        let nb = scene.bodies.len();
+        scene.moves = (0..scene.n_dof() * nb)
+            .map(|k| {
+                let (j, i) = (scene.coordinates[k / nb].body, k % nb);
+                let mut b = Some(i);
+                while let Some(a) = b {
+                    if a == j {
+                        return true;
+                    }
+                    b = scene.bodies[a].parent;
+                }
+                false
+            })
+            .collect();
         Ok(scene)
     }
 
@@ -447,6 +569,8 @@ impl Scene {
     /// The flicking finger of SCENE.md, identical to `scenes/finger.toml`.
     pub fn flicking_finger() -> Self {
         let joint = |limits, damping, actuated| JointSpec {
+            kind: JointKind::Hinge,
+            axis: None,
             limits,
             damping,
             actuated,
@@ -500,9 +624,9 @@ impl Scene {
         .expect("SCENE.md is a valid scene")
     }
 
-    /// Number of generalised coordinates (one joint angle per body).
+    /// Number of generalised coordinates (one per hinge or slider, three per free joint).
     pub fn n_dof(&self) -> usize {
-        self.bodies.len()
+        self.coordinates.len()
     }
 
     /// Number of state entries `[q; v]`.
@@ -511,11 +635,21 @@ impl Scene {
     }
 
     /// The name of each joint coordinate, in the order of `q` (and of `v`): `<body>.<coordinate>`, a
-    /// hinge's being `<body>.angle`. Tasks name the coordinates their costs and initial states act on.
+    /// hinge's being `<body>.angle`, a slider's `<body>.position`, a free joint's `<body>.x`, `<body>.y`
+    /// and `<body>.angle`. Tasks name the coordinates their costs and initial states act on.
     pub fn coordinate_names(&self) -> Vec<String> {
-        self.bodies
+        self.coordinates
             .iter()
-            .map(|b| format!("{}.angle", b.name))
+            .map(|c| {
+                let b = &self.bodies[c.body];
+                let what = match (b.joint, c.kind) {
+                    (_, CoordinateKind::Angle) => "angle",
+                    (JointKind::Free, CoordinateKind::Slide { axis }) if axis[0] == 1.0 => "x",
+                    (JointKind::Free, CoordinateKind::Slide { .. }) => "y",
+                    (_, CoordinateKind::Slide { .. }) => "position",
+                };
+                format!("{}.{what}", b.name)
+            })
             .collect()
     }
 
@@ -530,16 +664,10 @@ impl Scene {
         &self.rows
     }
 
-    /// Whether body `j` is `i` or one of its ancestors (so joint `j` moves body `i`).
+    /// Whether coordinate `j` belongs to body `i` or one of its ancestors (so it moves body `i`).
+    #[inline]
     pub fn moves(&self, j: usize, i: usize) -> bool {
-        let mut k = Some(i);
-        while let Some(b) = k {
-            if b == j {
-                return true;
-            }
-            k = self.bodies[b].parent;
-        }
-        false
+        self.moves[j * self.bodies.len() + i]
     }
 }
 

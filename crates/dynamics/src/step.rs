@@ -448,8 +448,8 @@ impl Model {
     pub(crate) fn with_drag<T: Ring>(&self, M: &mut [T]) {
         if self.settings.drag == Drag::Implicit {
             let n = self.scene.n_dof();
-            for (j, b) in self.scene.bodies.iter().enumerate() {
-                M[j * n + j] += T::from(self.settings.h * b.damping);
+            for (j, c) in self.scene.coordinates.iter().enumerate() {
+                M[j * n + j] += T::from(self.settings.h * c.damping);
             }
         }
     }
@@ -461,7 +461,9 @@ impl Model {
     pub(crate) fn check_drag<T: Ring>(&self, M: &[T]) -> Result<(), DynamicsError> {
         let h = self.settings.h;
         let scene = &self.scene;
-        if self.settings.drag == Drag::Implicit || scene.bodies.iter().all(|b| b.damping == 0.0) {
+        if self.settings.drag == Drag::Implicit
+            || scene.coordinates.iter().all(|c| c.damping == 0.0)
+        {
             return Ok(());
         }
         let n = scene.n_dof();
@@ -488,8 +490,8 @@ impl Model {
             }
         }
         let mut w = vec![0.0; n * n];
-        for (c, b) in scene.bodies.iter().enumerate() {
-            let root = b.damping.sqrt();
+        for (c, coordinate) in scene.coordinates.iter().enumerate() {
+            let root = coordinate.damping.sqrt();
             if root == 0.0 {
                 continue;
             }
@@ -519,7 +521,7 @@ impl Model {
             .max_by(|&a, &b| mode[a].abs().total_cmp(&mode[b].abs()))
             .unwrap_or(0);
         Err(DynamicsError::UnstableDrag {
-            joint: scene.bodies[joint].name.clone(),
+            joint: scene.bodies[scene.coordinates[joint].body].name.clone(),
             rate: h * lambda,
             h_max: 2.0 / lambda,
         })

@@ -435,11 +435,14 @@ pub(crate) fn local_values(
         .collect()
 }
 
-/// The free joint whose angle the task spins: the last unactuated one.
+/// The free joint whose angle the task spins: the last unactuated turning coordinate.
 pub fn free_joint(scene: &Scene) -> Result<usize, LibraryError> {
     (0..scene.n_dof())
         .rev()
-        .find(|&j| scene.bodies[j].actuator.is_none())
+        .find(|&j| {
+            let c = &scene.coordinates[j];
+            c.actuator.is_none() && c.kind == dynamics::CoordinateKind::Angle
+        })
         .ok_or_else(|| LibraryError::Invalid("the scene has no unactuated joint to spin".into()))
 }
 

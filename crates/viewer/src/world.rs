@@ -267,7 +267,9 @@ impl World {
                 .map(|b| BodyShape {
                     name: b.name.clone(),
                     semi_axes: [b.shape.a(), b.shape.b()],
-                    actuated: b.actuator.is_some(),
+                    actuated: self.scene().coordinates[b.coordinates.clone()]
+                        .iter()
+                        .any(|c| c.actuator.is_some()),
                 })
                 .collect(),
             h: self.settings.h,

@@ -420,10 +420,10 @@ impl Model {
             contacts,
             distance,
             actuated: scene
-                .bodies
+                .coordinates
                 .iter()
                 .enumerate()
-                .filter_map(|(j, b)| b.actuator.map(|k| (j, 2 * n + k)))
+                .filter_map(|(j, c)| c.actuator.map(|k| (j, 2 * n + k)))
                 .collect(),
             geometry,
             forces,
