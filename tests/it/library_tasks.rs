@@ -261,7 +261,7 @@ fn choosing_among_several_tasks_names_them() {
 
 /// The example scenes' tasks, solved from their initial states by full second-order DDP through the same
 /// path as `cargo xtask optimize --task`: the two fingers turn the ellipse to its target and hold it; the
-/// three-link finger spins it.
+/// three-link finger spins it; the finger of scenes/pushing.toml pushes the free block to its target.
 #[test]
 fn the_example_scenes_tasks_are_solved_from_rest() {
     use ddp::{Ddp, DdpSettings};
@@ -307,6 +307,19 @@ fn the_example_scenes_tasks_are_solved_from_rest() {
         turned > 1.0,
         "the three-link finger turned the ellipse {turned} rad"
     );
+    // Pushing: the finger pushes the free block along the ground to 0.6 and leaves it there, flat.
+    let (_, sol) = solve(include_str!("../../scenes/pushing.toml"), 300);
+    assert!(sol.status.converged(), "{:?}", sol.status);
+    let end = sol.states.last().unwrap();
+    let (x, y, angle, speed) = (end[2], end[3], end[4], end[7]);
+    assert!((x - 0.6).abs() < 0.05, "the block ends at x = {x}");
+    assert!(speed.abs() < 0.05, "moving at {speed}");
+    assert!(
+        (y - 0.2).abs() < 0.02 && angle.abs() < 0.05,
+        "not flat on the ground: y {y}, angle {angle}"
+    );
+    // It got there by contact: the block never left the ground, and the finger touched it.
+    assert!(sol.states.iter().all(|s| s[3] > 0.15 && s[3] < 0.3));
 }
 
 /// A small library of the paper's recipe (one kicked chain) on a task of a scene file.

@@ -166,6 +166,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     };
     let start = Instant::now();
     let horizon = args.horizon.unwrap_or(75);
+    // What a task's terms say of the solution (the finger's built-in report otherwise).
+    let mut summary = None;
     let (solution, problem) = match args.problem {
         Problem::Finger if args.task.is_some() => {
             let file = args.sim.problem_file()?;
@@ -188,6 +190,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                 &vec![vec![0.0; m]; horizon],
                 observe,
             )?;
+            summary = Some(task_summary(&file.scene, &task, &sol.states));
             (sol, "task")
         }
         Problem::Finger => {
@@ -241,7 +244,15 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         seconds * 1e3
     );
     println!("status: {}", meaning(solution.status));
-    if args.problem == Problem::Finger {
+    if let Some(summary) = &summary {
+        let gain = solution
+            .gains
+            .iter()
+            .flatten()
+            .fold(0.0f64, |a, k| a.max(k.abs()));
+        println!("{summary}; largest feedback gain |K| {gain:.3e}");
+    }
+    if args.problem == Problem::Finger && summary.is_none() {
         let n = solution.states[0].len() / 2;
         let turned =
             solution.states.last().expect("N + 1 states")[n - 1] - solution.states[0][n - 1];
@@ -272,4 +283,34 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         anyhow::bail!("--strict: {}", meaning(solution.status));
     }
     Ok(())
+}
+
+/// Each state entry a task's terms weigh, from the first state to the last (with the target of a
+/// quadratic term), one line: `block.x 0.000 -> 0.584 (target 0.6)`.
+fn task_summary(scene: &dynamics::Scene, task: &library::Task, states: &[Vec<f64>]) -> String {
+    let names = scene.coordinate_names();
+    let n = scene.n_dof();
+    let name = |i: usize| {
+        if i < n {
+            names[i].clone()
+        } else {
+            format!("{} velocity", names[i - n])
+        }
+    };
+    let (first, last) = (&states[0], states.last().expect("N + 1 states"));
+    let mut seen: Vec<(usize, Option<f64>)> = Vec::new();
+    for t in task.cost.running.iter().chain(&task.cost.final_terms) {
+        let key = (t.index, (t.quadratic != 0.0).then_some(t.target));
+        if !seen.contains(&key) {
+            seen.push(key);
+        }
+    }
+    let parts: Vec<String> = seen
+        .into_iter()
+        .map(|(i, target)| {
+            let target = target.map_or(String::new(), |t| format!(" (target {t})"));
+            format!("{} {:.4} -> {:.4}{target}", name(i), first[i], last[i])
+        })
+        .collect();
+    format!("over the horizon: {}", parts.join("; "))
 }
