@@ -380,7 +380,7 @@ One pass (backward pass with the steps' derivatives, then the forward pass with 
 /// 0.05 |u|^2`; median of 21.
 fn scenes_pass_table() -> anyhow::Result<String> {
     let mut out = String::from(
-        "\nOne full-DDP pass (as above) on scenes of other sizes, N = 75, logistic sigma = 0.1, cost -(angle of the free body) + 0.05 |u|^2 from rest, median of 21:\n\n| scene | states / controls | pass (ms) | per knot (us) | passes to get there |\n|---|---:|---:|---:|---:|\n",
+        "\nOne full-DDP pass (as above) on scenes of other sizes, N = 75, logistic sigma = 0.1, cost -(angle of the free body) + 0.05 |u|^2 from rest (pushing: its task's cost and initial state), median of 21:\n\n| scene | states / controls | pass (ms) | per knot (us) | passes to get there |\n|---|---:|---:|---:|---:|\n",
     );
     let three = Scene::from_toml_str(include_str!("../../scenes/three_link_finger.toml"))?;
     let cases = [
@@ -396,53 +396,74 @@ fn scenes_pass_table() -> anyhow::Result<String> {
         ),
     ];
     for (name, scene, x0) in cases {
-        let (n, m) = (scene.n_dof(), scene.n_controls);
+        let n = scene.n_dof();
         let free = library::free_joint(&scene).unwrap_or(n - 1);
-        let cost = finger_cost(n, free, m);
-        let settings = StepSettings {
-            model: Complementarity::Logistic { sigma: 0.1 },
-            ..StepSettings::default()
-        };
-        let make = || -> anyhow::Result<FingerDynamics> {
-            Ok(FingerDynamics::new(Simulator::new(
-                scene.clone(),
-                settings,
-            )?))
-        };
-        let before = Ddp::new(DdpSettings {
-            max_iterations: 30,
-            ..DdpSettings::default()
-        })?
-        .solve(&mut make()?, &cost, &x0, &vec![vec![0.0; m]; 75])?;
-        let midway = before.controls;
-        let time = |max_iterations: usize| -> anyhow::Result<f64> {
-            let mut t = Vec::new();
-            for _ in 0..21 {
-                let mut d = make()?;
-                let s = Instant::now();
-                if max_iterations == 0 {
-                    ddp::rollout(&mut d, &cost, &x0, &midway)
-                        .map_err(|(i, e)| anyhow::anyhow!("step {i}: {e}"))?;
-                } else {
-                    Ddp::new(DdpSettings {
-                        max_iterations,
-                        ..DdpSettings::default()
-                    })?
-                    .solve(&mut d, &cost, &x0, &midway)?;
-                }
-                t.push(s.elapsed().as_secs_f64() * 1e3);
-            }
-            t.sort_by(f64::total_cmp);
-            Ok(t[10])
-        };
-        let rollout = time(0)?;
-        let pass = time(1)? - rollout;
-        out.push_str(&format!(
-            "| {name} | {} / {m} | {pass:.2} | {:.1} | {} |\n",
-            2 * n,
-            pass * 1e3 / 75.0,
-            before.iterations.len()
-        ));
+        let cost = finger_cost(n, free, scene.n_controls);
+        out.push_str(&pass_row(name, &scene, &x0, &cost)?);
     }
+    // Pushing, on its own task (its cost and initial state).
+    let file = library::ProblemFile::from_toml_str(include_str!("../../scenes/pushing.toml"))?;
+    let task = file.task(Some("push"))?;
+    out.push_str(&pass_row(
+        "pushing (pushing.toml, its task push)",
+        &file.scene,
+        &task.x0,
+        &task.cost,
+    )?);
     Ok(out)
+}
+
+/// One row of [`scenes_pass_table`]: a one-pass solve from the trajectory 30 passes into a solve of `cost`
+/// from `x0` (zero controls), minus its rollout, median of 21.
+fn pass_row<C: ddp::Cost>(
+    name: &str,
+    scene: &Scene,
+    x0: &[f64],
+    cost: &C,
+) -> anyhow::Result<String> {
+    let (n, m) = (scene.n_dof(), scene.n_controls);
+    let settings = StepSettings {
+        model: Complementarity::Logistic { sigma: 0.1 },
+        ..StepSettings::default()
+    };
+    let make = || -> anyhow::Result<FingerDynamics> {
+        Ok(FingerDynamics::new(Simulator::new(
+            scene.clone(),
+            settings,
+        )?))
+    };
+    let before = Ddp::new(DdpSettings {
+        max_iterations: 30,
+        ..DdpSettings::default()
+    })?
+    .solve(&mut make()?, cost, x0, &vec![vec![0.0; m]; 75])?;
+    let midway = before.controls;
+    let time = |max_iterations: usize| -> anyhow::Result<f64> {
+        let mut t = Vec::new();
+        for _ in 0..21 {
+            let mut d = make()?;
+            let s = Instant::now();
+            if max_iterations == 0 {
+                ddp::rollout(&mut d, cost, x0, &midway)
+                    .map_err(|(i, e)| anyhow::anyhow!("step {i}: {e}"))?;
+            } else {
+                Ddp::new(DdpSettings {
+                    max_iterations,
+                    ..DdpSettings::default()
+                })?
+                .solve(&mut d, cost, x0, &midway)?;
+            }
+            t.push(s.elapsed().as_secs_f64() * 1e3);
+        }
+        t.sort_by(f64::total_cmp);
+        Ok(t[10])
+    };
+    let rollout = time(0)?;
+    let pass = time(1)? - rollout;
+    Ok(format!(
+        "| {name} | {} / {m} | {pass:.2} | {:.1} | {} |\n",
+        2 * n,
+        pass * 1e3 / 75.0,
+        before.iterations.len()
+    ))
 }

@@ -293,12 +293,28 @@ type Case = (&'static str, Scene, Vec<Vec<f64>>, Vec<f64>);
 /// median over states in contact.
 fn scenes_table(finger_states: &[Vec<f64>]) -> anyhow::Result<String> {
     let mut out = String::from(
-        "\nScenes of any size (logistic, sigma = 0.1, h = 0.05; median over 8 states with a link on the ellipse, warm-started; the Hessian of c^T f over (x, u) for a fixed c): the scene files under scenes/.\n\n| scene | joints / controls / rows | step (ns) | step + exact fx, fu (ns) | + Hessian of c^T f (ns) |\n|---|---:|---:|---:|---:|\n",
+        "\nScenes of any size (logistic, sigma = 0.1, h = 0.05; median over 8 states with a link on the ellipse (pushing: on the block), warm-started; the Hessian of c^T f over (x, u) for a fixed c): the scene files under scenes/.\n\n| scene | coordinates / controls / rows | step (ns) | step + exact fx, fu (ns) | + Hessian of c^T f (ns) |\n|---|---:|---:|---:|---:|\n",
     );
     let three = Scene::from_toml_str(include_str!("../../scenes/three_link_finger.toml"))?;
     let two = Scene::from_toml_str(include_str!("../../scenes/two_fingers.toml"))?;
     let at = |f: &dyn Fn(f64) -> Vec<f64>| (0..8).map(|i| f(i as f64 * 0.4)).collect::<Vec<_>>();
-    let cases: [Case; 3] = [
+    let pushing = Scene::from_toml_str(include_str!("../../scenes/pushing.toml"))?;
+    // Pushing: states of its task's optimal trajectory, the finger on the block, the block on the ground.
+    let pushed = [
+        [
+            -0.674, -0.285, 0.293, 0.241, -0.002, -0.521, 0.921, 1.318, -0.062, -0.432,
+        ],
+        [
+            -0.775, -0.039, 0.566, 0.226, -0.304, -0.303, 0.732, 0.599, 0.027, -0.919,
+        ],
+        [
+            -0.876, 0.185, 0.654, 0.229, -0.405, -0.345, 0.735, 0.113, -0.013, 0.054,
+        ],
+        [
+            -0.979, 0.392, 0.646, 0.218, -0.275, -0.341, 0.655, -0.092, -0.043, 0.62,
+        ],
+    ];
+    let cases: [Case; 4] = [
         (
             "finger (finger.toml)",
             Scene::flicking_finger(),
@@ -316,6 +332,12 @@ fn scenes_table(finger_states: &[Vec<f64>]) -> anyhow::Result<String> {
             two,
             at(&|t| vec![-1.2, 0.6, -1.95, -0.6, t, 0.3, -0.4, 0.2, 0.1, 1.0]),
             vec![0.2, -0.3, 0.1, 0.4],
+        ),
+        (
+            "pushing (pushing.toml: a free body, ground)",
+            pushing,
+            pushed.iter().cycle().take(8).map(|x| x.to_vec()).collect(),
+            vec![0.2, -0.3],
         ),
     ];
     for (name, scene, states, u) in cases {
