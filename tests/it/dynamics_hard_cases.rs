@@ -211,43 +211,56 @@ fn derivatives_of_a_four_joint_scene_match_central_differences() {
         model: Complementarity::Logistic { sigma: 0.2 },
         ..StepSettings::default()
     };
-    let mut sim = Simulator::new(scene.clone(), settings).unwrap();
     // Link 3 bent down towards the ellipse's top, the ellipse turning.
     let x = [-1.2, -0.6, -0.8, 0.4, 0.5, -1.0, 1.5, 0.2];
     let u = [0.2, -0.3, 0.1];
-    let (step, der) = sim.step_with_derivatives(&x, &u).unwrap();
+    let step = first_derivatives_match_differences(&scene, settings, &x, &u);
     assert_eq!(step.info.status, Status::Converged);
     assert!(step.lambda.iter().any(|&l| l > 1e-3), "{:?}", step.lambda);
-    let mut fresh = Simulator::new(scene, settings).unwrap();
+}
+
+/// The exact `fx`, `fu` of the step at `(x, u)` against central differences (step 1e-6) of fresh solves,
+/// every entry within 1e-6 of the largest entry of `fx`; returns the step.
+pub(crate) fn first_derivatives_match_differences(
+    scene: &Scene,
+    settings: StepSettings,
+    x: &[f64],
+    u: &[f64],
+) -> dynamics::Step {
+    let (nx, nu) = (x.len(), u.len());
+    let mut sim = Simulator::new(scene.clone(), settings).unwrap();
+    let (step, der) = sim.step_with_derivatives(x, u).unwrap();
+    let mut fresh = Simulator::new(scene.clone(), settings).unwrap();
     let mut f = |x: &[f64], u: &[f64]| {
         fresh.reset_warm_start();
         fresh.step(x, u).unwrap().x_next
     };
     let scale = der.fx.iter().fold(1.0f64, |m, v| m.max(v.abs()));
     let eps = 1e-6;
-    for j in 0..11 {
+    for j in 0..nx + nu {
         let (mut xp, mut xm, mut up, mut um) = (x.to_vec(), x.to_vec(), u.to_vec(), u.to_vec());
-        if j < 8 {
+        if j < nx {
             xp[j] += eps;
             xm[j] -= eps;
         } else {
-            up[j - 8] += eps;
-            um[j - 8] -= eps;
+            up[j - nx] += eps;
+            um[j - nx] -= eps;
         }
         let (p, m) = (f(&xp, &up), f(&xm, &um));
-        for i in 0..8 {
+        for i in 0..nx {
             let fd = (p[i] - m[i]) / (2.0 * eps);
-            let exact = if j < 8 {
-                der.fx[i * 8 + j]
+            let exact = if j < nx {
+                der.fx[i * nx + j]
             } else {
-                der.fu[i * 3 + j - 8]
+                der.fu[i * nu + j - nx]
             };
             assert!(
                 (fd - exact).abs() < 1e-6 * scale,
-                "d x'_{i} / d y_{j}: {fd} vs {exact}"
+                "at {x:?}: d x'_{i} / d y_{j}: {fd} vs {exact}"
             );
         }
     }
+    step
 }
 
 /// Two two-link fingers on either side of the ellipse: five joints, four controls, two contact pairs

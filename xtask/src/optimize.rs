@@ -244,23 +244,17 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         seconds * 1e3
     );
     println!("status: {}", meaning(solution.status));
+    let gain = solution
+        .gains
+        .iter()
+        .flatten()
+        .fold(0.0f64, |a, k| a.max(k.abs()));
     if let Some(summary) = &summary {
-        let gain = solution
-            .gains
-            .iter()
-            .flatten()
-            .fold(0.0f64, |a, k| a.max(k.abs()));
         println!("{summary}; largest feedback gain |K| {gain:.3e}");
-    }
-    if args.problem == Problem::Finger && summary.is_none() {
+    } else if args.problem == Problem::Finger {
         let n = solution.states[0].len() / 2;
         let turned =
             solution.states.last().expect("N + 1 states")[n - 1] - solution.states[0][n - 1];
-        let gain = solution
-            .gains
-            .iter()
-            .flatten()
-            .fold(0.0f64, |a, k| a.max(k.abs()));
         println!(
             "theta3 turned {turned:.4} rad over the horizon; largest feedback gain |K| {gain:.3e}"
         );
@@ -288,15 +282,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
 /// Each state entry a task's terms weigh, from the first state to the last (with the target of a
 /// quadratic term), one line: `block.x 0.000 -> 0.584 (target 0.6)`.
 fn task_summary(scene: &dynamics::Scene, task: &library::Task, states: &[Vec<f64>]) -> String {
-    let names = scene.coordinate_names();
-    let n = scene.n_dof();
-    let name = |i: usize| {
-        if i < n {
-            names[i].clone()
-        } else {
-            format!("{} velocity", names[i - n])
-        }
-    };
+    let names = scene.state_names();
     let (first, last) = (&states[0], states.last().expect("N + 1 states"));
     let mut seen: Vec<(usize, Option<f64>)> = Vec::new();
     for t in task.cost.running.iter().chain(&task.cost.final_terms) {
@@ -309,7 +295,7 @@ fn task_summary(scene: &dynamics::Scene, task: &library::Task, states: &[Vec<f64
         .into_iter()
         .map(|(i, target)| {
             let target = target.map_or(String::new(), |t| format!(" (target {t})"));
-            format!("{} {:.4} -> {:.4}{target}", name(i), first[i], last[i])
+            format!("{} {:.4} -> {:.4}{target}", names[i], first[i], last[i])
         })
         .collect();
     format!("over the horizon: {}", parts.join("; "))

@@ -205,7 +205,7 @@ impl<T: Ring> Constraints<T> {
                 let normal = c.normal[0] * rel[0] + c.normal[1] * rel[1];
                 let tangent = (t[0] * rel[0] + t[1] * rel[1]) * pair.friction;
                 plus[k] = normal + tangent;
-                minus[k] = normal + tangent * -1.0;
+                minus[k] = normal - tangent;
             }
             d.push(c.distance);
             d.push(c.distance);

@@ -13,7 +13,7 @@
 
 #![allow(non_snake_case)]
 
-use crate::scene::{CoordinateKind, JointKind, Scene};
+use crate::scene::{CoordinateKind, Scene};
 use num_dual::DualNum;
 
 /// The scalars the step's equations run on: `f64` and `num-dual`'s forward-mode types over `f64` (the
@@ -67,48 +67,39 @@ impl<T: Ring> Kinematics<T> {
         let zero = T::from(0.0);
         let (mut phi, mut hinge, mut centre) =
             (vec![zero; nb], vec![[zero; 2]; nb], vec![[zero; 2]; nb]);
-        let hinges_only = scene.bodies.iter().all(|b| b.joint == JointKind::Hinge);
-        let mut axis = if hinges_only {
+        let slides = scene
+            .coordinates
+            .iter()
+            .any(|c| matches!(c.kind, CoordinateKind::Slide { .. }));
+        let mut axis = if !slides {
             Vec::new()
         } else {
             vec![[zero; 2]; scene.n_dof()]
         };
         for (i, b) in scene.bodies.iter().enumerate() {
-            let first = b.coordinates.start;
-            if b.joint == JointKind::Hinge {
-                match b.parent {
-                    None => {
-                        phi[i] = q[first];
-                        hinge[i] = [T::from(b.anchor[0]), T::from(b.anchor[1])];
+            // The parent's frame (the world's for a root body), then the joint's coordinates in order:
+            // slides move the origin along their axes, an angle turns the frame.
+            let (mut angle, mut origin) = match b.parent {
+                None => (None, [T::from(b.anchor[0]), T::from(b.anchor[1])]),
+                Some(p) => (Some(phi[p]), add(hinge[p], rotate(phi[p], b.anchor))),
+            };
+            for c in b.coordinates.clone() {
+                match scene.coordinates[c].kind {
+                    CoordinateKind::Slide { axis: a } => {
+                        let world = match b.parent {
+                            None => [T::from(a[0]), T::from(a[1])],
+                            Some(p) => rotate(phi[p], a),
+                        };
+                        origin = add(origin, [world[0] * q[c], world[1] * q[c]]);
+                        axis[c] = world;
                     }
-                    Some(p) => {
-                        phi[i] = phi[p] + q[first];
-                        hinge[i] = add(hinge[p], rotate(phi[p], b.anchor));
-                    }
-                }
-            } else {
-                // The parent's frame (the world's for a root body), then the joint's coordinates in order:
-                // slides move the origin along their axes, an angle turns the frame.
-                let (mut angle, mut origin) = match b.parent {
-                    None => (zero, [T::from(b.anchor[0]), T::from(b.anchor[1])]),
-                    Some(p) => (phi[p], add(hinge[p], rotate(phi[p], b.anchor))),
-                };
-                for c in b.coordinates.clone() {
-                    match scene.coordinates[c].kind {
-                        CoordinateKind::Slide { axis: a } => {
-                            let world = match b.parent {
-                                None => [T::from(a[0]), T::from(a[1])],
-                                Some(p) => rotate(phi[p], a),
-                            };
-                            origin = add(origin, [world[0] * q[c], world[1] * q[c]]);
-                            axis[c] = world;
-                        }
-                        CoordinateKind::Angle => angle += q[c],
+                    CoordinateKind::Angle => {
+                        angle = Some(angle.map_or(q[c], |a| a + q[c]));
                     }
                 }
-                phi[i] = angle;
-                hinge[i] = origin;
             }
+            phi[i] = angle.unwrap_or(zero);
+            hinge[i] = origin;
             centre[i] = add(hinge[i], rotate(phi[i], b.centre));
         }
         Kinematics {
@@ -243,12 +234,10 @@ impl<T: Ring> Kinematics<T> {
                     None => [zero; 2],
                     Some(p) => self.point_velocity(scene, p, self.hinge[j], v),
                 };
-                if b.joint != JointKind::Hinge {
-                    for c in b.coordinates.clone() {
-                        if let CoordinateKind::Slide { .. } = scene.coordinates[c].kind {
-                            w[0] += v[c] * self.axis[c][0];
-                            w[1] += v[c] * self.axis[c][1];
-                        }
+                for c in b.coordinates.clone() {
+                    if let CoordinateKind::Slide { .. } = scene.coordinates[c].kind {
+                        w[0] += v[c] * self.axis[c][0];
+                        w[1] += v[c] * self.axis[c][1];
                     }
                 }
                 w

@@ -417,22 +417,27 @@ impl Scene {
                 coordinates.truncate(first);
             }
         }
-        let taken = |name: &str| {
-            name == "world"
-                || spec.bodies.iter().any(|o| o.name == name)
-                || spec.planes.iter().filter(|o| o.name == name).count()
-                    + spec.fixed.iter().filter(|o| o.name == name).count()
-                    > 1
-        };
-        let mut planes = Vec::new();
-        for (i, p) in spec.planes.iter().enumerate() {
-            let f = |name: &str| format!("plane[{i}].{name}");
-            if taken(&p.name) {
+        // The static shapes' names: unique among bodies, planes and fixed ellipses, and not "world".
+        let statics: Vec<(String, &String)> = (spec.planes.iter().enumerate())
+            .map(|(i, p)| (format!("plane[{i}].name"), &p.name))
+            .chain(
+                (spec.fixed.iter().enumerate()).map(|(i, e)| (format!("fixed[{i}].name"), &e.name)),
+            )
+            .collect();
+        for (field, name) in &statics {
+            if *name == "world"
+                || spec.bodies.iter().any(|o| &o.name == *name)
+                || statics.iter().filter(|(_, o)| o == name).count() > 1
+            {
                 bad(
-                    f("name"),
+                    field.clone(),
                     "must be unique among bodies, planes and fixed ellipses and not \"world\"",
                 );
             }
+        }
+        let mut planes = Vec::new();
+        for (i, p) in spec.planes.iter().enumerate() {
+            let f = |name: &str| format!("plane[{i}].{name}");
             match geometry::HalfPlane::new(p.point, p.normal) {
                 Ok(shape) => planes.push(Plane {
                     name: p.name.clone(),
@@ -447,12 +452,6 @@ impl Scene {
         let mut fixed = Vec::new();
         for (i, e) in spec.fixed.iter().enumerate() {
             let f = |name: &str| format!("fixed[{i}].{name}");
-            if taken(&e.name) {
-                bad(
-                    f("name"),
-                    "must be unique among bodies, planes and fixed ellipses and not \"world\"",
-                );
-            }
             if !(e.centre.iter().all(|v| v.is_finite()) && e.angle.is_finite()) {
                 bad(f("centre/angle"), "must be finite");
             }
@@ -651,6 +650,13 @@ impl Scene {
                 format!("{}.{what}", b.name)
             })
             .collect()
+    }
+
+    /// The name of each state entry of `x = [q; v]`: the coordinates' names, then each with " velocity".
+    pub fn state_names(&self) -> Vec<String> {
+        let names = self.coordinate_names();
+        let velocities: Vec<String> = names.iter().map(|c| format!("{c} velocity")).collect();
+        names.into_iter().chain(velocities).collect()
     }
 
     /// Number of unilateral constraint rows: two per joint with limits, two per contact pair.

@@ -134,17 +134,6 @@ pub struct TargetDistance {
     pub last: f64,
 }
 
-/// The state entry `index` of `scene` by name: its coordinate's, with " velocity" for a velocity.
-fn entry_name(scene: &dynamics::Scene, index: usize) -> String {
-    let names = scene.coordinate_names();
-    let n = scene.n_dof();
-    if index < n {
-        names[index].clone()
-    } else {
-        format!("{} velocity", names[index - n])
-    }
-}
-
 /// Accumulates [`TaskMeasures`] along a run.
 struct TaskMeter {
     cost: crate::TaskCost,
@@ -208,6 +197,7 @@ impl TaskMeter {
         at_quarter: &[f64],
         x: &[f64],
     ) -> TaskMeasures {
+        let names = scene.state_names();
         let time = steps as f64 * self.h;
         let late_steps = steps - self.quarter;
         let late_time = late_steps as f64 * self.h;
@@ -228,7 +218,7 @@ impl TaskMeter {
             rates: weights
                 .into_iter()
                 .map(|(j, weight)| CoordinateRate {
-                    coordinate: entry_name(scene, j),
+                    coordinate: names[j].clone(),
                     weight,
                     rate: (x[j] - x0[j]) / time,
                     final_rate: (x[j] - at_quarter[j]) / late_time,
@@ -238,7 +228,7 @@ impl TaskMeter {
                 .targets
                 .into_iter()
                 .map(|(t, final_only, sums, worst)| TargetDistance {
-                    entry: entry_name(scene, t.index),
+                    entry: names[t.index].clone(),
                     target: t.target,
                     final_only,
                     mean: sums[0] / steps as f64,

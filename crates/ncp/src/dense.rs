@@ -344,26 +344,33 @@ impl DenseLu {
     }
 }
 
+/// Partial pivoting at elimination step `k`: the row (`k` or below) of the largest magnitude in
+/// `column` (the magnitudes from row `k` down; the first of equals), or `Singular` when it is not above
+/// `tiny`.
+#[inline(always)]
+fn pivot(k: usize, column: impl Iterator<Item = f64>, tiny: f64) -> Result<usize, FactorError> {
+    let (mut p, mut best) = (k, f64::NEG_INFINITY);
+    for (i, v) in (k..).zip(column) {
+        if v > best || i == k {
+            best = v;
+            p = i;
+        }
+    }
+    if !(best > tiny) {
+        return Err(FactorError::Singular {
+            column: k,
+            pivot: best,
+            threshold: tiny,
+        });
+    }
+    Ok(p)
+}
+
 /// Gaussian elimination with partial pivoting of the row-major `n x n` matrix in `lu`, in place (`L`'s
 /// multipliers below the diagonal, `U` on and above it), recording the row swaps in `perm`.
 fn eliminate(lu: &mut [f64], perm: &mut [usize], n: usize, tiny: f64) -> Result<(), FactorError> {
     for k in 0..n {
-        let mut p = k;
-        let mut best = lu[k * n + k].abs();
-        for i in k + 1..n {
-            let v = lu[i * n + k].abs();
-            if v > best {
-                best = v;
-                p = i;
-            }
-        }
-        if !(best > tiny) {
-            return Err(FactorError::Singular {
-                column: k,
-                pivot: best,
-                threshold: tiny,
-            });
-        }
+        let p = pivot(k, (k..n).map(|i| lu[i * n + k].abs()), tiny)?;
         if p != k {
             let (top, bottom) = lu.split_at_mut(p * n);
             top[k * n..(k + 1) * n].swap_with_slice(&mut bottom[..n]);
@@ -396,22 +403,7 @@ fn eliminate_fixed<const N: usize>(
     let (rows, _) = lu.as_chunks_mut::<N>();
     let rows: &mut [[f64; N]; N] = rows.try_into().expect("an N x N matrix");
     for k in 0..N {
-        let mut p = k;
-        let mut best = rows[k][k].abs();
-        for (i, row) in rows.iter().enumerate().skip(k + 1) {
-            let v = row[k].abs();
-            if v > best {
-                best = v;
-                p = i;
-            }
-        }
-        if !(best > tiny) {
-            return Err(FactorError::Singular {
-                column: k,
-                pivot: best,
-                threshold: tiny,
-            });
-        }
+        let p = pivot(k, rows[k..].iter().map(|row| row[k].abs()), tiny)?;
         if p != k {
             rows.swap(k, p);
             perm.swap(k, p);
