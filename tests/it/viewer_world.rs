@@ -243,3 +243,113 @@ fn switching_to_online_mpc_never_stalls_the_world_and_spreads_its_first_solve_ov
     }
     assert!(last > bound, "the warm-up ran: {last} passes in 40 steps");
 }
+
+/// A world on a scene file's task: the task's initial state, time step and noise scale, as
+/// `cargo xtask view --scene FILE --task NAME` sets them.
+fn task_world(text: &str, task: &str, policy: PolicyKind) -> World {
+    let problem = library::ProblemFile::from_toml_str(text).unwrap();
+    let task = problem.task(Some(task)).unwrap();
+    let sigma = match task.model {
+        library::Model::Logistic(s) | library::Model::Normal(s) => s,
+        library::Model::Hard => 0.1,
+    };
+    World::new(
+        problem.scene.clone(),
+        None,
+        WorldSettings {
+            policy,
+            x0: task.x0.clone(),
+            h: task.h,
+            sigma,
+            task: Some(task),
+            ..WorldSettings::default()
+        },
+    )
+    .unwrap()
+}
+
+#[test]
+fn the_pushing_scene_is_shown_whole_its_free_block_can_be_dragged_and_online_mpc_pushes_it() {
+    let text = include_str!("../../scenes/pushing.toml");
+    let mut world = task_world(text, "push", PolicyKind::Off);
+    let hello = serde_json::to_value(world.hello()).unwrap();
+    // The ground is sent, the window holds it and every body, and the page follows block.x to 0.6.
+    assert_eq!(hello["planes"].as_array().unwrap().len(), 1, "{hello}");
+    assert_eq!(hello["planes"][0]["normal"], serde_json::json!([0.0, 1.0]));
+    assert_eq!(hello["bodies"].as_array().unwrap().len(), 3);
+    assert_eq!(hello["watched"]["name"], "block.x");
+    assert_eq!(hello["watched"]["target"], 0.6);
+    let w: Vec<f64> = serde_json::from_value(hello["window"].clone()).unwrap();
+    assert!(
+        w[2] < 0.0 && w[3] > 1.3 && w[0] < -1.4 - 0.5 && w[1] > 1.2,
+        "{w:?}"
+    );
+    let frame = world.frame();
+    assert_eq!(
+        frame.bodies.len(),
+        3,
+        "one pose per body, not per coordinate"
+    );
+    // Grab the block (body 2, a free body: 3 coordinates, so body indices are not coordinates) at its
+    // centre and pull it right along the ground.
+    let start = world.state()[2];
+    world
+        .apply(ClientMessage::Grab {
+            body: 2,
+            point: [0.0, 0.2],
+        })
+        .unwrap();
+    world
+        .apply(ClientMessage::Drag { target: [1.0, 0.2] })
+        .unwrap();
+    for _ in 0..40 {
+        world.advance().unwrap();
+    }
+    world.apply(ClientMessage::Release).unwrap();
+    let dragged = world.state()[2] - start;
+    assert!(dragged > 0.2, "the drag moved the block {dragged}");
+    assert!(world.frame().watched == world.state()[2]);
+    // A body index past the scene's bodies is refused (the scene has 5 coordinates but 3 bodies).
+    assert!(
+        world
+            .apply(ClientMessage::Grab {
+                body: 3,
+                point: [0.0, 0.2],
+            })
+            .is_err()
+    );
+    // Online MPC on the task's cost, from the task's start, pushes the block most of the way.
+    let mut world = task_world(text, "push", PolicyKind::Mpc);
+    for _ in 0..120 {
+        world.advance().unwrap();
+        assert!(world.warning().is_none(), "{:?}", world.warning());
+    }
+    let x = world.state()[2];
+    println!("online MPC: block.x {x:.3} after 6 s (target 0.6)");
+    assert!((x - 0.6).abs() < 0.15, "block.x {x}");
+}
+
+#[test]
+fn the_two_finger_scene_turns_to_its_target_under_online_mpc_and_never_counts_a_stall() {
+    let mut world = task_world(
+        include_str!("../../scenes/two_fingers.toml"),
+        "turn",
+        PolicyKind::Mpc,
+    );
+    let hello = serde_json::to_value(world.hello()).unwrap();
+    assert_eq!(hello["watched"]["name"], "ellipse.angle");
+    assert!(hello["planes"].as_array().unwrap().is_empty());
+    for _ in 0..160 {
+        world.advance().unwrap();
+        assert!(world.warning().is_none(), "{:?}", world.warning());
+    }
+    let frame = world.frame();
+    println!(
+        "online MPC: ellipse.angle {:.3} after 8 s (target 0.5)",
+        frame.watched
+    );
+    assert!((frame.watched - 0.5).abs() < 0.15, "{}", frame.watched);
+    // A target task has no progress to stall on: the plan is never re-seeded (there is no library
+    // either).
+    assert_eq!(frame.mpc_reseeds, 0);
+}

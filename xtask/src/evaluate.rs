@@ -83,22 +83,33 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let policy = library.policy()?;
     let progress = library.progress()?;
     let watched = &library.scene().coordinate_names()[progress.coordinate];
+    // The spin measures (rate, contacts per half-turn, kicks recovered as forward spin) mean something
+    // for a task that rewards progress along its periodic coordinate (the finger's); a task that holds a
+    // target gets the task's own measures alone.
+    let spin = progress.forward.is_some();
     let mut out = String::new();
     let _ = writeln!(
         out,
-        "library {}: {} controllers for task {}, built on {:?} at h = {}; rates are of {watched}, from the library's initial state",
+        "library {}: {} controllers for task {}, built on {:?} at h = {}; {}, from the library's initial state",
         args.library.display(),
         library.entries.len(),
         library
             .task()
             .map_or("the finger's (built in)".to_string(), |t| t.name.clone()),
         library.settings.model,
-        library.settings.h
+        library.settings.h,
+        if spin {
+            format!("rates are of {watched}")
+        } else {
+            "the task holds targets: its own measures alone".into()
+        }
     );
-    let _ = writeln!(
-        out,
-        "| world | h | rate (rad/s) | last quarter | after kicks | contacts per half-turn | contacts/s | in contact | kicks recovered | quarter turn resumed (mean time) |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
-    );
+    if spin {
+        let _ = writeln!(
+            out,
+            "| world | h | rate (rad/s) | last quarter | after kicks | contacts per half-turn | contacts/s | in contact | kicks recovered | quarter turn resumed (mean time) |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+        );
+    }
     if !emit(&mut out) {
         return Ok(());
     }
@@ -115,27 +126,29 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         };
         let e = evaluate(&library, &policy, &settings)?;
         let kicked = e.kicks > 0;
-        let _ = writeln!(
-            out,
-            "| {world} | {h} | {:.3} | {:.3} | {} | {} | {:.2} | {:.0}% | {} | {} |",
-            e.spin_rate,
-            e.final_spin_rate,
-            e.spin_after_kicks.map_or("-".into(), |v| format!("{v:.3}")),
-            e.contacts_per_half_turn
-                .map_or("- (under half a turn)".into(), |v| format!("{v:.2}")),
-            e.contacts_per_second,
-            100.0 * e.contact_fraction,
-            if kicked {
-                format!("{}/{}", e.recovered, e.kicks)
-            } else {
-                "- (no kicks)".into()
-            },
-            if kicked {
-                format!("{}/{} ({})", e.resumed, e.kicks, seconds(e.resume_time))
-            } else {
-                "-".into()
-            },
-        );
+        if spin {
+            let _ = writeln!(
+                out,
+                "| {world} | {h} | {:.3} | {:.3} | {} | {} | {:.2} | {:.0}% | {} | {} |",
+                e.spin_rate,
+                e.final_spin_rate,
+                e.spin_after_kicks.map_or("-".into(), |v| format!("{v:.3}")),
+                e.contacts_per_half_turn
+                    .map_or("- (under half a turn)".into(), |v| format!("{v:.2}")),
+                e.contacts_per_second,
+                100.0 * e.contact_fraction,
+                if kicked {
+                    format!("{}/{}", e.recovered, e.kicks)
+                } else {
+                    "- (no kicks)".into()
+                },
+                if kicked {
+                    format!("{}/{} ({})", e.resumed, e.kicks, seconds(e.resume_time))
+                } else {
+                    "-".into()
+                },
+            );
+        }
         if !emit(&mut out) {
             return Ok(());
         }
@@ -148,7 +161,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     // What the task's own cost says (any task; for the finger's, the rate repeats the spin above).
     let _ = writeln!(
         out,
-        "\nby the task's cost: running cost per second (whole run / last quarter); each linearly weighted coordinate's rate (whole run / last quarter, weight); each quadratic target's distance (mean / last-quarter mean / last-quarter worst / at the end)\n| world | h | running cost per second | rates | distance to targets |\n|---|---:|---:|---|---|"
+        "{}by the task's cost: running cost per second (whole run / last quarter); each linearly weighted coordinate's rate (whole run / last quarter, weight); each quadratic target's distance (mean / last-quarter mean / last-quarter worst / at the end)\n| world | h | running cost per second | rates | distance to targets |\n|---|---:|---:|---|---|",
+        if spin { "\n" } else { "" }
     );
     for row in &rows {
         let t = &row.evaluation.task;

@@ -15,7 +15,8 @@ use std::path::{Path, PathBuf};
 /// Options of `cargo xtask figures`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// The library whose states and closed loop are drawn.
+    /// The library whose states and closed loop are drawn: the paper's four figures for the finger, and
+    /// for a task library on another scene its closed loops over time and in frames.
     #[arg(long, default_value = "results/finger.lib")]
     library: PathBuf,
     /// Output folder.
@@ -548,6 +549,50 @@ pub fn write_all(lib: &Library, dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
     .collect())
 }
 
+/// Whether `scene` has the flicking finger's shape (three hinges, two of them driven), which the paper's
+/// figures (the contact surface over three angles, the cycle over the two finger joints) assume.
+fn finger_shaped(scene: &Scene) -> bool {
+    scene.n_dof() == 3
+        && scene.n_controls == 2
+        && scene.bodies.len() == 3
+        && scene
+            .coordinates
+            .iter()
+            .all(|c| c.kind == dynamics::CoordinateKind::Angle)
+}
+
+/// A task library's figures (any scene): its policy from the library's initial state for 40 s on its own
+/// model and on hard contact, the watched entry over time and eight frames.
+pub fn write_task(lib: &Library, dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
+    let task = lib
+        .task()
+        .ok_or_else(|| anyhow!("the library has no task of a scene file"))?;
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let task = library::Task {
+        x0: lib.settings.x0.clone(),
+        h: lib.settings.h,
+        ..task.clone()
+    };
+    let mut traces = Vec::new();
+    for model in [lib.settings.model, library::Model::Hard] {
+        traces.push(crate::examples::closed_loop(lib, &task, model, 40.0)?.1);
+    }
+    let holds = lib.progress()?.forward.is_none();
+    let files = crate::examples::task_pictures(
+        "task",
+        &format!("task {}", task.name),
+        holds,
+        lib.scene(),
+        &task,
+        &[(lib.settings.seed, traces.as_slice())],
+        dir,
+    )?;
+    Ok(files
+        .iter()
+        .flat_map(|p| [p.clone(), p.with_extension("svg")])
+        .collect())
+}
+
 /// Run `cargo xtask figures`.
 pub fn run(args: &Args) -> anyhow::Result<()> {
     let lib = Library::load(&args.library).with_context(|| {
@@ -556,7 +601,12 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             args.library.display()
         )
     })?;
-    for p in write_all(&lib, &args.out)? {
+    let written = if lib.task().is_some() && !finger_shaped(lib.scene()) {
+        write_task(&lib, &args.out)?
+    } else {
+        write_all(&lib, &args.out)?
+    };
+    for p in written {
         println!("wrote {}", p.display());
     }
     Ok(())

@@ -19,7 +19,9 @@ mod bench_viewer;
 mod benchmarks;
 mod diagnose;
 mod distance;
+mod draw;
 mod evaluate;
+mod examples;
 mod figures;
 mod jsonl;
 mod lcp;
@@ -81,6 +83,10 @@ enum Command {
     /// Where the paper's limit cycle is won or lost: the optimiser as MPC (N = 75 and 90), online MPC
     /// and the libraries' policies from rest without kicks; a table and a picture per run.
     Diagnose(diagnose::Args),
+    /// Other scenes and tasks end to end (three example scenes, or --scene FILE): solved from rest,
+    /// libraries over seeds, closed loops on the smoothed and hard world, success measures, pictures,
+    /// and docs/results.md's examples section.
+    Examples(examples::Args),
     /// The paper's figures (contact surface, library states, limit cycle, frames) as PNG and SVG.
     Figures(figures::Args),
     /// Measure speed against error and rewrite the generated tables of docs/benchmarks.md.
@@ -131,6 +137,7 @@ fn main() -> anyhow::Result<()> {
         Command::Reproduce(args) => reproduce::run(&args),
         Command::Seeds(args) => seeds::run(&args),
         Command::Figures(args) => figures::run(&args),
+        Command::Examples(args) => examples::run(&args),
         Command::Diagnose(args) => diagnose::run(&args),
         Command::Benchmarks(args) => benchmarks::run(&args),
         Command::View(args) => view::run(&args),

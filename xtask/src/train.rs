@@ -58,6 +58,16 @@ pub struct Args {
     /// default 4, the paper's recipe 1).
     #[arg(long)]
     keep: Option<usize>,
+    /// With the default recipe: trajectories of the unperturbed receding-horizon chain from x0 (the
+    /// trunk) [default: 100].
+    #[arg(long)]
+    trunk: Option<usize>,
+    /// With the default recipe: trunk trajectories branches do not start from [default: 25].
+    #[arg(long)]
+    settle: Option<usize>,
+    /// With the default recipe: trajectories per branch [default: 20].
+    #[arg(long)]
+    length: Option<usize>,
     /// Scene file (TOML); default: the flicking finger of SCENE.md (scenes/finger.toml).
     #[arg(long)]
     scene: Option<PathBuf>,
@@ -116,6 +126,25 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         base = base.for_task(task);
     }
     let model = crate::step::contact_model(args.model, args.sigma, task.as_ref())?;
+    let exploration = match base.exploration {
+        library::Exploration::Branches {
+            trunk,
+            settle,
+            length,
+        } => library::Exploration::Branches {
+            trunk: args.trunk.unwrap_or(trunk),
+            settle: args.settle.unwrap_or(settle),
+            length: args.length.unwrap_or(length),
+        },
+        kicks => {
+            if args.trunk.is_some() || args.settle.is_some() || args.length.is_some() {
+                anyhow::bail!(
+                    "--trunk, --settle and --length shape the default recipe, not --paper's"
+                );
+            }
+            kicks
+        }
+    };
     let settings = LibrarySettings {
         model,
         h: args.h.unwrap_or(base.h),
@@ -128,6 +157,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         growth: args.growth.unwrap_or(base.growth),
         warm_passes: args.warm_passes,
         tolerance: args.tolerance,
+        exploration,
         ..base
     };
     let progress = match &task {

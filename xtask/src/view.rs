@@ -12,17 +12,25 @@ use viewer::{Viewer, ViewerConfig, WorldSettings};
 /// Options of `cargo xtask view`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// The library for the library policy. Default: results/finger.lib (written by `cargo xtask train`
-    /// and `cargo xtask reproduce` with their default settings) if it exists, else that library built
-    /// now (about 15 s) and saved there.
+    /// The library for the library policy. Default, for the finger: results/finger.lib (written by
+    /// `cargo xtask train` and `cargo xtask reproduce` with their default settings) if it exists, else
+    /// that library built now (about 15 s) and saved there; for another --scene: none (online MPC).
     #[arg(long)]
     library: Option<PathBuf>,
+    /// Scene file (TOML) [default: the flicking finger, scenes/finger.toml, or the --library's scene].
+    #[arg(long)]
+    scene: Option<PathBuf>,
+    /// A task of the scene file (`[task.NAME]`): the online optimiser minimises its cost under its
+    /// control limits from its initial state, at its time step and noise scale, and the page follows
+    /// its progress or target [default: the --library's task, else the finger's built-in one].
+    #[arg(long)]
+    task: Option<String>,
     /// Port on 127.0.0.1 (0: any free port).
     #[arg(long, default_value_t = 8080)]
     port: u16,
-    /// The controller at start.
-    #[arg(long, value_enum, default_value = "library")]
-    policy: Policy,
+    /// The controller at start [default: library when there is one, else mpc].
+    #[arg(long, value_enum)]
+    policy: Option<Policy>,
     /// Optimiser passes per control step of the online MPC (1 to 100).
     #[arg(long, default_value_t = WorldSettings::default().mpc_passes,
           value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=viewer::MAX_MPC_PASSES as u64))]
@@ -78,6 +86,86 @@ fn library(args: &Args) -> anyhow::Result<Library> {
     Ok(lib)
 }
 
+/// The scene, task, library and world settings `args` ask for.
+fn config(args: &Args) -> anyhow::Result<ViewerConfig> {
+    let problem = match &args.scene {
+        Some(path) => Some(
+            library::ProblemFile::load(path)
+                .with_context(|| format!("scene {}", path.display()))?,
+        ),
+        None => None,
+    };
+    // The finger's default library only when neither a scene nor a library is named.
+    let library = match (&args.library, &problem) {
+        (Some(_), _) | (None, None) => Some(library(args)?),
+        (None, Some(_)) => None,
+    };
+    let scene = match (&problem, &library) {
+        (Some(p), _) => p.scene.clone(),
+        (None, Some(lib)) => lib.scene().clone(),
+        (None, None) => Scene::flicking_finger(),
+    };
+    let task = match (&args.task, &problem, &library) {
+        (Some(name), Some(p), _) => Some(p.task(Some(name))?),
+        (Some(name), None, _) => {
+            Some(library::ProblemFile::from_toml_str(crate::step::FINGER_FILE)?.task(Some(name))?)
+        }
+        (None, _, Some(lib)) => lib.task().cloned(),
+        (None, _, None) => None,
+    };
+    if let Some(lib) = &library {
+        lib.check_scene(&scene)
+            .context("the --library was built for another scene")?;
+    }
+    let defaults = WorldSettings::default();
+    let (x0, h, sigma, world) = match &task {
+        Some(t) => (
+            t.x0.clone(),
+            t.h,
+            match t.model {
+                library::Model::Logistic(s) | library::Model::Normal(s) => s,
+                library::Model::Hard => defaults.sigma,
+            },
+            if t.model == library::Model::Hard {
+                viewer::protocol::WorldKind::Hard
+            } else {
+                viewer::protocol::WorldKind::Smoothed
+            },
+        ),
+        None => (
+            library
+                .as_ref()
+                .map_or(defaults.x0.clone(), |l| l.settings.x0.clone()),
+            defaults.h,
+            defaults.sigma,
+            defaults.world,
+        ),
+    };
+    let policy = match args.policy {
+        Some(Policy::Library) => PolicyKind::Library,
+        Some(Policy::Mpc) => PolicyKind::Mpc,
+        Some(Policy::Off) => PolicyKind::Off,
+        None if library.is_some() => PolicyKind::Library,
+        None => PolicyKind::Mpc,
+    };
+    Ok(ViewerConfig {
+        addr: SocketAddr::from((Ipv4Addr::LOCALHOST, args.port)),
+        scene,
+        library,
+        world: WorldSettings {
+            policy,
+            mpc_passes: args.mpc_passes,
+            mpc_horizon: args.mpc_horizon,
+            x0,
+            h,
+            sigma,
+            world,
+            task,
+            ..defaults
+        },
+    })
+}
+
 /// Run `cargo xtask view`.
 pub fn run(args: &Args) -> anyhow::Result<()> {
     tracing_subscriber::fmt()
@@ -85,22 +173,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "warn".into()),
         )
         .init();
-    let library = library(args)?;
-    let config = ViewerConfig {
-        addr: SocketAddr::from((Ipv4Addr::LOCALHOST, args.port)),
-        scene: Scene::flicking_finger(),
-        library: Some(library),
-        world: WorldSettings {
-            policy: match args.policy {
-                Policy::Library => PolicyKind::Library,
-                Policy::Mpc => PolicyKind::Mpc,
-                Policy::Off => PolicyKind::Off,
-            },
-            mpc_passes: args.mpc_passes,
-            mpc_horizon: args.mpc_horizon,
-            ..WorldSettings::default()
-        },
-    };
+    let config = config(args)?;
     let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
     runtime.block_on(async {
         let viewer = Viewer::bind(config).await?;

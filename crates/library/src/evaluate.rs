@@ -128,7 +128,7 @@ pub struct TargetDistance {
     pub mean: f64,
     /// Mean absolute distance over the last quarter.
     pub final_mean: f64,
-    /// Largest absolute distance over the last quarter.
+    /// Largest absolute distance over the last quarter, its final state included.
     pub final_worst: f64,
     /// Absolute distance at the end.
     pub last: f64,
@@ -227,14 +227,18 @@ impl TaskMeter {
             targets: self
                 .targets
                 .into_iter()
-                .map(|(t, final_only, sums, worst)| TargetDistance {
-                    entry: names[t.index].clone(),
-                    target: t.target,
-                    final_only,
-                    mean: sums[0] / steps as f64,
-                    final_mean: sums[1] / late_steps as f64,
-                    final_worst: worst,
-                    last: t.offset(x[t.index]).abs(),
+                .map(|(t, final_only, sums, worst)| {
+                    let last = t.offset(x[t.index]).abs();
+                    TargetDistance {
+                        entry: names[t.index].clone(),
+                        target: t.target,
+                        final_only,
+                        mean: sums[0] / steps as f64,
+                        final_mean: sums[1] / late_steps as f64,
+                        // The last quarter's states and the final one.
+                        final_worst: worst.max(last),
+                        last,
+                    }
                 })
                 .collect(),
         }
@@ -490,8 +494,8 @@ mod tests {
         assert_eq!(speed.entry, format!("{name} velocity"));
         assert!((angle.mean - d.iter().sum::<f64>() / 4.0).abs() < 1e-12);
         assert!((angle.final_mean - d[3]).abs() < 1e-12);
-        assert!((angle.final_worst - d[3]).abs() < 1e-12);
+        assert!((angle.final_worst - d[3].max(angle.last)).abs() < 1e-12);
         assert!((angle.last - (7.5 - 3.0 - std::f64::consts::TAU).abs()).abs() < 1e-12);
-        assert!((speed.mean - 1.25).abs() < 1e-12 && speed.last == 3.0 && speed.final_worst == 2.0);
+        assert!((speed.mean - 1.25).abs() < 1e-12 && speed.last == 3.0 && speed.final_worst == 3.0);
     }
 }

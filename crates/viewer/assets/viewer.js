@@ -7,15 +7,18 @@ const canvas = document.getElementById("scene");
 const ctx = canvas.getContext("2d");
 const plot = document.getElementById("plot");
 const plotCtx = plot.getContext("2d");
-// World window: x in [-3.5, 3.5], y in [-4, 2].
-const SCALE = 100;
-const ORIGIN = [350, 200];
+// The world window the server sends in its hello ([x_min, x_max, y_min, y_max]), fitted to the canvas.
+let SCALE = 100;
+let ORIGIN = [350, 200];
 const PLOT_SECONDS = 20;
 
 let socket = null;
 let shapes = [];
+let planes = [];
+let fixed = [];
+let watched = { name: "", index: 0, target: null };
 let frame = null;
-let history = []; // [t, spin rate]
+let history = []; // [t, rate of the watched entry, its value]
 let dragging = false;
 let lastError = "";
 
@@ -40,6 +43,15 @@ function connect() {
     const message = JSON.parse(event.data);
     if (message.type === "hello") {
       shapes = message.bodies;
+      planes = message.planes || [];
+      fixed = message.fixed || [];
+      watched = message.watched || watched;
+      fit(message.window || [-3.5, 3.5, -4, 2]);
+      document.getElementById("title").textContent = message.title || "";
+      document.getElementById("watched-name").textContent =
+        watched.target === null || watched.target === undefined
+          ? `${watched.name} rate (2 s)`
+          : `${watched.name} (target ${watched.target})`;
       document.getElementById("status").textContent =
         `connected; h = ${message.h} s; ` +
         (message.library ? `library of ${message.controllers} controllers` : "no library loaded");
@@ -55,13 +67,22 @@ function connect() {
   };
 }
 
+// Fit the world window to the canvas, centred, one scale for both axes.
+function fit(w) {
+  const [x0, x1, y0, y1] = w;
+  SCALE = Math.min(canvas.width / (x1 - x0), canvas.height / (y1 - y0));
+  const cx = (x0 + x1) / 2;
+  const cy = (y0 + y1) / 2;
+  ORIGIN = [canvas.width / 2 - SCALE * cx, canvas.height / 2 + SCALE * cy];
+}
+
 function receive(f) {
   if (frame && f.t < frame.t) {
     history = []; // a reset
   }
   frame = f;
   window.lastFrame = f; // for end-to-end tests
-  history.push([f.t, f.spin_rate]);
+  history.push([f.t, f.spin_rate, f.watched]);
   while (history.length && history[0][0] < f.t - PLOT_SECONDS) {
     history.shift();
   }
@@ -86,7 +107,10 @@ function syncControls(f) {
 function readout(f) {
   const fixed = (v, d) => (Number.isFinite(v) ? v.toFixed(d) : "-");
   document.getElementById("time").textContent = `${fixed(f.t, 2)} s`;
-  document.getElementById("spin").textContent = `${fixed(f.spin_rate, 3)} rad/s`;
+  document.getElementById("spin").textContent =
+    watched.target === null || watched.target === undefined
+      ? `${fixed(f.spin_rate, 3)} /s`
+      : `${fixed(f.watched, 3)}`;
   document.getElementById("control-ms").textContent =
     `${fixed(f.control_ms, 3)} ms (max ${fixed(f.control_ms_max, 3)} ms over 2 s)` +
     (f.policy === "mpc" ? `; plan re-seeded ${f.mpc_reseeds}x` : "");
@@ -109,8 +133,43 @@ function ellipse(pose, shape, fill, stroke) {
   ctx.stroke();
 }
 
+// The canvas part on the solid side of a half-plane (the canvas rectangle clipped by its boundary).
+function drawPlane(p) {
+  const corners = [[0, 0], [canvas.width, 0], [canvas.width, canvas.height], [0, canvas.height]].map(toWorld);
+  const side = (q) => (q[0] - p.point[0]) * p.normal[0] + (q[1] - p.point[1]) * p.normal[1];
+  const part = [];
+  for (let k = 0; k < 4; k++) {
+    const a = corners[k];
+    const b = corners[(k + 1) % 4];
+    const sa = side(a);
+    const sb = side(b);
+    if (sa <= 0) {
+      part.push(a);
+    }
+    if ((sa < 0) !== (sb < 0) && sa !== sb) {
+      const t = sa / (sa - sb);
+      part.push([a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])]);
+    }
+  }
+  if (part.length < 3) {
+    return;
+  }
+  ctx.beginPath();
+  part.map(toScreen).forEach(([x, y], i) => (i === 0 ? ctx.moveTo(x, y) : ctx.lineTo(x, y)));
+  ctx.closePath();
+  ctx.fillStyle = "#c8c8c8";
+  ctx.fill();
+  ctx.strokeStyle = "#666";
+  ctx.lineWidth = 1;
+  ctx.stroke();
+}
+
 function draw() {
   ctx.clearRect(0, 0, canvas.width, canvas.height);
+  planes.forEach(drawPlane);
+  for (const f of fixed) {
+    ellipse({ centre: f.centre, angle: f.angle }, f, "#a0a0a0", "#444");
+  }
   if (frame && shapes.length === frame.bodies.length) {
     frame.bodies.forEach((pose, i) => {
       const shape = shapes[i];
@@ -167,7 +226,11 @@ function drawPlot() {
   const w = plot.width;
   const h = plot.height;
   plotCtx.clearRect(0, 0, w, h);
-  const limit = Math.max(0.5, ...history.map((p) => Math.abs(p[1])));
+  // A task with a target: the watched entry's distance to it; otherwise its rate.
+  const target = watched.target;
+  const hasTarget = target !== null && target !== undefined;
+  const value = (p) => (hasTarget ? p[2] - target : p[1]);
+  const limit = Math.max(hasTarget ? 0.1 : 0.5, ...history.map((p) => Math.abs(value(p))));
   const y = (v) => h / 2 - (h / 2 - 10) * (v / limit);
   plotCtx.strokeStyle = "#bbb";
   plotCtx.beginPath();
@@ -176,7 +239,13 @@ function drawPlot() {
   plotCtx.stroke();
   plotCtx.fillStyle = "#555";
   plotCtx.font = "11px sans-serif";
-  plotCtx.fillText(`spin rate, last ${PLOT_SECONDS} s (+-${limit.toFixed(2)} rad/s)`, 4, 12);
+  plotCtx.fillText(
+    hasTarget
+      ? `${watched.name} - ${target}, last ${PLOT_SECONDS} s (+-${limit.toFixed(2)})`
+      : `${watched.name} rate, last ${PLOT_SECONDS} s (+-${limit.toFixed(2)} /s)`,
+    4,
+    12,
+  );
   if (history.length < 2) {
     return;
   }
@@ -184,7 +253,9 @@ function drawPlot() {
   plotCtx.strokeStyle = "#1565c0";
   plotCtx.lineWidth = 1.5;
   plotCtx.beginPath();
-  history.forEach(([t, v], i) => {
+  history.forEach((p, i) => {
+    const t = p[0];
+    const v = value(p);
     const x = w - (w * (t1 - t)) / PLOT_SECONDS;
     if (i === 0) {
       plotCtx.moveTo(x, y(v));

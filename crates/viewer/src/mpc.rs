@@ -4,9 +4,11 @@
 //! real-time iteration scheme), so one pass per step is enough once it has caught on.
 
 use crate::error::ViewerError;
-use ddp::{Ddp, DdpError, DdpSettings, QuadraticCost, Solution};
+use ddp::{
+    ControlLimits, Cost, CostDerivatives, Ddp, DdpError, DdpSettings, QuadraticCost, Solution,
+};
 use dynamics::{Complementarity, Scene, Simulator, StepSettings};
-use library::{FingerDynamics, Policy, finger_cost, free_joint};
+use library::{FingerDynamics, Policy, Progress, Task, TaskCost, finger_cost};
 
 /// The largest regularisation carried from one control step to the next (a solve that gave up at a
 /// huge `mu` should not freeze the next ones).
@@ -39,19 +41,58 @@ impl Default for MpcSettings {
     }
 }
 
+/// What the online optimiser minimises: the finger's built-in cost, or a task's.
+#[derive(Debug, Clone)]
+enum Objective {
+    Finger(QuadraticCost),
+    Task(TaskCost),
+}
+
+impl Cost for Objective {
+    fn running(&self, i: usize, x: &[f64], u: &[f64]) -> f64 {
+        match self {
+            Objective::Finger(c) => c.running(i, x, u),
+            Objective::Task(c) => c.running(i, x, u),
+        }
+    }
+
+    fn terminal(&self, x: &[f64]) -> f64 {
+        match self {
+            Objective::Finger(c) => c.terminal(x),
+            Objective::Task(c) => c.terminal(x),
+        }
+    }
+
+    fn running_derivatives(&self, i: usize, x: &[f64], u: &[f64], out: &mut CostDerivatives) {
+        match self {
+            Objective::Finger(c) => c.running_derivatives(i, x, u, out),
+            Objective::Task(c) => c.running_derivatives(i, x, u, out),
+        }
+    }
+
+    fn terminal_derivatives(&self, x: &[f64], lx: &mut [f64], lxx: &mut [f64]) {
+        match self {
+            Objective::Finger(c) => c.terminal_derivatives(x, lx, lxx),
+            Objective::Task(c) => c.terminal_derivatives(x, lx, lxx),
+        }
+    }
+}
+
 /// The online optimiser (see the module documentation).
 #[derive(Debug)]
 pub struct OnlineMpc {
     settings: MpcSettings,
     dynamics: FingerDynamics,
-    cost: QuadraticCost,
+    cost: Objective,
+    control_limits: Option<ControlLimits>,
     plan: Vec<Vec<f64>>,
     /// The regularisation the last solve ended with: the next starts there, so that a few passes per
     /// step add up to one optimisation rather than restarting its trust region every step.
     mu: f64,
-    /// How far the last plan turns the free body over the horizon.
+    /// How far the last plan moves the task's progress coordinate forward over the horizon.
     planned_turn: f64,
-    free: usize,
+    /// The task's progress coordinate and its rewarded direction (`None`: no progress to stall on).
+    progress: Progress,
     /// Extra passes still owed to a fresh plan.
     warmup: usize,
     /// Optimiser passes run so far.
@@ -59,9 +100,19 @@ pub struct OnlineMpc {
 }
 
 impl OnlineMpc {
-    /// An optimiser for the task on `scene`, with an empty (all zero) plan; the horizon at most
-    /// [`MAX_MPC_HORIZON`] steps and the passes at most [`MAX_MPC_PASSES`].
+    /// An optimiser for the finger's built-in task on `scene`, with an empty (all zero) plan; the horizon
+    /// at most [`MAX_MPC_HORIZON`] steps and the passes at most [`MAX_MPC_PASSES`].
     pub fn new(scene: &Scene, settings: MpcSettings) -> Result<Self, ViewerError> {
+        Self::for_task(scene, None, settings)
+    }
+
+    /// [`OnlineMpc::new`] for `task` of a scene file when given (its cost and control limits; its
+    /// contact model, time step and horizon are the settings'), the finger's built-in task otherwise.
+    pub fn for_task(
+        scene: &Scene,
+        task: Option<&Task>,
+        settings: MpcSettings,
+    ) -> Result<Self, ViewerError> {
         if !(settings.sigma.is_finite() && settings.sigma > 0.0) {
             return Err(ViewerError::Setting {
                 name: "sigma",
@@ -81,15 +132,26 @@ impl OnlineMpc {
                 ..StepSettings::default()
             },
         )?;
-        let free = free_joint(scene)?;
+        let progress = match task {
+            Some(task) => Progress::of_task(task)?,
+            None => Progress::finger(scene)?,
+        };
         Ok(OnlineMpc {
-            cost: finger_cost(scene.n_dof(), free, scene.n_controls),
+            cost: match task {
+                Some(task) => Objective::Task(task.cost.clone()),
+                None => Objective::Finger(finger_cost(
+                    scene.n_dof(),
+                    progress.coordinate,
+                    scene.n_controls,
+                )),
+            },
+            control_limits: task.and_then(|t| t.control_limits.clone()),
             plan: vec![vec![0.0; scene.n_controls]; settings.horizon],
             dynamics: FingerDynamics::new(sim),
             settings,
             mu: DdpSettings::default().mu_init,
             planned_turn: 0.0,
-            free,
+            progress,
             warmup: 0,
             passes_run: 0,
         })
@@ -100,10 +162,11 @@ impl OnlineMpc {
         &self.settings
     }
 
-    /// How far the last plan turns the free body over its horizon, rad (near zero: the optimiser sees
-    /// no way to spin it from here, a local minimum).
-    pub fn planned_turn(&self) -> f64 {
-        self.planned_turn
+    /// How far the last plan moves the task's progress coordinate forward over its horizon (the finger:
+    /// turns the free body, rad; near zero: the optimiser sees no way to spin it from here, a local
+    /// minimum). `None` for a task that rewards no progress (a target to reach and hold).
+    pub fn planned_turn(&self) -> Option<f64> {
+        self.progress.forward.map(|_| self.planned_turn)
     }
 
     /// The current plan (controls over the horizon).
@@ -158,6 +221,7 @@ impl OnlineMpc {
         let sol = self.solve(
             DdpSettings {
                 max_iterations: max_passes.max(1),
+                control_limits: self.control_limits.clone(),
                 ..DdpSettings::default()
             },
             x,
@@ -190,6 +254,7 @@ impl OnlineMpc {
                 mu_init: self.mu,
                 // Step sizes 1, 0.1, 0.01, 0.001: a control step's worst case stays a few rollouts.
                 line_search_steps: 4,
+                control_limits: self.control_limits.clone(),
                 ..DdpSettings::default()
             },
             x,
@@ -207,7 +272,9 @@ impl OnlineMpc {
             .map_or(self.mu, |it| it.mu)
             .clamp(0.0, MU_CARRIED_MAX);
         let u = sol.controls[0].clone();
-        self.planned_turn = sol.states[sol.states.len() - 1][self.free] - x[self.free];
+        let c = self.progress.coordinate;
+        self.planned_turn =
+            self.progress.forward.unwrap_or(0.0) * (sol.states[sol.states.len() - 1][c] - x[c]);
         self.plan = ddp::shift_controls(&sol.controls, 1);
         Ok(u)
     }

@@ -152,8 +152,11 @@ pub struct Frame {
     pub contacts: Vec<ContactView>,
     /// The spring, while a body is held.
     pub spring: Option<SpringView>,
-    /// Spin rate of the free body over the last 2 s, rad/s.
+    /// Rate of the watched entry ([`WatchedView`]; the finger: its free body's spin) over the last 2 s,
+    /// per second.
     pub spin_rate: f64,
+    /// The watched entry's value.
+    pub watched: f64,
     /// Current policy.
     pub policy: PolicyKind,
     /// Current world.
@@ -191,6 +194,42 @@ pub struct BodyShape {
     pub actuated: bool,
 }
 
+/// A half-plane of the world (ground, wall), sent once.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PlaneShape {
+    /// Name.
+    pub name: String,
+    /// A point of its boundary line.
+    pub point: [f64; 2],
+    /// Its unit outward normal (the solid lies behind it).
+    pub normal: [f64; 2],
+}
+
+/// An ellipse fixed in the world, sent once.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FixedShape {
+    /// Name.
+    pub name: String,
+    /// Semi-axes `[a, b]`.
+    pub semi_axes: [f64; 2],
+    /// Centre.
+    pub centre: [f64; 2],
+    /// Angle of its first semi-axis.
+    pub angle: f64,
+}
+
+/// The state entry the page follows: the task's progress coordinate, whose rate the frames carry, or
+/// the first position a task without progress pulls to a target.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct WatchedView {
+    /// Its name (`ellipse.angle`, `block.x`).
+    pub name: String,
+    /// Its index in the state.
+    pub index: usize,
+    /// Its target, if the task has one.
+    pub target: Option<f64>,
+}
+
 /// A message from the server.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "type", rename_all = "snake_case")]
@@ -205,6 +244,16 @@ pub enum ServerMessage {
         library: bool,
         /// Its number of controllers.
         controllers: usize,
+        /// What runs (`flicking finger`, `task NAME`).
+        title: String,
+        /// The world's half-planes.
+        planes: Vec<PlaneShape>,
+        /// The world's fixed ellipses.
+        fixed: Vec<FixedShape>,
+        /// The world window to show, `[x_min, x_max, y_min, y_max]`.
+        window: [f64; 4],
+        /// The state entry the frames follow.
+        watched: WatchedView,
     },
     /// The state after a step.
     Frame(Box<Frame>),

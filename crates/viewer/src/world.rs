@@ -5,11 +5,11 @@
 use crate::error::ViewerError;
 use crate::mpc::{MpcSettings, OnlineMpc};
 use crate::protocol::{
-    BodyPose, BodyShape, ClientMessage, ContactView, Frame, PolicyKind, ServerMessage, SpringView,
-    WorldKind,
+    BodyPose, BodyShape, ClientMessage, ContactView, FixedShape, Frame, PlaneShape, PolicyKind,
+    ServerMessage, SpringView, WatchedView, WorldKind,
 };
 use dynamics::{Complementarity, Kinematics, Scene, Simulator, StepSettings};
-use library::{Library, Policy, free_joint};
+use library::{Library, Policy, Progress, Task};
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 use std::collections::VecDeque;
@@ -51,6 +51,10 @@ pub struct WorldSettings {
     pub mpc_passes: usize,
     /// Seed of the kicks.
     pub seed: u64,
+    /// The task of a scene file the online optimiser minimises, whose progress or target the page
+    /// follows (`None`: the finger's built-in task, spin the last unactuated joint). Its `x0`, `h` and
+    /// contact model are not taken from it here: set them above.
+    pub task: Option<Task>,
 }
 
 impl Default for WorldSettings {
@@ -65,8 +69,104 @@ impl Default for WorldSettings {
             mpc_horizon: MpcSettings::default().horizon,
             mpc_passes: MpcSettings::default().passes,
             seed: 1,
+            task: None,
         }
     }
+}
+
+/// The state entry the page follows: the task's progress coordinate (its rate is the frame's
+/// `spin_rate`) or, for a task without one, its first position target.
+#[derive(Debug, Clone, PartialEq)]
+struct Watched {
+    index: usize,
+    name: String,
+    target: Option<f64>,
+}
+
+impl Watched {
+    fn of(scene: &Scene, task: Option<&Task>) -> Result<Self, ViewerError> {
+        let names = scene.state_names();
+        let progress = match task {
+            Some(t) => Progress::of_task(t)?,
+            None => Progress::finger(scene)?,
+        };
+        if let Some(task) = task
+            && progress.forward.is_none()
+            && let Some(term) = task
+                .cost
+                .running
+                .iter()
+                .chain(&task.cost.final_terms)
+                .find(|t| t.index < scene.n_dof() && t.quadratic != 0.0)
+        {
+            return Ok(Watched {
+                index: term.index,
+                name: names[term.index].clone(),
+                target: Some(term.target),
+            });
+        }
+        Ok(Watched {
+            index: progress.coordinate,
+            name: names[progress.coordinate].clone(),
+            target: None,
+        })
+    }
+}
+
+/// A world window `[x_min, x_max, y_min, y_max]` for the page: every body at `x0` and within the reach
+/// of its chain's root (a hinged chain can swing all the way round its anchor), the fixed ellipses, and
+/// a strip of each half-plane, with a margin.
+pub fn window(scene: &Scene, x0: &[f64]) -> [f64; 4] {
+    let kin = Kinematics::new(scene, &x0[..scene.n_dof()]);
+    let mut bounds = [[f64::INFINITY; 2], [f64::NEG_INFINITY; 2]];
+    let cover = |bounds: &mut [[f64; 2]; 2], c: [f64; 2], r: f64| {
+        for k in 0..2 {
+            bounds[0][k] = bounds[0][k].min(c[k] - r);
+            bounds[1][k] = bounds[1][k].max(c[k] + r);
+        }
+    };
+    for (i, b) in scene.bodies.iter().enumerate() {
+        let size = b.shape.a().max(b.shape.b());
+        cover(&mut bounds, kin.centre[i], size);
+        let mut root = i;
+        while let Some(p) = scene.bodies[root].parent {
+            root = p;
+        }
+        // A hinged root swings its chain round its pivot; a free or sliding root carries it along (a unit
+        // of room around it).
+        if scene.bodies[root].joint == dynamics::JointKind::Hinge {
+            let pivot = kin.hinge[root];
+            let reach = (kin.centre[i][0] - pivot[0]).hypot(kin.centre[i][1] - pivot[1]) + size;
+            cover(&mut bounds, pivot, reach);
+        } else {
+            cover(&mut bounds, kin.centre[i], size + 1.0);
+        }
+    }
+    for f in &scene.fixed {
+        cover(
+            &mut bounds,
+            [f.pose[0], f.pose[1]],
+            f.shape.a().max(f.shape.b()),
+        );
+    }
+    let [lo, hi] = bounds;
+    let mid = [(lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0];
+    for p in &scene.planes {
+        let (o, n) = (p.shape.point(), p.shape.normal());
+        let s = (mid[0] - o[0]) * n[0] + (mid[1] - o[1]) * n[1];
+        let foot = [mid[0] - s * n[0], mid[1] - s * n[1]];
+        if foot.iter().all(|v| v.abs() < 1e3) {
+            cover(&mut bounds, foot, 0.3);
+        }
+    }
+    let [lo, hi] = bounds;
+    let margin = 0.3;
+    [
+        lo[0] - margin,
+        hi[0] + margin,
+        lo[1] - margin,
+        hi[1] + margin,
+    ]
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -96,12 +196,12 @@ pub struct World {
     paused: bool,
     drag: Option<Drag>,
     contacts: Vec<ContactView>,
-    /// `(t, free angle, control ms)` over the last [`WINDOW`] seconds.
+    /// `(t, watched entry, control ms)` over the last [`WINDOW`] seconds.
     history: VecDeque<(f64, f64, f64)>,
     control_ms: f64,
     perturbations: u64,
     unconverged: u64,
-    free: usize,
+    watched: Watched,
     rng: rand_chacha::ChaCha8Rng,
     warning: Option<String>,
     stalled: u64,
@@ -177,7 +277,17 @@ impl World {
                 "the library policy needs a library".into(),
             ));
         }
-        let free = free_joint(&scene)?;
+        if let Some(task) = &settings.task
+            && task.x0.len() != scene.n_state()
+        {
+            return Err(ViewerError::Message(format!(
+                "the task {} has {} state entries, the scene {}",
+                task.name,
+                task.x0.len(),
+                scene.n_state()
+            )));
+        }
+        let watched = Watched::of(&scene, settings.task.as_ref())?;
         let sim = Self::simulator(&scene, settings.world, settings.sigma, settings.h)?;
         let m = scene.n_controls;
         let mut world = World {
@@ -196,7 +306,7 @@ impl World {
             control_ms: 0.0,
             perturbations: 0,
             unconverged: 0,
-            free,
+            watched,
             rng: rand_chacha::ChaCha8Rng::seed_from_u64(settings.seed),
             warning: None,
             stalled: 0,
@@ -234,8 +344,9 @@ impl World {
 
     /// (Re)start the online optimiser at the current sigma, seeded by the library's policy if any.
     fn start_mpc(&mut self) -> Result<(), ViewerError> {
-        let mut mpc = OnlineMpc::new(
+        let mut mpc = OnlineMpc::for_task(
             &self.scene,
+            self.settings.task.as_ref(),
             MpcSettings {
                 sigma: self.sigma,
                 h: self.settings.h,
@@ -275,6 +386,37 @@ impl World {
             h: self.settings.h,
             library: self.library.is_some(),
             controllers: self.library.as_ref().map_or(0, |(l, _)| l.entries.len()),
+            title: match &self.settings.task {
+                Some(task) => format!("task {}", task.name),
+                None => "flicking finger".into(),
+            },
+            planes: self
+                .scene
+                .planes
+                .iter()
+                .map(|p| PlaneShape {
+                    name: p.name.clone(),
+                    point: p.shape.point(),
+                    normal: p.shape.normal(),
+                })
+                .collect(),
+            fixed: self
+                .scene
+                .fixed
+                .iter()
+                .map(|f| FixedShape {
+                    name: f.name.clone(),
+                    semi_axes: [f.shape.a(), f.shape.b()],
+                    centre: [f.pose[0], f.pose[1]],
+                    angle: f.pose[2],
+                })
+                .collect(),
+            window: window(&self.scene, &self.settings.x0),
+            watched: WatchedView {
+                name: self.watched.name.clone(),
+                index: self.watched.index,
+                target: self.watched.target,
+            },
         }
     }
 
@@ -308,10 +450,10 @@ impl World {
         match message {
             ClientMessage::Grab { body, point } => {
                 check_point(point)?;
-                if body >= self.scene.n_dof() {
+                if body >= self.scene.bodies.len() {
                     return Err(ViewerError::Message(format!(
                         "there is no body {body} (the scene has {})",
-                        self.scene.n_dof()
+                        self.scene.bodies.len()
                     )));
                 }
                 let kin = Kinematics::new(&self.scene, &self.x[..self.scene.n_dof()]);
@@ -460,11 +602,10 @@ impl World {
                 // A plan that has not expected to turn the ellipse for a while is stuck in a local
                 // minimum (the finger pressing on it, or resting beside it): start the next plan from the
                 // library's policy, which knows a flick from here (a cheap rollout, within the step's
-                // budget).
-                if mpc.planned_turn() < STALL_TURN {
-                    self.stalled += 1;
-                } else {
-                    self.stalled = 0;
+                // budget). A task without progress to make (a target to hold) never stalls.
+                match mpc.planned_turn() {
+                    Some(turn) if turn < STALL_TURN => self.stalled += 1,
+                    _ => self.stalled = 0,
                 }
                 if self.stalled >= STALL_STEPS
                     && let Some((_, policy)) = &self.library
@@ -542,7 +683,7 @@ impl World {
         self.t += self.settings.h;
         self.steps += 1;
         self.history
-            .push_back((self.t, self.x[self.free], self.control_ms));
+            .push_back((self.t, self.x[self.watched.index], self.control_ms));
         while self
             .history
             .front()
@@ -575,7 +716,7 @@ impl World {
             step: self.steps,
             x: self.x.clone(),
             u: self.u.clone(),
-            bodies: (0..n)
+            bodies: (0..self.scene.bodies.len())
                 .map(|i| BodyPose {
                     centre: kin.centre[i],
                     angle: kin.phi[i],
@@ -585,6 +726,7 @@ impl World {
             contacts: self.contacts.clone(),
             spring: self.spring().map(|(_, s)| s),
             spin_rate,
+            watched: self.x[self.watched.index],
             policy: self.policy,
             world: self.world,
             sigma: self.sigma,
