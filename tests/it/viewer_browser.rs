@@ -1,7 +1,8 @@
 //! The viewer end to end in a real headless browser (Debian's Chromium driven by playwright-core from
 //! tests/e2e/viewer.mjs): the page loads, the online controller spins the ellipse, a mouse drag against
-//! the spin reaches the server and holds the ellipse back, and after the release the spin resumes.
-//! Screenshots land in target/e2e/.
+//! the spin reaches the server and holds the ellipse back, and after the release the spin resumes; and on
+//! the pushing scene (tests/e2e/scene.mjs), the ground is drawn where it is and a drag lifts the free
+//! block. Screenshots land in target/e2e/.
 //!
 //! Needs node, /usr/bin/chromium and `npm ci --prefix tests/e2e`, which `.ci/run` installs; elsewhere the
 //! test says what is missing and passes, unless `VIEWER_E2E=required` (as `.ci/run` sets).
@@ -28,8 +29,10 @@ fn missing(e2e: &Path) -> Vec<String> {
     missing
 }
 
-#[test]
-fn in_a_browser_a_drag_against_the_spin_holds_the_ellipse_and_the_spin_resumes() {
+/// Serve `config` on a free port of 127.0.0.1, run the e2e script `script` against it (its screenshot
+/// to target/e2e/`screenshot`), stop the server, and return the script's JSON result; `None` (the test
+/// skipped) when the browser or its driver is missing and not required.
+fn in_browser(config: ViewerConfig, script: &str, screenshot: &str) -> Option<serde_json::Value> {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
     let e2e = root.join("e2e");
     let missing = missing(&e2e);
@@ -37,31 +40,21 @@ fn in_a_browser_a_drag_against_the_spin_holds_the_ellipse_and_the_spin_resumes()
         let required = std::env::var("VIEWER_E2E").is_ok_and(|v| v == "required");
         assert!(!required, "the browser test needs {missing:?}");
         println!("skipped: the browser test needs {missing:?} (bash .ci/run installs them)");
-        return;
+        return None;
     }
     let out = root.join("../target/e2e");
     std::fs::create_dir_all(&out).unwrap();
     let runtime = tokio::runtime::Runtime::new().unwrap();
-    let viewer = runtime
-        .block_on(Viewer::bind(ViewerConfig {
-            addr: SocketAddr::from((Ipv4Addr::LOCALHOST, 0)),
-            scene: dynamics::Scene::flicking_finger(),
-            library: Some(crate::support::finger_library().clone()),
-            world: WorldSettings {
-                policy: PolicyKind::Library,
-                ..WorldSettings::default()
-            },
-        }))
-        .unwrap();
+    let viewer = runtime.block_on(Viewer::bind(config)).unwrap();
     let addr = viewer.local_addr().unwrap();
     let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
     let server = runtime.spawn(viewer.run(async {
         let _ = stopped.await;
     }));
     let output = Command::new("node")
-        .arg(e2e.join("viewer.mjs"))
+        .arg(e2e.join(script))
         .arg(format!("http://{addr}/"))
-        .arg(out.join("viewer.png"))
+        .arg(out.join(screenshot))
         .output()
         .unwrap();
     let stdout = String::from_utf8_lossy(&output.stdout);
@@ -72,11 +65,60 @@ fn in_a_browser_a_drag_against_the_spin_holds_the_ellipse_and_the_spin_resumes()
         .expect("the server stops")
         .unwrap()
         .unwrap();
-    let result: serde_json::Value =
-        serde_json::from_str(stdout.lines().last().expect("the script prints its result")).unwrap();
+    assert!(out.join(screenshot).exists() || !output.status.success());
+    Some(
+        serde_json::from_str(stdout.lines().last().expect("the script prints its result"))
+            .unwrap(),
+    )
+}
+
+#[test]
+fn in_a_browser_a_drag_against_the_spin_holds_the_ellipse_and_the_spin_resumes() {
+    let Some(result) = in_browser(
+        ViewerConfig {
+            addr: SocketAddr::from((Ipv4Addr::LOCALHOST, 0)),
+            scene: dynamics::Scene::flicking_finger(),
+            library: Some(crate::support::finger_library().clone()),
+            world: WorldSettings {
+                policy: PolicyKind::Library,
+                ..WorldSettings::default()
+            },
+        },
+        "viewer.mjs",
+        "viewer.png",
+    ) else {
+        return;
+    };
     assert_eq!(result["ok"], true, "{result}");
     assert!(result["perturbations"].as_u64().unwrap() >= 1);
     assert!(result["turned_while_held"].as_f64().unwrap() < 0.5);
     assert!(result["spin_after"].as_f64().unwrap() > 0.1);
-    assert!(out.join("viewer.png").exists());
+}
+
+#[test]
+fn in_a_browser_the_pushing_scene_shows_its_ground_and_its_free_block_can_be_lifted() {
+    let problem =
+        library::ProblemFile::from_toml_str(include_str!("../../scenes/pushing.toml")).unwrap();
+    let task = problem.task(Some("push")).unwrap();
+    let Some(result) = in_browser(
+        ViewerConfig {
+            addr: SocketAddr::from((Ipv4Addr::LOCALHOST, 0)),
+            scene: problem.scene.clone(),
+            library: None,
+            world: WorldSettings {
+                policy: PolicyKind::Off,
+                x0: task.x0.clone(),
+                h: task.h,
+                task: Some(task),
+                ..WorldSettings::default()
+            },
+        },
+        "scene.mjs",
+        "viewer-pushing.png",
+    ) else {
+        return;
+    };
+    assert_eq!(result["ok"], true, "{result}");
+    assert_eq!(result["watched"], "block.x");
+    assert!(result["lifted"].as_f64().unwrap() > 0.3, "{result}");
 }

@@ -91,8 +91,8 @@ enum Command {
     Figures(figures::Args),
     /// Measure speed against error and rewrite the generated tables of docs/benchmarks.md.
     Benchmarks(benchmarks::Args),
-    /// The interactive viewer: a local web server with the finger simulated at real time under the
-    /// library's policy or online MPC; drag bodies with the mouse.
+    /// The interactive viewer: a local web server with the finger (or any --scene and --task) simulated
+    /// at real time under the library's policy or online MPC; drag bodies with the mouse.
     View(view::Args),
 }
 

@@ -1,6 +1,7 @@
 //! The WebSocket protocol, JSON text messages both ways.
 //!
-//! The server sends `{"type":"hello",...}` once (the scene's shapes and the options), then a `frame` after
+//! The server sends `{"type":"hello",...}` once (the scene's bodies, half-planes and fixed ellipses, the
+//! world window to show, the state entry the page follows, and the options), then a `frame` after
 //! every simulated step (at most one per step; a slow client skips frames rather than falling behind),
 //! and `error` in reply to a message it refused. The page sends:
 //!
