@@ -67,8 +67,7 @@ fn in_browser(config: ViewerConfig, script: &str, screenshot: &str) -> Option<se
         .unwrap();
     assert!(out.join(screenshot).exists() || !output.status.success());
     Some(
-        serde_json::from_str(stdout.lines().last().expect("the script prints its result"))
-            .unwrap(),
+        serde_json::from_str(stdout.lines().last().expect("the script prints its result")).unwrap(),
     )
 }
 

@@ -376,11 +376,11 @@ One pass (backward pass with the steps' derivatives, then the forward pass with 
 
 /// One full-DDP pass (as in the table above: a one-pass solve from the trajectory 30 passes into a solve,
 /// minus its rollout) on the finger and on the three-link finger (`scenes/three_link_finger.toml`: 4
-/// joints, 3 controls, 8 states), N = 75, logistic sigma = 0.1, the cost `-angle of the free body +
-/// 0.05 |u|^2`; median of 21.
+/// joints, 3 controls, 8 states) with the cost `-angle of the free body + 0.05 |u|^2`, and on the two
+/// fingers and the pushing scene with their tasks' costs; N = 75, logistic sigma = 0.1; median of 21.
 fn scenes_pass_table() -> anyhow::Result<String> {
     let mut out = String::from(
-        "\nOne full-DDP pass (as above) on scenes of other sizes, N = 75, logistic sigma = 0.1, cost -(angle of the free body) + 0.05 |u|^2 from rest (pushing: its task's cost and initial state), median of 21:\n\n| scene | states / controls | pass (ms) | per knot (us) | passes to get there |\n|---|---:|---:|---:|---:|\n",
+        "\nOne full-DDP pass (as above) on scenes of other sizes, N = 75, logistic sigma = 0.1, cost -(angle of the free body) + 0.05 |u|^2 from rest (two fingers and pushing: their tasks' costs and initial states), median of 21:\n\n| scene | states / controls | pass (ms) | per knot (us) | passes to get there |\n|---|---:|---:|---:|---:|\n",
     );
     let three = Scene::from_toml_str(include_str!("../../scenes/three_link_finger.toml"))?;
     let cases = [
@@ -401,15 +401,23 @@ fn scenes_pass_table() -> anyhow::Result<String> {
         let cost = finger_cost(n, free, scene.n_controls);
         out.push_str(&pass_row(name, &scene, &x0, &cost)?);
     }
-    // Pushing, on its own task (its cost and initial state).
-    let file = library::ProblemFile::from_toml_str(include_str!("../../scenes/pushing.toml"))?;
-    let task = file.task(Some("push"))?;
-    out.push_str(&pass_row(
-        "pushing (pushing.toml, its task push)",
-        &file.scene,
-        &task.x0,
-        &task.cost,
-    )?);
+    // The two target tasks on their own costs and initial states.
+    for (name, text, task) in [
+        (
+            "two fingers (two_fingers.toml, its task turn)",
+            include_str!("../../scenes/two_fingers.toml"),
+            "turn",
+        ),
+        (
+            "pushing (pushing.toml, its task push)",
+            include_str!("../../scenes/pushing.toml"),
+            "push",
+        ),
+    ] {
+        let file = library::ProblemFile::from_toml_str(text)?;
+        let task = file.task(Some(task))?;
+        out.push_str(&pass_row(name, &file.scene, &task.x0, &task.cost)?);
+    }
     Ok(out)
 }
 

@@ -190,3 +190,46 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         anyhow::Ok(())
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn args(scene: Option<&str>, task: Option<&str>, policy: Option<Policy>) -> Args {
+        Args {
+            library: None,
+            scene: scene.map(|s| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..").join(s)),
+            task: task.map(str::to_string),
+            port: 0,
+            policy,
+            mpc_passes: 1,
+            mpc_horizon: 60,
+        }
+    }
+
+    #[test]
+    fn a_scene_files_task_sets_the_world_and_online_mpc_runs_it_without_a_library() {
+        let c = config(&args(Some("scenes/pushing.toml"), Some("push"), None)).unwrap();
+        assert!(c.library.is_none());
+        assert_eq!(c.scene.n_dof(), 5);
+        let task = c.world.task.as_ref().unwrap();
+        assert_eq!(task.name, "push");
+        assert_eq!(c.world.x0, task.x0);
+        assert_eq!((c.world.h, c.world.sigma), (0.05, 0.05));
+        assert_eq!(c.world.policy, PolicyKind::Mpc);
+        // And the world it configures starts.
+        viewer::World::new(c.scene, c.library, c.world).unwrap();
+        // The library policy needs a library: the world refuses it by name.
+        let c = config(&args(
+            Some("scenes/pushing.toml"),
+            Some("push"),
+            Some(Policy::Library),
+        ))
+        .unwrap();
+        let err = viewer::World::new(c.scene, c.library, c.world).unwrap_err();
+        assert!(err.to_string().contains("library"), "{err}");
+        // A task the file does not have is named in the error.
+        let err = config(&args(Some("scenes/pushing.toml"), Some("spin"), None)).unwrap_err();
+        assert!(format!("{err:#}").contains("spin"), "{err:#}");
+    }
+}
