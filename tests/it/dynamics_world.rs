@@ -5,7 +5,7 @@ use ncp::Status;
 
 /// A drag-free two-link pendulum over the ground, with a fixed peg beside its upper link: three pairs
 /// (ground under the lower link, the peg against either link).
-const PENDULUM: &str = r#"
+pub(crate) const PENDULUM: &str = r#"
 gravity = [0.0, -9.81]
 
 [[body]]

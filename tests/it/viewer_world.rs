@@ -353,3 +353,42 @@ fn the_two_finger_scene_turns_to_its_target_under_online_mpc_and_never_counts_a_
     // either).
     assert_eq!(frame.mpc_reseeds, 0);
 }
+
+#[test]
+fn a_scene_with_a_fixed_peg_and_a_ground_sends_both_and_keeps_them_in_the_window() {
+    // The pendulum of dynamics_world: two hinged links over a ground, a fixed peg beside them.
+    let scene = dynamics::Scene::from_toml_str(crate::dynamics_world::PENDULUM).unwrap();
+    let mut world = World::new(
+        scene.clone(),
+        None,
+        WorldSettings {
+            policy: PolicyKind::Off,
+            x0: vec![-1.2, 0.3, 0.0, 0.0],
+            ..WorldSettings::default()
+        },
+    )
+    .unwrap();
+    let hello = serde_json::to_value(world.hello()).unwrap();
+    assert_eq!(hello["fixed"][0]["name"], "peg");
+    assert_eq!(
+        hello["fixed"][0]["semi_axes"],
+        serde_json::json!([0.25, 0.2])
+    );
+    assert_eq!(hello["fixed"][0]["centre"], serde_json::json!([-1.3, -0.4]));
+    assert_eq!(hello["fixed"][0]["angle"], 0.3);
+    // The ground's normal arrives normalised.
+    assert_eq!(hello["planes"][0]["normal"], serde_json::json!([0.0, 1.0]));
+    let w: Vec<f64> = serde_json::from_value(hello["window"].clone()).unwrap();
+    // The chain swings round its pivot at the origin (reach 1.8 + 0.6), the peg and the ground inside.
+    assert!(
+        w[0] < -2.4 && w[1] > 2.4 && w[2] < -2.1 && w[3] > 2.4,
+        "{w:?}"
+    );
+    // The pendulum falls onto the peg and the ground under gravity; the world keeps stepping, its
+    // contacts reported.
+    for _ in 0..60 {
+        world.advance().unwrap();
+    }
+    assert!(world.state().iter().all(|v| v.is_finite()));
+    assert_eq!(world.frame().contacts.len(), 3);
+}
