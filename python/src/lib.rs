@@ -1,0 +1,646 @@
+//! `slcp`: the Python package over the crates. NumPy arrays in and out (float64; outputs are NumPy
+//! arrays that own the vectors the crates computed, no copy), the scene and task files of the command
+//! line, every error of the crates raised as `slcp.SlcpError` with the crate's message, and the GIL
+//! released for the whole of any long computation (rollouts, optimisation, library builds, evaluations).
+
+use ::library::{
+    Evaluation, EvaluationSettings, Exploration, FingerDynamics, Library as RsLibrary,
+    LibrarySettings, Model as LibModel, Policy as RsPolicy, ProblemFile, Task,
+};
+use ddp::{Ddp, DdpSettings, Method};
+use dynamics::{Scene, Simulator as RsSimulator, StepSettings};
+use numpy::ndarray::{Array1, Array2, Array3};
+use numpy::{AllowTypeChange, IntoPyArray, PyArray1, PyArray2, PyArrayLike1, PyArrayLike2};
+use pyo3::create_exception;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use std::path::PathBuf;
+
+create_exception!(
+    slcp,
+    SlcpError,
+    pyo3::exceptions::PyValueError,
+    "An error of the slcp crates (a bad scene, task or library file, a bad input such as a NaN state or an array of the wrong length, an impossible setting), with the crate's message."
+);
+
+/// The flicking finger's scene file (SCENE.md), with its task `spin`.
+const FINGER_FILE: &str = include_str!("../../scenes/finger.toml");
+
+fn error(e: impl std::fmt::Display) -> PyErr {
+    SlcpError::new_err(e.to_string())
+}
+
+/// A 1-D input as a vector, its length checked.
+fn vector(a: &PyArrayLike1<'_, f64, AllowTypeChange>, what: &str, len: usize) -> PyResult<Vec<f64>> {
+    let v: Vec<f64> = a.as_array().iter().copied().collect();
+    if v.len() != len {
+        return Err(error(format!(
+            "{what} has {} entries, expected {len}",
+            v.len()
+        )));
+    }
+    Ok(v)
+}
+
+/// A 2-D input as rows, its column count checked.
+fn rows(a: &PyArrayLike2<'_, f64, AllowTypeChange>, what: &str, cols: usize) -> PyResult<Vec<Vec<f64>>> {
+    let view = a.as_array();
+    if view.ncols() != cols {
+        return Err(error(format!(
+            "{what} has {} columns, expected {cols}",
+            view.ncols()
+        )));
+    }
+    Ok(view.rows().into_iter().map(|r| r.to_vec()).collect())
+}
+
+fn matrix<'py>(py: Python<'py>, v: Vec<f64>, r: usize, c: usize) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    Ok(Array2::from_shape_vec((r, c), v)
+        .map_err(error)?
+        .into_pyarray(py))
+}
+
+fn stacked<'py>(py: Python<'py>, rows: Vec<Vec<f64>>, cols: usize) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let n = rows.len();
+    matrix(py, rows.into_iter().flatten().collect(), n, cols)
+}
+
+/// The contact model named `model` (`"logistic"`, `"normal"`, `"hard"`) at `sigma`.
+fn model(model: &str, sigma: f64) -> PyResult<LibModel> {
+    match model {
+        "logistic" => Ok(LibModel::Logistic(sigma)),
+        "normal" => Ok(LibModel::Normal(sigma)),
+        "hard" => Ok(LibModel::Hard),
+        other => Err(error(format!(
+            "model \"{other}\" is not one of \"logistic\", \"normal\", \"hard\""
+        ))),
+    }
+}
+
+/// The scene file at `path`, or the finger's with `None`.
+fn problem_file(path: Option<PathBuf>) -> PyResult<ProblemFile> {
+    match path {
+        None => ProblemFile::from_toml_str(FINGER_FILE).map_err(error),
+        Some(p) => ProblemFile::load(&p).map_err(|e| error(format!("scene {}: {e}", p.display()))),
+    }
+}
+
+/// Python's `json.loads` of a serde value: nested dicts, lists and floats.
+fn to_python<'py>(py: Python<'py>, value: &impl serde::Serialize) -> PyResult<Bound<'py, PyAny>> {
+    let text = serde_json::to_string(value).map_err(error)?;
+    py.import("json")?.call_method1("loads", (text,))
+}
+
+/// The simulator: one time step of a scene under a contact model, its exact first derivatives and the
+/// Hessian of `c^T f`. Warm starts carry from one step to the next, as in the crates.
+#[pyclass(module = "slcp")]
+struct Simulator {
+    sim: RsSimulator,
+}
+
+#[pymethods]
+impl Simulator {
+    /// `Simulator(scene=None, model="logistic", sigma=0.1, h=0.05)`: the scene file at `scene` (TOML,
+    /// docs/scenes.md), or the flicking finger of SCENE.md.
+    #[new]
+    #[pyo3(signature = (scene=None, model="logistic", sigma=0.1, h=0.05))]
+    fn new(scene: Option<PathBuf>, model: &str, sigma: f64, h: f64) -> PyResult<Self> {
+        let scene = match scene {
+            None => Scene::flicking_finger(),
+            Some(p) => {
+                let text = std::fs::read_to_string(&p)
+                    .map_err(|e| error(format!("reading {}: {e}", p.display())))?;
+                Scene::from_toml_str(&text)
+                    .map_err(|e| error(format!("scene {}: {e}", p.display())))?
+            }
+        };
+        let model = self::model(model, sigma)?;
+        if let LibModel::Logistic(s) | LibModel::Normal(s) = model
+            && !(s.is_finite() && s > 0.0)
+        {
+            return Err(error(format!("sigma {s} must be positive and finite")));
+        }
+        let sim = RsSimulator::new(
+            scene,
+            StepSettings {
+                model: model.complementarity(),
+                h,
+                ..StepSettings::default()
+            },
+        )
+        .map_err(error)?;
+        Ok(Simulator { sim })
+    }
+
+    /// Length of the state `x = [q; v]`.
+    #[getter]
+    fn n_state(&self) -> usize {
+        self.sim.scene().n_state()
+    }
+
+    /// Number of controls.
+    #[getter]
+    fn n_controls(&self) -> usize {
+        self.sim.scene().n_controls
+    }
+
+    /// Names of the state's entries (`link1.angle`, ..., `link1.angle velocity`, ...).
+    #[getter]
+    fn state_names(&self) -> Vec<String> {
+        self.sim.scene().state_names()
+    }
+
+    /// The time step.
+    #[getter]
+    fn h(&self) -> f64 {
+        self.sim.settings().h
+    }
+
+    /// `step(x, u) -> x_next`.
+    fn step<'py>(
+        &mut self,
+        py: Python<'py>,
+        x: PyArrayLike1<'py, f64, AllowTypeChange>,
+        u: PyArrayLike1<'py, f64, AllowTypeChange>,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let (x, u) = self.inputs(&x, &u)?;
+        let step = self.sim.step(&x, &u).map_err(error)?;
+        Ok(step.x_next.into_pyarray(py))
+    }
+
+    /// `step_info(x, u) -> dict`: the next state, the row impulses `lambda` (in the order of the
+    /// scene's complementarity rows), each contact pair's distance, normal and tangential impulse, and
+    /// the complementarity solve's status, iterations and residual.
+    fn step_info<'py>(
+        &mut self,
+        py: Python<'py>,
+        x: PyArrayLike1<'py, f64, AllowTypeChange>,
+        u: PyArrayLike1<'py, f64, AllowTypeChange>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let (x, u) = self.inputs(&x, &u)?;
+        let step = self.sim.step(&x, &u).map_err(error)?;
+        let out = PyDict::new(py);
+        out.set_item("x_next", step.x_next.clone().into_pyarray(py))?;
+        out.set_item("lambda", step.lambda.clone().into_pyarray(py))?;
+        out.set_item("d", step.d.clone().into_pyarray(py))?;
+        out.set_item(
+            "contact_distance",
+            step.contacts
+                .iter()
+                .map(|c| c.distance)
+                .collect::<Vec<_>>()
+                .into_pyarray(py),
+        )?;
+        out.set_item(
+            "normal_impulse",
+            step.impulses
+                .iter()
+                .map(|i| i.normal)
+                .collect::<Vec<_>>()
+                .into_pyarray(py),
+        )?;
+        out.set_item(
+            "tangent_impulse",
+            step.impulses
+                .iter()
+                .map(|i| i.tangent)
+                .collect::<Vec<_>>()
+                .into_pyarray(py),
+        )?;
+        out.set_item("status", status(step.info.status))?;
+        out.set_item("iterations", step.info.iterations)?;
+        out.set_item("residual", step.info.residual)?;
+        Ok(out)
+    }
+
+    /// `derivatives(x, u) -> (x_next, fx, fu)`: one step and its exact first derivatives,
+    /// `fx[i, j] = d x_next[i] / d x[j]`, `fu[i, j] = d x_next[i] / d u[j]`.
+    fn derivatives<'py>(
+        &mut self,
+        py: Python<'py>,
+        x: PyArrayLike1<'py, f64, AllowTypeChange>,
+        u: PyArrayLike1<'py, f64, AllowTypeChange>,
+    ) -> PyResult<(
+        Bound<'py, PyArray1<f64>>,
+        Bound<'py, PyArray2<f64>>,
+        Bound<'py, PyArray2<f64>>,
+    )> {
+        let (x, u) = self.inputs(&x, &u)?;
+        let (n, m) = (x.len(), u.len());
+        let (step, d) = self.sim.step_with_derivatives(&x, &u).map_err(error)?;
+        Ok((
+            step.x_next.into_pyarray(py),
+            matrix(py, d.fx, n, n)?,
+            matrix(py, d.fu, n, m)?,
+        ))
+    }
+
+    /// `hessian(x, u, c) -> H`: the Hessian of `c . f(x, u)` over `y = (x, u)`, square of side
+    /// `n_state + n_controls` (the second-order term of full DDP, with `c` the value gradient).
+    fn hessian<'py>(
+        &mut self,
+        py: Python<'py>,
+        x: PyArrayLike1<'py, f64, AllowTypeChange>,
+        u: PyArrayLike1<'py, f64, AllowTypeChange>,
+        c: PyArrayLike1<'py, f64, AllowTypeChange>,
+    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let (x, u) = self.inputs(&x, &u)?;
+        let c = vector(&c, "c", x.len())?;
+        let side = x.len() + u.len();
+        let (_, _, h) = self.sim.step_with_hessian(&x, &u, &c).map_err(error)?;
+        matrix(py, h, side, side)
+    }
+
+    /// `rollout(x0, us) -> xs`: the states from `x0` under the controls `us` (shape `(N, n_controls)`),
+    /// shape `(N + 1, n_state)`. The GIL is released while it runs.
+    fn rollout<'py>(
+        &mut self,
+        py: Python<'py>,
+        x0: PyArrayLike1<'py, f64, AllowTypeChange>,
+        us: PyArrayLike2<'py, f64, AllowTypeChange>,
+    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let n = self.n_state();
+        let x0 = vector(&x0, "x0", n)?;
+        let us = rows(&us, "us", self.n_controls())?;
+        let sim = &mut self.sim;
+        let states = py.allow_threads(move || -> Result<Vec<Vec<f64>>, String> {
+            let mut xs = Vec::with_capacity(us.len() + 1);
+            xs.push(x0);
+            for (k, u) in us.iter().enumerate() {
+                let x = xs.last().expect("x0 pushed");
+                let next = sim
+                    .step(x, u)
+                    .map_err(|e| format!("step {k}: {e}"))?
+                    .x_next;
+                xs.push(next);
+            }
+            Ok(xs)
+        });
+        stacked(py, states.map_err(error)?, n)
+    }
+
+    /// Forget the warm start: the next step's solve starts from `[v; 0]`.
+    fn reset_warm_start(&mut self) {
+        self.sim.reset_warm_start();
+    }
+}
+
+impl Simulator {
+    fn inputs(
+        &self,
+        x: &PyArrayLike1<'_, f64, AllowTypeChange>,
+        u: &PyArrayLike1<'_, f64, AllowTypeChange>,
+    ) -> PyResult<(Vec<f64>, Vec<f64>)> {
+        Ok((
+            vector(x, "x", self.n_state())?,
+            vector(u, "u", self.n_controls())?,
+        ))
+    }
+}
+
+fn status(s: ncp::Status) -> String {
+    match s {
+        ncp::Status::Converged => "converged".into(),
+        other => format!("{other:?}").to_lowercase(),
+    }
+}
+
+/// `optimize(scene=None, task=None, horizon=None, x0=None, us=None, max_iterations=300, method="full",
+/// model=None, sigma=None, h=None) -> dict`: iLQG / DDP on a task of a scene file (the only one when
+/// `task` is None; the finger's `spin` without a scene). Returns the trajectory (`states` (N+1, n),
+/// `controls` (N, m)), the feedback gains `gains` (N, m, n) of `u = controls[i] + gains[i] (x -
+/// states[i])`, the local value model (`cost_to_go` (N+1,), `value_gradient` (N+1, n), `value_hessian`
+/// (N+1, n, n)), `cost`, `passes`, `status` and `converged`. The GIL is released while it runs.
+#[pyfunction]
+#[pyo3(signature = (scene=None, task=None, horizon=None, x0=None, us=None, max_iterations=300, method="full", model=None, sigma=None, h=None))]
+#[allow(clippy::too_many_arguments)]
+fn optimize<'py>(
+    py: Python<'py>,
+    scene: Option<PathBuf>,
+    task: Option<&str>,
+    horizon: Option<usize>,
+    x0: Option<PyArrayLike1<'py, f64, AllowTypeChange>>,
+    us: Option<PyArrayLike2<'py, f64, AllowTypeChange>>,
+    max_iterations: usize,
+    method: &str,
+    model: Option<&str>,
+    sigma: Option<f64>,
+    h: Option<f64>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let file = problem_file(scene)?;
+    let task = file.task(task).map_err(error)?;
+    let (n, m) = (file.scene.n_state(), file.scene.n_controls);
+    let horizon = horizon.unwrap_or(task.horizon);
+    if !(1..=100_000).contains(&horizon) {
+        return Err(error(format!("horizon {horizon} must be 1 to 100000 steps")));
+    }
+    if !(1..=100_000).contains(&max_iterations) {
+        return Err(error(format!(
+            "max_iterations {max_iterations} must be 1 to 100000"
+        )));
+    }
+    let x0 = match &x0 {
+        Some(a) => vector(a, "x0", n)?,
+        None => task.x0.clone(),
+    };
+    let us = match &us {
+        Some(a) => {
+            let r = rows(a, "us", m)?;
+            if r.len() != horizon {
+                return Err(error(format!(
+                    "us has {} rows, expected the horizon {horizon}",
+                    r.len()
+                )));
+            }
+            r
+        }
+        None => vec![vec![0.0; m]; horizon],
+    };
+    let method = match method {
+        "full" => Method::Full,
+        "ilqr" => Method::GaussNewton,
+        other => {
+            return Err(error(format!(
+                "method \"{other}\" is not one of \"full\", \"ilqr\""
+            )));
+        }
+    };
+    let own_sigma = match task.model {
+        LibModel::Logistic(s) | LibModel::Normal(s) => s,
+        LibModel::Hard => 0.1,
+    };
+    let contact = match model {
+        Some(name) => self::model(name, sigma.unwrap_or(own_sigma))?,
+        None => match (task.model, sigma) {
+            (LibModel::Logistic(_), Some(s)) => LibModel::Logistic(s),
+            (LibModel::Normal(_), Some(s)) => LibModel::Normal(s),
+            (own, _) => own,
+        },
+    };
+    let sim = RsSimulator::new(
+        file.scene.clone(),
+        StepSettings {
+            model: contact.complementarity(),
+            h: h.unwrap_or(task.h),
+            ..StepSettings::default()
+        },
+    )
+    .map_err(error)?;
+    let ddp = Ddp::new(DdpSettings {
+        method,
+        max_iterations,
+        control_limits: task.control_limits.clone(),
+        ..DdpSettings::default()
+    })
+    .map_err(error)?;
+    let cost = task.cost.clone();
+    let sol = py
+        .allow_threads(move || ddp.solve(&mut FingerDynamics::new(sim), &cost, &x0, &us))
+        .map_err(error)?;
+    let out = PyDict::new(py);
+    let steps = sol.controls.len();
+    out.set_item("states", stacked(py, sol.states, n)?)?;
+    out.set_item("controls", stacked(py, sol.controls, m)?)?;
+    out.set_item(
+        "gains",
+        Array3::from_shape_vec((steps, m, n), sol.gains.into_iter().flatten().collect())
+            .map_err(error)?
+            .into_pyarray(py),
+    )?;
+    let knots = sol.values.len();
+    out.set_item(
+        "cost_to_go",
+        Array1::from_iter(sol.values.iter().map(|v| v.cost_to_go)).into_pyarray(py),
+    )?;
+    out.set_item(
+        "value_gradient",
+        stacked(py, sol.values.iter().map(|v| v.gradient.clone()).collect(), n)?,
+    )?;
+    out.set_item(
+        "value_hessian",
+        Array3::from_shape_vec(
+            (knots, n, n),
+            sol.values.into_iter().flat_map(|v| v.hessian).collect(),
+        )
+        .map_err(error)?
+        .into_pyarray(py),
+    )?;
+    out.set_item("cost", sol.cost)?;
+    out.set_item("passes", sol.iterations.len())?;
+    out.set_item("status", format!("{:?}", sol.status))?;
+    out.set_item("converged", sol.status.converged())?;
+    out.set_item("task", task.name)?;
+    Ok(out)
+}
+
+/// A controller library (paper section IV-C): local feedback controllers along receding-horizon
+/// trajectories, and the global nearest-neighbour policy over them.
+#[pyclass(module = "slcp")]
+struct Library {
+    lib: RsLibrary,
+    policy: RsPolicy,
+}
+
+impl Library {
+    fn wrap(lib: RsLibrary) -> PyResult<Self> {
+        let policy = lib.policy().map_err(error)?;
+        Ok(Library { lib, policy })
+    }
+}
+
+#[pymethods]
+impl Library {
+    /// `Library.train(scene=None, task=None, trajectories=400, seed=1, paper=False, horizon=None,
+    /// growth=None, trunk=None, settle=None, length=None, chains=1)`: build a library as `cargo xtask
+    /// train` does: for the task of a scene file (`task`, or the file's only task when a scene is given),
+    /// or without either the finger's built-in task with the default recipe (`paper=True`: the paper's).
+    /// The GIL is released while it builds.
+    #[staticmethod]
+    #[pyo3(signature = (scene=None, task=None, trajectories=400, seed=1, paper=false, horizon=None, growth=None, trunk=None, settle=None, length=None, chains=1))]
+    #[allow(clippy::too_many_arguments)]
+    fn train(
+        py: Python<'_>,
+        scene: Option<PathBuf>,
+        task: Option<&str>,
+        trajectories: usize,
+        seed: u64,
+        paper: bool,
+        horizon: Option<usize>,
+        growth: Option<usize>,
+        trunk: Option<usize>,
+        settle: Option<usize>,
+        length: Option<usize>,
+        chains: usize,
+    ) -> PyResult<Self> {
+        let with_task = scene.is_some() || task.is_some();
+        let file = problem_file(scene)?;
+        let chosen: Option<Task> = if with_task {
+            Some(file.task(task).map_err(error)?)
+        } else {
+            None
+        };
+        let mut base = if paper {
+            LibrarySettings::paper()
+        } else {
+            LibrarySettings::default()
+        };
+        if let Some(t) = &chosen {
+            base = base.for_task(t);
+        }
+        let exploration = match base.exploration {
+            Exploration::Branches {
+                trunk: t,
+                settle: s,
+                length: l,
+            } => Exploration::Branches {
+                trunk: trunk.unwrap_or(t),
+                settle: settle.unwrap_or(s),
+                length: length.unwrap_or(l),
+            },
+            kicks => {
+                if trunk.is_some() || settle.is_some() || length.is_some() {
+                    return Err(error(
+                        "trunk, settle and length shape the default recipe, not the paper's",
+                    ));
+                }
+                kicks
+            }
+        };
+        let settings = LibrarySettings {
+            trajectories,
+            seed,
+            chains,
+            horizon: horizon.unwrap_or(base.horizon),
+            growth: growth.unwrap_or(base.growth),
+            exploration,
+            ..base
+        };
+        let lib = py
+            .allow_threads(move || match &chosen {
+                Some(t) => RsLibrary::build_task(&file, Some(&t.name), &settings, |_, _| {}),
+                None => RsLibrary::build(&file.scene, &settings, |_, _| {}),
+            })
+            .map_err(error)?;
+        Library::wrap(lib)
+    }
+
+    /// `Library.load(path)`: a library file written by `save` or `cargo xtask train`.
+    #[staticmethod]
+    fn load(py: Python<'_>, path: PathBuf) -> PyResult<Self> {
+        let lib = py
+            .allow_threads(|| RsLibrary::load(&path))
+            .map_err(|e| error(format!("{}: {e}", path.display())))?;
+        Library::wrap(lib)
+    }
+
+    /// `save(path)`: write the library file (the format `cargo xtask` reads).
+    fn save(&self, path: PathBuf) -> PyResult<()> {
+        self.lib
+            .save(&path)
+            .map_err(|e| error(format!("{}: {e}", path.display())))
+    }
+
+    /// Number of local controllers.
+    fn __len__(&self) -> usize {
+        self.lib.entries.len()
+    }
+
+    /// The controllers' states, shape `(len, n_state)`.
+    #[getter]
+    fn states<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let n = self.lib.scene().n_state();
+        stacked(py, self.lib.entries.iter().map(|e| e.x.clone()).collect(), n)
+    }
+
+    /// The task's name (`None`: the finger's built-in task).
+    #[getter]
+    fn task(&self) -> Option<String> {
+        self.lib.task().map(|t| t.name.clone())
+    }
+
+    /// The settings it was built with, as a dict.
+    #[getter]
+    fn settings<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        to_python(py, &self.lib.settings)
+    }
+
+    /// The initial state of its first trajectory (its task's).
+    #[getter]
+    fn x0<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        self.lib.settings.x0.clone().into_pyarray(py)
+    }
+
+    /// `policy(x) -> u`: the global policy's control at `x` (eq. 20, or the value-ranked choice among
+    /// the nearest controllers when the library was built to rank them).
+    fn policy<'py>(
+        &self,
+        py: Python<'py>,
+        x: PyArrayLike1<'py, f64, AllowTypeChange>,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let x = vector(&x, "x", self.lib.scene().n_state())?;
+        let mut u = vec![0.0; self.lib.scene().n_controls];
+        self.policy.control(&x, &mut u).map_err(error)?;
+        Ok(u.into_pyarray(py))
+    }
+
+    /// `evaluate(seconds=200.0, model=None, sigma=None, h=None, kick_every=10.0, kick_std=2.0, seed=7,
+    /// x0=None) -> dict`: the policy in closed loop (`cargo xtask evaluate`'s measures) on the library's
+    /// own model (or `model`: "logistic", "normal", "hard") at its time step (or `h`), from its initial
+    /// state (or `x0`). The GIL is released while it runs.
+    #[pyo3(signature = (seconds=200.0, model=None, sigma=None, h=None, kick_every=10.0, kick_std=2.0, seed=7, x0=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn evaluate<'py>(
+        &self,
+        py: Python<'py>,
+        seconds: f64,
+        model: Option<&str>,
+        sigma: Option<f64>,
+        h: Option<f64>,
+        kick_every: f64,
+        kick_std: f64,
+        seed: u64,
+        x0: Option<PyArrayLike1<'py, f64, AllowTypeChange>>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let own = self.lib.settings.model;
+        let own_sigma = match own {
+            LibModel::Logistic(s) | LibModel::Normal(s) => s,
+            LibModel::Hard => 0.1,
+        };
+        let world = match model {
+            Some(name) => self::model(name, sigma.unwrap_or(own_sigma))?,
+            None => own,
+        };
+        let x0 = match &x0 {
+            Some(a) => vector(a, "x0", self.lib.scene().n_state())?,
+            None => self.lib.settings.x0.clone(),
+        };
+        if !(seconds.is_finite() && seconds <= 1e6) {
+            return Err(error(format!("seconds {seconds} must be finite and at most 1e6")));
+        }
+        let settings = EvaluationSettings {
+            model: world,
+            h: h.unwrap_or(self.lib.settings.h),
+            seconds,
+            kick_every,
+            kick_std,
+            seed,
+            x0,
+        };
+        let (lib, policy) = (&self.lib, &self.policy);
+        let e: Evaluation = py
+            .allow_threads(|| ::library::evaluate(lib, policy, &settings))
+            .map_err(error)?;
+        to_python(py, &e)
+    }
+}
+
+/// Stochastic complementarity for contact: the Rust crates from Python.
+#[pymodule]
+fn slcp(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<Simulator>()?;
+    m.add_class::<Library>()?;
+    m.add_function(wrap_pyfunction!(optimize, m)?)?;
+    m.add("SlcpError", m.py().get_type::<SlcpError>())?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}

@@ -1,0 +1,189 @@
+"""The Python package against the Rust crates: the same numbers as `cargo xtask step`, shapes and
+dtypes, errors raised with the crates' messages, and the GIL released during long work."""
+
+import math
+import threading
+import time
+
+import numpy as np
+import pytest
+
+import slcp
+
+X0 = np.array([-0.7853981633974483, -0.5235987755982989, 0.0, 0.0, 0.0, 0.0])
+
+
+def states():
+    """Finger states in and out of contact, moving."""
+    rng = np.random.default_rng(3)
+    out = [X0.copy()]
+    for _ in range(5):
+        x = X0 + rng.normal(0.0, 0.4, 6)
+        x[3:] = rng.normal(0.0, 1.0, 3)
+        out.append(x)
+    # The finger's tip pressed on the ellipse (theta2 bent down onto it).
+    out.append(np.array([-1.25, -1.05, 0.3, 0.2, -0.5, 1.0]))
+    return out
+
+
+@pytest.mark.parametrize("model", ["logistic", "hard", "normal"])
+def test_a_step_and_its_derivatives_equal_the_command_lines(xtask_step, model):
+    sim = slcp.Simulator(model=model, sigma=0.1)
+    u = np.array([0.3, -0.7])
+    xs = states()
+    # A fresh simulator per line on both sides: each step cold-started, as `xtask step` starts each line
+    # from the previous line's solution, so the lines run in the same order through one simulator here.
+    reference = xtask_step(
+        [{"x": list(x), "u": list(u)} for x in xs], "--model", model, "--sigma", "0.1", "--derivatives"
+    )
+    for x, ref in zip(xs, reference):
+        x_next, fx, fu = sim.derivatives(x, u)
+        assert x_next.dtype == np.float64 and x_next.shape == (6,)
+        assert fx.shape == (6, 6) and fu.shape == (6, 2)
+        np.testing.assert_allclose(x_next, ref["x_next"], rtol=0, atol=1e-12)
+        np.testing.assert_allclose(fx, np.array(ref["fx"]), rtol=0, atol=1e-12)
+        np.testing.assert_allclose(fu, np.array(ref["fu"]), rtol=0, atol=1e-12)
+
+
+def test_the_hessian_equals_the_command_lines_and_is_symmetric(xtask_step):
+    sim = slcp.Simulator(sigma=0.2)
+    c = np.array([0.3, -0.7, 1.0, 0.2, -0.1, 0.5])
+    u = [0.2, -0.4]
+    x = [-1.25, -1.05, 0.3, 0.2, -0.5, 1.0]
+    [ref] = xtask_step([{"x": x, "u": u, "c": list(c)}], "--sigma", "0.2", "--hessian")
+    h = sim.hessian(x, u, c)
+    assert h.shape == (8, 8)
+    np.testing.assert_allclose(h, np.array(ref["hessian"]), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(h, h.T, rtol=0, atol=1e-9)
+
+
+def test_step_info_reports_the_contact_and_a_rollout_repeats_the_steps():
+    sim = slcp.Simulator()
+    info = sim.step_info([-1.25, -1.05, 0.3, 0.0, 0.0, 0.0], [0.0, -3.0])
+    assert info["status"] == "converged"
+    assert info["normal_impulse"].shape == (1,) and info["normal_impulse"][0] > 0.0
+    assert info["lambda"].shape == (6,)
+    assert info["contact_distance"][0] < 0.2
+    us = np.tile([0.1, -0.2], (40, 1))
+    xs = slcp.Simulator().rollout(X0, us)
+    assert xs.shape == (41, 6)
+    one = slcp.Simulator()
+    x = X0
+    for k in range(40):
+        x = one.step(x, us[k])
+    np.testing.assert_array_equal(xs[-1], x)
+
+
+def test_other_scenes_load_and_name_their_state(root):
+    sim = slcp.Simulator(root / "scenes" / "pushing.toml", model="hard")
+    assert (sim.n_state, sim.n_controls) == (10, 2)
+    assert sim.state_names[2:5] == ["block.x", "block.y", "block.angle"]
+
+
+def test_bad_input_raises_with_the_crates_message_and_never_crashes(root, tmp_path):
+    sim = slcp.Simulator()
+    with pytest.raises(slcp.SlcpError, match="x has 5 entries, expected 6"):
+        sim.step(np.zeros(5), np.zeros(2))
+    with pytest.raises(slcp.SlcpError, match="us has 3 columns"):
+        sim.rollout(X0, np.zeros((4, 3)))
+    with pytest.raises(slcp.SlcpError, match="NaN|finite"):
+        sim.step([math.nan, 0, 0, 0, 0, 0], [0, 0])
+    with pytest.raises(slcp.SlcpError, match="model"):
+        slcp.Simulator(model="soft")
+    with pytest.raises(slcp.SlcpError, match="sigma"):
+        slcp.Simulator(sigma=-1.0)
+    bad = tmp_path / "bad.toml"
+    bad.write_text('gravity = [0.0, -4.0]\n[[body]]\nname = "a"\nsemi_axes = [0.5, -1.0]\n')
+    with pytest.raises(slcp.SlcpError, match="bad.toml"):
+        slcp.Simulator(bad)
+    with pytest.raises(slcp.SlcpError):
+        slcp.Simulator(tmp_path / "missing.toml")
+    with pytest.raises(slcp.SlcpError, match="spin"):
+        slcp.optimize(root / "scenes" / "pushing.toml", task="spin")
+    with pytest.raises(slcp.SlcpError, match="method"):
+        slcp.optimize(method="newton")
+    garbage = tmp_path / "garbage.lib"
+    garbage.write_bytes(b"not a library")
+    with pytest.raises(slcp.SlcpError, match="garbage.lib"):
+        slcp.Library.load(garbage)
+    # A wrong type is Python's own TypeError, not a crash.
+    with pytest.raises(TypeError):
+        sim.step("abc", [0, 0])
+    assert issubclass(slcp.SlcpError, ValueError)
+
+
+def test_optimize_returns_the_trajectory_its_gains_and_value_model(root):
+    sol = slcp.optimize(root / "scenes" / "pushing.toml", task="push", max_iterations=300)
+    n, m, N = 10, 2, 60
+    assert sol["converged"] and sol["task"] == "push"
+    assert sol["states"].shape == (N + 1, n) and sol["controls"].shape == (N, m)
+    assert sol["gains"].shape == (N, m, n)
+    assert sol["cost_to_go"].shape == (N + 1,)
+    assert sol["value_gradient"].shape == (N + 1, n)
+    assert sol["value_hessian"].shape == (N + 1, n, n)
+    assert abs(sol["states"][-1, 2] - 0.6) < 0.05
+    # The trajectory is the simulator's rollout of its controls on the task's model.
+    xs = slcp.Simulator(root / "scenes" / "pushing.toml", sigma=0.05).rollout(sol["states"][0], sol["controls"])
+    np.testing.assert_allclose(xs, sol["states"], rtol=0, atol=1e-9)
+    # The value model's Hessian is symmetric, and its cost-to-go at the start is the cost.
+    np.testing.assert_allclose(sol["value_hessian"], np.transpose(sol["value_hessian"], (0, 2, 1)), atol=1e-8)
+    assert abs(sol["cost_to_go"][0] - sol["cost"]) < 1e-9 * (1 + abs(sol["cost"]))
+
+
+def small_library():
+    return slcp.Library.train(trajectories=8, horizon=40, growth=0, trunk=6, settle=1, length=2)
+
+
+def test_a_library_trains_saves_loads_and_its_policy_runs(tmp_path):
+    lib = small_library()
+    assert len(lib) == 32 and lib.task is None
+    assert lib.states.shape == (32, 6)
+    u = lib.policy(lib.x0)
+    assert u.shape == (2,) and np.all(np.isfinite(u))
+    path = tmp_path / "small.lib"
+    lib.save(path)
+    again = slcp.Library.load(path)
+    np.testing.assert_array_equal(again.states, lib.states)
+    np.testing.assert_array_equal(again.policy(lib.x0), u)
+    e = again.evaluate(seconds=10.0, kick_every=0.0)
+    assert set(["spin_rate", "final_spin_rate", "task", "unconverged_steps"]) <= set(e)
+    assert math.isfinite(e["spin_rate"])
+    hard = again.evaluate(seconds=5.0, model="hard", kick_every=0.0)
+    assert hard["unconverged_steps"] == 0
+    assert lib.settings["trajectories"] == 8
+
+
+def test_a_task_library_of_a_scene_file(root):
+    lib = slcp.Library.train(root / "scenes" / "pushing.toml", trajectories=12, trunk=8, settle=1, length=2, growth=0)
+    assert lib.task == "push"
+    e = lib.evaluate(seconds=10.0, kick_every=0.0)
+    [target, _] = e["task"]["targets"]
+    assert target["entry"] == "block.x"
+    assert target["last"] < 0.1
+
+
+def test_long_work_releases_the_gil():
+    # A library build on one thread; the main thread counts while it runs. Holding the GIL for the
+    # build would let the counter advance only in the interpreter's switch interval slices, never while
+    # the build is inside Rust.
+    done = threading.Event()
+    built = []
+
+    def build():
+        built.append(slcp.Library.train(trajectories=30, horizon=60, growth=0, trunk=10, settle=2, length=4))
+        done.set()
+
+    thread = threading.Thread(target=build)
+    count = 0
+    start = time.perf_counter()
+    thread.start()
+    while not done.is_set():
+        count += 1
+    elapsed = time.perf_counter() - start
+    thread.join()
+    assert built and len(built[0]) == 120
+    # Tens of millions of increments a second when the GIL is free; a held GIL gives the counter
+    # nothing while Rust runs.
+    rate = count / elapsed
+    assert elapsed > 0.05, elapsed
+    assert rate > 1e5, f"the main thread counted {count} in {elapsed:.2f} s while the build ran"
