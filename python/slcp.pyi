@@ -102,10 +102,12 @@ class Library:
         settle: Optional[int] = None,
         length: Optional[int] = None,
         chains: int = 1,
+        model: Optional[str] = None,
+        sigma: Optional[float] = None,
     ) -> "Library":
         """Build a library as ``cargo xtask train`` does: for a task of a scene file, or without scene
-        and task the finger's built-in task; the default recipe or the paper's (``paper=True``).
-        Releases the GIL."""
+        and task the finger's built-in task; the default recipe or the paper's (``paper=True``); the
+        task's contact model and sigma unless ``model`` or ``sigma`` is given. Releases the GIL."""
     @staticmethod
     def load(path: Path) -> "Library":
         """A library file written by :meth:`save` or ``cargo xtask train``."""

@@ -31,7 +31,11 @@ fn error(e: impl std::fmt::Display) -> PyErr {
 }
 
 /// A 1-D input as a vector, its length checked.
-fn vector(a: &PyArrayLike1<'_, f64, AllowTypeChange>, what: &str, len: usize) -> PyResult<Vec<f64>> {
+fn vector(
+    a: &PyArrayLike1<'_, f64, AllowTypeChange>,
+    what: &str,
+    len: usize,
+) -> PyResult<Vec<f64>> {
     let v: Vec<f64> = a.as_array().iter().copied().collect();
     if v.len() != len {
         return Err(error(format!(
@@ -43,7 +47,11 @@ fn vector(a: &PyArrayLike1<'_, f64, AllowTypeChange>, what: &str, len: usize) ->
 }
 
 /// A 2-D input as rows, its column count checked.
-fn rows(a: &PyArrayLike2<'_, f64, AllowTypeChange>, what: &str, cols: usize) -> PyResult<Vec<Vec<f64>>> {
+fn rows(
+    a: &PyArrayLike2<'_, f64, AllowTypeChange>,
+    what: &str,
+    cols: usize,
+) -> PyResult<Vec<Vec<f64>>> {
     let view = a.as_array();
     if view.ncols() != cols {
         return Err(error(format!(
@@ -54,13 +62,22 @@ fn rows(a: &PyArrayLike2<'_, f64, AllowTypeChange>, what: &str, cols: usize) -> 
     Ok(view.rows().into_iter().map(|r| r.to_vec()).collect())
 }
 
-fn matrix<'py>(py: Python<'py>, v: Vec<f64>, r: usize, c: usize) -> PyResult<Bound<'py, PyArray2<f64>>> {
+fn matrix<'py>(
+    py: Python<'py>,
+    v: Vec<f64>,
+    r: usize,
+    c: usize,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
     Ok(Array2::from_shape_vec((r, c), v)
         .map_err(error)?
         .into_pyarray(py))
 }
 
-fn stacked<'py>(py: Python<'py>, rows: Vec<Vec<f64>>, cols: usize) -> PyResult<Bound<'py, PyArray2<f64>>> {
+fn stacked<'py>(
+    py: Python<'py>,
+    rows: Vec<Vec<f64>>,
+    cols: usize,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
     let n = rows.len();
     matrix(py, rows.into_iter().flatten().collect(), n, cols)
 }
@@ -90,6 +107,13 @@ fn to_python<'py>(py: Python<'py>, value: &impl serde::Serialize) -> PyResult<Bo
     let text = serde_json::to_string(value).map_err(error)?;
     py.import("json")?.call_method1("loads", (text,))
 }
+
+/// `(x_next, fx, fu)` as NumPy arrays.
+type Linearised<'py> = (
+    Bound<'py, PyArray1<f64>>,
+    Bound<'py, PyArray2<f64>>,
+    Bound<'py, PyArray2<f64>>,
+);
 
 /// The simulator: one time step of a scene under a contact model, its exact first derivatives and the
 /// Hessian of `c^T f`. Warm starts carry from one step to the next, as in the crates.
@@ -220,11 +244,7 @@ impl Simulator {
         py: Python<'py>,
         x: PyArrayLike1<'py, f64, AllowTypeChange>,
         u: PyArrayLike1<'py, f64, AllowTypeChange>,
-    ) -> PyResult<(
-        Bound<'py, PyArray1<f64>>,
-        Bound<'py, PyArray2<f64>>,
-        Bound<'py, PyArray2<f64>>,
-    )> {
+    ) -> PyResult<Linearised<'py>> {
         let (x, u) = self.inputs(&x, &u)?;
         let (n, m) = (x.len(), u.len());
         let (step, d) = self.sim.step_with_derivatives(&x, &u).map_err(error)?;
@@ -268,10 +288,7 @@ impl Simulator {
             xs.push(x0);
             for (k, u) in us.iter().enumerate() {
                 let x = xs.last().expect("x0 pushed");
-                let next = sim
-                    .step(x, u)
-                    .map_err(|e| format!("step {k}: {e}"))?
-                    .x_next;
+                let next = sim.step(x, u).map_err(|e| format!("step {k}: {e}"))?.x_next;
                 xs.push(next);
             }
             Ok(xs)
@@ -332,7 +349,9 @@ fn optimize<'py>(
     let (n, m) = (file.scene.n_state(), file.scene.n_controls);
     let horizon = horizon.unwrap_or(task.horizon);
     if !(1..=100_000).contains(&horizon) {
-        return Err(error(format!("horizon {horizon} must be 1 to 100000 steps")));
+        return Err(error(format!(
+            "horizon {horizon} must be 1 to 100000 steps"
+        )));
     }
     if !(1..=100_000).contains(&max_iterations) {
         return Err(error(format!(
@@ -414,7 +433,11 @@ fn optimize<'py>(
     )?;
     out.set_item(
         "value_gradient",
-        stacked(py, sol.values.iter().map(|v| v.gradient.clone()).collect(), n)?,
+        stacked(
+            py,
+            sol.values.iter().map(|v| v.gradient.clone()).collect(),
+            n,
+        )?,
     )?;
     out.set_item(
         "value_hessian",
@@ -451,12 +474,12 @@ impl Library {
 #[pymethods]
 impl Library {
     /// `Library.train(scene=None, task=None, trajectories=400, seed=1, paper=False, horizon=None,
-    /// growth=None, trunk=None, settle=None, length=None, chains=1)`: build a library as `cargo xtask
-    /// train` does: for the task of a scene file (`task`, or the file's only task when a scene is given),
+    /// growth=None, trunk=None, settle=None, length=None, chains=1, model=None, sigma=None)`: build a
+    /// library as `cargo xtask train` does (the contact model and sigma the task's unless given): for the task of a scene file (`task`, or the file's only task when a scene is given),
     /// or without either the finger's built-in task with the default recipe (`paper=True`: the paper's).
     /// The GIL is released while it builds.
     #[staticmethod]
-    #[pyo3(signature = (scene=None, task=None, trajectories=400, seed=1, paper=false, horizon=None, growth=None, trunk=None, settle=None, length=None, chains=1))]
+    #[pyo3(signature = (scene=None, task=None, trajectories=400, seed=1, paper=false, horizon=None, growth=None, trunk=None, settle=None, length=None, chains=1, model=None, sigma=None))]
     #[allow(clippy::too_many_arguments)]
     fn train(
         py: Python<'_>,
@@ -471,6 +494,8 @@ impl Library {
         settle: Option<usize>,
         length: Option<usize>,
         chains: usize,
+        model: Option<&str>,
+        sigma: Option<f64>,
     ) -> PyResult<Self> {
         let with_task = scene.is_some() || task.is_some();
         let file = problem_file(scene)?;
@@ -506,7 +531,20 @@ impl Library {
                 kicks
             }
         };
+        let own_sigma = match base.model {
+            LibModel::Logistic(s) | LibModel::Normal(s) => s,
+            LibModel::Hard => 0.1,
+        };
+        let contact = match model {
+            Some(name) => self::model(name, sigma.unwrap_or(own_sigma))?,
+            None => match (base.model, sigma) {
+                (LibModel::Logistic(_), Some(s)) => LibModel::Logistic(s),
+                (LibModel::Normal(_), Some(s)) => LibModel::Normal(s),
+                (own, _) => own,
+            },
+        };
         let settings = LibrarySettings {
+            model: contact,
             trajectories,
             seed,
             chains,
@@ -549,7 +587,11 @@ impl Library {
     #[getter]
     fn states<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
         let n = self.lib.scene().n_state();
-        stacked(py, self.lib.entries.iter().map(|e| e.x.clone()).collect(), n)
+        stacked(
+            py,
+            self.lib.entries.iter().map(|e| e.x.clone()).collect(),
+            n,
+        )
     }
 
     /// The task's name (`None`: the finger's built-in task).
@@ -615,7 +657,9 @@ impl Library {
             None => self.lib.settings.x0.clone(),
         };
         if !(seconds.is_finite() && seconds <= 1e6) {
-            return Err(error(format!("seconds {seconds} must be finite and at most 1e6")));
+            return Err(error(format!(
+                "seconds {seconds} must be finite and at most 1e6"
+            )));
         }
         let settings = EvaluationSettings {
             model: world,
