@@ -187,3 +187,15 @@ def test_long_work_releases_the_gil():
     rate = count / elapsed
     assert elapsed > 0.05, elapsed
     assert rate > 1e5, f"the main thread counted {count} in {elapsed:.2f} s while the build ran"
+
+
+def test_the_package_ships_its_typed_stubs_and_docstrings():
+    import pathlib
+
+    here = pathlib.Path(slcp.__file__).parent
+    stubs = (here / "__init__.pyi").read_text()
+    assert (here / "py.typed").exists()
+    for name in ["class Simulator", "def optimize", "class Library", "class SlcpError", "def rollout"]:
+        assert name in stubs, name
+    assert "exact first derivatives" in slcp.Simulator.derivatives.__doc__
+    assert "GIL" in slcp.optimize.__doc__

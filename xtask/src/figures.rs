@@ -3,6 +3,7 @@
 //! states (Fig. 3), a closed-loop limit cycle coloured by contact impulse (Fig. 4), and frames of the
 //! controlled finger (Fig. 5).
 
+use crate::draw::ellipse_outline;
 use anyhow::{Context, anyhow};
 use dynamics::{Constraints, Kinematics, Scene, Simulator, StepSettings};
 use library::{Library, Policy};
@@ -395,19 +396,6 @@ fn draw_cycle_3d<DB: DrawingBackend>(
             .map_err(err)?;
     }
     colour_bar(&right, top)
-}
-
-fn ellipse_outline(c: [f64; 2], phi: f64, a: f64, b: f64) -> Vec<(f64, f64)> {
-    (0..=48)
-        .map(|k| {
-            let t = 2.0 * PI * k as f64 / 48.0;
-            let (x, y) = (a * t.cos(), b * t.sin());
-            (
-                c[0] + phi.cos() * x - phi.sin() * y,
-                c[1] + phi.sin() * x + phi.cos() * y,
-            )
-        })
-        .collect()
 }
 
 fn draw_frames<DB: DrawingBackend>(
