@@ -141,4 +141,6 @@ class Library:
         x0: Optional[ArrayLike] = None,
     ) -> dict[str, Any]:
         """The policy in closed loop (``cargo xtask evaluate``'s measures, with the task's own under
-        ``"task"``). Releases the GIL."""
+        ``"task"``) on the library's own model, or ``model`` (``"logistic"``, ``"normal"``, ``"hard"``),
+        with ``sigma`` replacing the noise scale (refused for the hard model), at the library's time step
+        or ``h``, from its initial state or ``x0``. Releases the GIL."""

@@ -94,6 +94,25 @@ fn model(model: &str, sigma: f64) -> PyResult<LibModel> {
     }
 }
 
+/// The contact model asked for: `model` at `sigma` (the task's own sigma when not given), or the task's
+/// own model `own` with `sigma` replacing its noise scale. A sigma for the hard model is refused rather
+/// than ignored.
+fn contact_model(own: LibModel, model: Option<&str>, sigma: Option<f64>) -> PyResult<LibModel> {
+    let own_sigma = match own {
+        LibModel::Logistic(s) | LibModel::Normal(s) => s,
+        LibModel::Hard => 0.1,
+    };
+    match (model, own, sigma) {
+        (Some("hard"), _, Some(s)) | (None, LibModel::Hard, Some(s)) => Err(error(format!(
+            "sigma {s} given for the hard model, which has no noise scale (pass model=\"logistic\" or \"normal\")"
+        ))),
+        (Some(name), _, s) => self::model(name, s.unwrap_or(own_sigma)),
+        (None, LibModel::Logistic(_), Some(s)) => Ok(LibModel::Logistic(s)),
+        (None, LibModel::Normal(_), Some(s)) => Ok(LibModel::Normal(s)),
+        (None, own, _) => Ok(own),
+    }
+}
+
 /// The scene file at `path`, or the finger's with `None`.
 fn problem_file(path: Option<PathBuf>) -> PyResult<ProblemFile> {
     match path {
@@ -384,18 +403,7 @@ fn optimize<'py>(
             )));
         }
     };
-    let own_sigma = match task.model {
-        LibModel::Logistic(s) | LibModel::Normal(s) => s,
-        LibModel::Hard => 0.1,
-    };
-    let contact = match model {
-        Some(name) => self::model(name, sigma.unwrap_or(own_sigma))?,
-        None => match (task.model, sigma) {
-            (LibModel::Logistic(_), Some(s)) => LibModel::Logistic(s),
-            (LibModel::Normal(_), Some(s)) => LibModel::Normal(s),
-            (own, _) => own,
-        },
-    };
+    let contact = contact_model(task.model, model, sigma)?;
     let sim = RsSimulator::new(
         file.scene.clone(),
         StepSettings {
@@ -531,18 +539,7 @@ impl Library {
                 kicks
             }
         };
-        let own_sigma = match base.model {
-            LibModel::Logistic(s) | LibModel::Normal(s) => s,
-            LibModel::Hard => 0.1,
-        };
-        let contact = match model {
-            Some(name) => self::model(name, sigma.unwrap_or(own_sigma))?,
-            None => match (base.model, sigma) {
-                (LibModel::Logistic(_), Some(s)) => LibModel::Logistic(s),
-                (LibModel::Normal(_), Some(s)) => LibModel::Normal(s),
-                (own, _) => own,
-            },
-        };
+        let contact = contact_model(base.model, model, sigma)?;
         let settings = LibrarySettings {
             model: contact,
             trajectories,
@@ -643,15 +640,7 @@ impl Library {
         seed: u64,
         x0: Option<PyArrayLike1<'py, f64, AllowTypeChange>>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let own = self.lib.settings.model;
-        let own_sigma = match own {
-            LibModel::Logistic(s) | LibModel::Normal(s) => s,
-            LibModel::Hard => 0.1,
-        };
-        let world = match model {
-            Some(name) => self::model(name, sigma.unwrap_or(own_sigma))?,
-            None => own,
-        };
+        let world = contact_model(self.lib.settings.model, model, sigma)?;
         let x0 = match &x0 {
             Some(a) => vector(a, "x0", self.lib.scene().n_state())?,
             None => self.lib.settings.x0.clone(),

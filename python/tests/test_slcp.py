@@ -102,6 +102,9 @@ def test_bad_input_raises_with_the_crates_message_and_never_crashes(root, tmp_pa
         slcp.optimize(root / "scenes" / "pushing.toml", task="spin")
     with pytest.raises(slcp.SlcpError, match="method"):
         slcp.optimize(method="newton")
+    # A noise scale for the hard model is refused, not ignored.
+    with pytest.raises(slcp.SlcpError, match="hard model"):
+        slcp.optimize(model="hard", sigma=0.1)
     garbage = tmp_path / "garbage.lib"
     garbage.write_bytes(b"not a library")
     with pytest.raises(slcp.SlcpError, match="garbage.lib"):
