@@ -170,7 +170,20 @@ fn bad_evaluation_settings_are_typed_errors() {
             x0: vec![0.0; 3],
             ..EvaluationSettings::default()
         },
+        // A count that would run for days, and a kick interval that would silently mean none.
+        EvaluationSettings {
+            seconds: 1e12,
+            ..EvaluationSettings::default()
+        },
+        EvaluationSettings {
+            kick_every: f64::NAN,
+            ..EvaluationSettings::default()
+        },
+        EvaluationSettings {
+            kick_every: -1.0,
+            ..EvaluationSettings::default()
+        },
     ] {
-        assert!(evaluate(lib, &policy, &s).is_err());
+        assert!(evaluate(lib, &policy, &s).is_err(), "{s:?}");
     }
 }

@@ -20,7 +20,7 @@ pub struct EvaluationSettings {
     pub h: f64,
     /// Simulated time.
     pub seconds: f64,
-    /// A velocity kick every this many seconds (none if not positive).
+    /// A velocity kick every this many seconds (0: none; finite and non-negative).
     pub kick_every: f64,
     /// Standard deviation of each velocity's kick.
     pub kick_std: f64,
@@ -245,6 +245,9 @@ impl TaskMeter {
     }
 }
 
+/// The longest closed loop [`evaluate`] runs, in time steps (a few minutes of computing on the finger).
+pub const MAX_EVALUATION_STEPS: usize = 10_000_000;
+
 /// A contact impulse this large (in the normal direction, per step) counts as touching.
 pub const CONTACT_IMPULSE: f64 = 1e-3;
 
@@ -322,6 +325,20 @@ pub fn evaluate_in(
             name: "seconds",
             value: settings.seconds,
             expected: "at least one time step",
+        });
+    }
+    if settings.seconds / settings.h > MAX_EVALUATION_STEPS as f64 {
+        return Err(LibraryError::Setting {
+            name: "seconds",
+            value: settings.seconds,
+            expected: "at most 1e7 time steps",
+        });
+    }
+    if !(settings.kick_every.is_finite() && settings.kick_every >= 0.0) {
+        return Err(LibraryError::Setting {
+            name: "kick_every",
+            value: settings.kick_every,
+            expected: "finite and non-negative (0: no kicks)",
         });
     }
     if !(settings.kick_std.is_finite() && settings.kick_std >= 0.0) {
