@@ -223,36 +223,22 @@ impl Simulator {
         let (x, u) = self.inputs(&x, &u)?;
         let step = self.sim.step(&x, &u).map_err(error)?;
         let out = PyDict::new(py);
-        out.set_item("x_next", step.x_next.clone().into_pyarray(py))?;
-        out.set_item("lambda", step.lambda.clone().into_pyarray(py))?;
-        out.set_item("d", step.d.clone().into_pyarray(py))?;
+        let pairs = |f: fn(&dynamics::ContactImpulse) -> f64| {
+            Array1::from_iter(step.impulses.iter().map(f)).into_pyarray(py)
+        };
+        out.set_item("normal_impulse", pairs(|i| i.normal))?;
+        out.set_item("tangent_impulse", pairs(|i| i.tangent))?;
         out.set_item(
             "contact_distance",
-            step.contacts
-                .iter()
-                .map(|c| c.distance)
-                .collect::<Vec<_>>()
-                .into_pyarray(py),
-        )?;
-        out.set_item(
-            "normal_impulse",
-            step.impulses
-                .iter()
-                .map(|i| i.normal)
-                .collect::<Vec<_>>()
-                .into_pyarray(py),
-        )?;
-        out.set_item(
-            "tangent_impulse",
-            step.impulses
-                .iter()
-                .map(|i| i.tangent)
-                .collect::<Vec<_>>()
-                .into_pyarray(py),
+            Array1::from_iter(step.contacts.iter().map(|c| c.distance)).into_pyarray(py),
         )?;
         out.set_item("status", status(step.info.status))?;
         out.set_item("iterations", step.info.iterations)?;
         out.set_item("residual", step.info.residual)?;
+        // The vectors move into their arrays, no copy.
+        out.set_item("x_next", step.x_next.into_pyarray(py))?;
+        out.set_item("lambda", step.lambda.into_pyarray(py))?;
+        out.set_item("d", step.d.into_pyarray(py))?;
         Ok(out)
     }
 

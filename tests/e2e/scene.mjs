@@ -3,42 +3,11 @@
 // server says they are, and a mouse drag lifts the block (a free body) off the ground. Usage: node
 // scene.mjs URL SCREENSHOT.png. Prints one JSON line with what it measured; exits non-zero if a check
 // fails.
-import { chromium } from "playwright-core";
+import { run } from "./common.mjs";
 
 const [url, screenshot] = process.argv.slice(2);
-const executablePath = process.env.CHROMIUM || "/usr/bin/chromium";
-const browser = await chromium.launch({
-  executablePath,
-  args: [
-    "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-    "--disable-background-networking", "--disable-component-update", "--disable-sync",
-  ],
-});
-const result = { ok: false };
-const fail = (why) => {
-  result.error = why;
-  throw new Error(why);
-};
-try {
-  const page = await browser.newPage({ viewport: { width: 1100, height: 820 } });
-  const errors = [];
-  page.on("pageerror", (e) => errors.push(String(e)));
-  await page.goto(url);
-  const frame = () => page.evaluate(() => window.lastFrame);
-  const waitFor = async (test, simSeconds, what) => {
-    const start = (await frame()).t;
-    for (;;) {
-      const f = await frame();
-      if (f && test(f)) {
-        return f;
-      }
-      if (f && f.t > start + simSeconds) {
-        fail(`${what}: not within ${simSeconds} simulated seconds (t = ${f.t})`);
-      }
-      await page.waitForTimeout(100);
-    }
-  };
-  await page.waitForFunction(() => window.lastFrame !== undefined, null, { timeout: 10000 });
+
+await run(url, async ({ page, frame, waitFor, fail, result }) => {
   // The colour the canvas shows at a world point (after the next animation frame).
   const colourAt = (p) =>
     page.evaluate((p) => {
@@ -63,7 +32,6 @@ try {
   // leaves the ground.
   const start = await frame();
   const centre = start.bodies[2].centre;
-  result.block_colour = await colourAt(centre.map((v, i) => v + (i === 1 ? 0.1 : 0.1)));
   const [gx, gy] = await page.evaluate((p) => window.viewerToClient(p), centre);
   const [tx, ty] = await page.evaluate((p) => window.viewerToClient(p), [centre[0], centre[1] + 1.5]);
   await page.mouse.move(gx, gy);
@@ -78,14 +46,4 @@ try {
   await page.screenshot({ path: screenshot });
   await page.mouse.up();
   await waitFor((f) => f.spring === null, 2, "the release reaches the server");
-  if (errors.length) {
-    fail(`page errors: ${errors.join("; ")}`);
-  }
-  result.ok = true;
-} catch (e) {
-  result.error = result.error || String(e);
-} finally {
-  await browser.close();
-  console.log(JSON.stringify(result));
-  process.exitCode = result.ok ? 0 : 1;
-}
+});

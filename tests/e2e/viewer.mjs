@@ -2,43 +2,11 @@
 // spin the ellipse, drag the ellipse against its spin with the mouse, release, and wait for the spin to
 // resume. Usage: node viewer.mjs URL SCREENSHOT.png. Prints one JSON line with what it measured; exits
 // non-zero if a check fails.
-import { chromium } from "playwright-core";
+import { run } from "./common.mjs";
 
 const [url, screenshot] = process.argv.slice(2);
-const executablePath = process.env.CHROMIUM || "/usr/bin/chromium";
-const browser = await chromium.launch({
-  executablePath,
-  args: [
-    "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-    "--disable-background-networking", "--disable-component-update", "--disable-sync",
-  ],
-});
-const result = { ok: false };
-const fail = (why) => {
-  result.error = why;
-  throw new Error(why);
-};
-try {
-  const page = await browser.newPage({ viewport: { width: 1100, height: 820 } });
-  const errors = [];
-  page.on("pageerror", (e) => errors.push(String(e)));
-  await page.goto(url);
-  const frame = () => page.evaluate(() => window.lastFrame);
-  // Wait (in simulated time) for a frame satisfying `test`, polling every 100 ms of real time.
-  const waitFor = async (test, simSeconds, what) => {
-    const start = (await frame()).t;
-    for (;;) {
-      const f = await frame();
-      if (f && test(f)) {
-        return f;
-      }
-      if (f && f.t > start + simSeconds) {
-        fail(`${what}: not within ${simSeconds} simulated seconds (t = ${f.t}, spin ${f.spin_rate})`);
-      }
-      await page.waitForTimeout(100);
-    }
-  };
-  await page.waitForFunction(() => window.lastFrame !== undefined, null, { timeout: 10000 });
+
+await run(url, async ({ page, frame, waitFor, fail, result }) => {
   await page.click("input[name=policy][value=mpc]");
   const spinning = await waitFor((f) => f.policy === "mpc" && f.spin_rate > 0.2, 40, "the controller spins the ellipse");
   result.spin_before = spinning.spin_rate;
@@ -79,14 +47,4 @@ try {
   result.resume_seconds = resumed.t - released.t;
   result.spin_after = resumed.spin_rate;
   await page.screenshot({ path: screenshot });
-  if (errors.length) {
-    fail(`page errors: ${errors.join("; ")}`);
-  }
-  result.ok = true;
-} catch (e) {
-  result.error = result.error || String(e);
-} finally {
-  await browser.close();
-  console.log(JSON.stringify(result));
-  process.exitCode = result.ok ? 0 : 1;
-}
+});

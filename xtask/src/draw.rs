@@ -142,59 +142,79 @@ pub(crate) fn draw_static<DB: DrawingBackend>(
         }
     }
     for f in &scene.fixed {
-        let outline = ellipse_outline([f.pose[0], f.pose[1]], f.pose[2], f.shape.a(), f.shape.b());
+        draw_ellipse(
+            chart,
+            ([f.pose[0], f.pose[1]], f.pose[2]),
+            (f.shape.a(), f.shape.b()),
+            RGBColor(120, 120, 120).mix(0.6),
+        )?;
+    }
+    Ok(())
+}
+
+/// An ellipse filled with `fill` and outlined in black.
+fn draw_ellipse<DB: DrawingBackend>(
+    chart: &mut WorldChart<'_, DB>,
+    (c, phi): ([f64; 2], f64),
+    (a, b): (f64, f64),
+    fill: RGBAColor,
+) -> anyhow::Result<()> {
+    let outline = ellipse_outline(c, phi, a, b);
+    chart
+        .draw_series(std::iter::once(Polygon::new(
+            outline.clone(),
+            fill.filled(),
+        )))
+        .map_err(err)?;
+    chart
+        .draw_series(LineSeries::new(outline, BLACK.stroke_width(1)))
+        .map_err(err)?;
+    Ok(())
+}
+
+/// Draw body `i` of `scene` posed by `kin`, filled with `fill`; a passive body also gets its major axis
+/// with one end marked, so that its turning shows.
+pub(crate) fn draw_body<DB: DrawingBackend>(
+    chart: &mut WorldChart<'_, DB>,
+    scene: &Scene,
+    kin: &Kinematics,
+    i: usize,
+    fill: RGBAColor,
+) -> anyhow::Result<()> {
+    let shape = &scene.bodies[i].shape;
+    let (a, b) = (shape.a(), shape.b());
+    let (c, phi) = (kin.centre[i], kin.phi[i]);
+    draw_ellipse(chart, (c, phi), (a, b), fill)?;
+    if is_passive(scene, i) {
+        let tip = (c[0] + a * phi.cos(), c[1] + a * phi.sin());
         chart
-            .draw_series(std::iter::once(Polygon::new(
-                outline.clone(),
-                RGBColor(120, 120, 120).mix(0.6).filled(),
-            )))
+            .draw_series(LineSeries::new(
+                [(c[0] - a * phi.cos(), c[1] - a * phi.sin()), tip],
+                BLACK.stroke_width(1),
+            ))
             .map_err(err)?;
         chart
-            .draw_series(LineSeries::new(outline, BLACK.stroke_width(1)))
+            .draw_series(std::iter::once(Circle::new(tip, 3, BLACK.filled())))
             .map_err(err)?;
     }
     Ok(())
 }
 
 /// Draw the scene's bodies at state `x`: actuated bodies blue, passive ones orange with their major
-/// axis and one end marked (so that their turning shows).
+/// axis and one end marked.
 pub(crate) fn draw_bodies<DB: DrawingBackend>(
     chart: &mut WorldChart<'_, DB>,
     scene: &Scene,
     x: &[f64],
 ) -> anyhow::Result<()> {
     let kin = Kinematics::new(scene, &x[..scene.n_dof()]);
-    for (i, body) in scene.bodies.iter().enumerate() {
-        let (a, b) = (body.shape.a(), body.shape.b());
-        let (c, phi) = (kin.centre[i], kin.phi[i]);
-        let passive = is_passive(scene, i);
-        let fill = if passive {
+    for i in 0..scene.bodies.len() {
+        let fill = if is_passive(scene, i) {
             RGBColor(240, 150, 40).mix(0.35)
         } else {
             BLUE.mix(0.25)
         };
-        let outline = ellipse_outline(c, phi, a, b);
-        chart
-            .draw_series(std::iter::once(Polygon::new(
-                outline.clone(),
-                fill.filled(),
-            )))
-            .map_err(err)?;
-        chart
-            .draw_series(LineSeries::new(outline, BLACK.stroke_width(1)))
-            .map_err(err)?;
-        if passive {
-            let tip = (c[0] + a * phi.cos(), c[1] + a * phi.sin());
-            chart
-                .draw_series(LineSeries::new(
-                    [(c[0] - a * phi.cos(), c[1] - a * phi.sin()), tip],
-                    BLACK.stroke_width(1),
-                ))
-                .map_err(err)?;
-            chart
-                .draw_series(std::iter::once(Circle::new(tip, 3, BLACK.filled())))
-                .map_err(err)?;
-        }
+        draw_body(chart, scene, &kin, i, fill)?;
     }
     Ok(())
 }

@@ -324,40 +324,29 @@ fn recipe(task: &Task, e: &Example, seed: u64) -> LibrarySettings {
     }
 }
 
-/// The closed loop of `lib`'s policy from the task's x0 in one world: the evaluation, and the states.
-pub(crate) fn closed_loop(
+/// The closed loop of `lib`'s policy from the task's x0 in one world, with kicks every `kick_every` s
+/// (0: none): its evaluation.
+fn evaluated(
     lib: &Library,
+    policy: &library::Policy,
     task: &Task,
     model: Model,
     seconds: f64,
-) -> anyhow::Result<(Evaluation, Vec<Vec<f64>>)> {
-    let policy = lib.policy()?;
-    let settings = EvaluationSettings {
-        model,
-        h: task.h,
-        seconds,
-        kick_every: 0.0,
-        x0: task.x0.clone(),
-        ..EvaluationSettings::default()
-    };
-    let evaluation = evaluate(lib, &policy, &settings)?;
-    let mut sim = dynamics::Simulator::new(
-        lib.scene().clone(),
-        dynamics::StepSettings {
-            model: model.complementarity(),
+    kick_every: f64,
+) -> anyhow::Result<Evaluation> {
+    Ok(evaluate(
+        lib,
+        policy,
+        &EvaluationSettings {
+            model,
             h: task.h,
-            ..dynamics::StepSettings::default()
+            seconds,
+            kick_every,
+            kick_std: KICK_STD,
+            x0: task.x0.clone(),
+            ..EvaluationSettings::default()
         },
-    )?;
-    let mut x = task.x0.clone();
-    let mut u = vec![0.0; lib.scene().n_controls];
-    let mut states = vec![x.clone()];
-    for _ in 0..(seconds / task.h).round() as usize {
-        policy.control(&x, &mut u)?;
-        x = sim.step(&x, &u)?.x_next;
-        states.push(x.clone());
-    }
-    Ok((evaluation, states))
+    )?)
 }
 
 fn run_example(
@@ -403,24 +392,15 @@ fn run_example(
             traces: Vec::new(),
         };
         let policy = lib.policy()?;
-        for (name, model) in &worlds {
-            let (evaluation, states) = closed_loop(&lib, &task, *model, seconds)?;
+        let steps = (seconds / task.h).round() as usize;
+        for &(ref name, model) in &worlds {
+            let evaluation = evaluated(&lib, &policy, &task, model, seconds, 0.0)?;
             let (measure, passed) = e.success.judge(&evaluation);
             run.worlds.push((name.clone(), evaluation, measure, passed));
-            run.traces.push(states);
-            let kicked = evaluate(
-                &lib,
-                &policy,
-                &EvaluationSettings {
-                    model: *model,
-                    h: task.h,
-                    seconds,
-                    kick_every: KICK_EVERY,
-                    kick_std: KICK_STD,
-                    x0: task.x0.clone(),
-                    ..EvaluationSettings::default()
-                },
-            )?;
+            let trace =
+                crate::figures::closed_loop(&lib, &policy, (model, task.h), &task.x0, steps)?;
+            run.traces.push(trace.states);
+            let kicked = evaluated(&lib, &policy, &task, model, seconds, KICK_EVERY)?;
             run.kicked.push(e.success.judge_kicked(&kicked));
         }
         println!(
@@ -832,29 +812,15 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     );
     let documented = args.scene.is_none() && args.seeds == 3 && args.seconds == SECONDS;
     if documented && !args.no_docs {
-        let demoted: String = body
-            .lines()
-            .map(|l| {
-                if l.starts_with('#') {
-                    format!("#{l}\n")
-                } else {
-                    format!("{l}\n")
-                }
-            })
-            .collect();
-        crate::benchmarks::replace_section(
-            &args.docs.join("results.md"),
+        crate::reproduce::write_section(
+            &args.docs,
             "examples",
             "cargo xtask examples",
-            &format!("{}\n\n{demoted}", stamp_line()),
+            &stamp_line(),
+            "#",
+            &body,
+            &figures,
         )?;
-        let dir = args.docs.join("figures");
-        std::fs::create_dir_all(&dir)?;
-        for f in &figures {
-            if let Some(file) = f.file_name() {
-                std::fs::copy(f, dir.join(file))?;
-            }
-        }
         println!("rewrote {}", args.docs.join("results.md").display());
     }
     Ok(())

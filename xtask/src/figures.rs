@@ -3,7 +3,6 @@
 //! states (Fig. 3), a closed-loop limit cycle coloured by contact impulse (Fig. 4), and frames of the
 //! controlled finger (Fig. 5).
 
-use crate::draw::ellipse_outline;
 use anyhow::{Context, anyhow};
 use dynamics::{Constraints, Kinematics, Scene, Simulator, StepSettings};
 use library::{Library, Policy};
@@ -236,21 +235,28 @@ pub(crate) struct Run {
     pub(crate) h: f64,
 }
 
-/// The closed loop of the library's policy on its own smoothed model.
-fn closed_loop(lib: &Library, policy: &Policy, seconds: f64) -> anyhow::Result<Run> {
+/// `steps` time steps of the library's policy in closed loop from `x0` on the world of `model` at time
+/// step `h`.
+pub(crate) fn closed_loop(
+    lib: &Library,
+    policy: &Policy,
+    (model, h): (library::Model, f64),
+    x0: &[f64],
+    steps: usize,
+) -> anyhow::Result<Run> {
     let mut sim = Simulator::new(
         lib.scene().clone(),
         StepSettings {
-            model: lib.settings.model.complementarity(),
-            h: lib.settings.h,
+            model: model.complementarity(),
+            h,
             ..StepSettings::default()
         },
     )?;
-    let mut x = lib.settings.x0.clone();
+    let mut x = x0.to_vec();
     let mut u = vec![0.0; lib.scene().n_controls];
     let mut states = vec![x.clone()];
     let mut impulses = vec![0.0];
-    for _ in 0..(seconds / lib.settings.h) as usize {
+    for _ in 0..steps {
         policy.control(&x, &mut u)?;
         let s = sim.step(&x, &u)?;
         impulses.push(s.normal_impulse());
@@ -260,7 +266,7 @@ fn closed_loop(lib: &Library, policy: &Policy, seconds: f64) -> anyhow::Result<R
     Ok(Run {
         states,
         impulses,
-        h: lib.settings.h,
+        h,
     })
 }
 
@@ -435,35 +441,8 @@ fn draw_frames<DB: DrawingBackend>(
             )
             .build_cartesian_2d(-2.9..1.3, -3.8..0.8)
             .map_err(err)?;
-        for (i, body) in scene.bodies.iter().enumerate() {
-            let (a, b) = (body.shape.a(), body.shape.b());
-            let outline = ellipse_outline(kin.centre[i], kin.phi[i], a, b);
-            chart
-                .draw_series(std::iter::once(Polygon::new(
-                    outline.clone(),
-                    BLUE.mix(0.25).filled(),
-                )))
-                .map_err(err)?;
-            chart
-                .draw_series(LineSeries::new(outline, BLACK.stroke_width(1)))
-                .map_err(err)?;
-            if scene.coordinates[body.coordinates.clone()]
-                .iter()
-                .all(|c| c.actuator.is_none())
-            {
-                // The free body's orientation: its major axis, one end marked.
-                let (c, phi) = (kin.centre[i], kin.phi[i]);
-                let tip = (c[0] + a * phi.cos(), c[1] + a * phi.sin());
-                chart
-                    .draw_series(LineSeries::new(
-                        [(c[0] - a * phi.cos(), c[1] - a * phi.sin()), tip],
-                        BLACK.stroke_width(1),
-                    ))
-                    .map_err(err)?;
-                chart
-                    .draw_series(std::iter::once(Circle::new(tip, 3, BLACK.filled())))
-                    .map_err(err)?;
-            }
+        for i in 0..scene.bodies.len() {
+            crate::draw::draw_body(&mut chart, scene, &kin, i, BLUE.mix(0.25))?;
         }
         let q = &x[..n];
         if let Ok(c) = Constraints::new(scene, &kin, q)
@@ -511,7 +490,8 @@ pub fn write_all(lib: &Library, dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
         |r| draw_states(r, lib),
     )?;
     let policy = lib.policy()?;
-    let run = closed_loop(lib, &policy, 60.0)?;
+    let s = &lib.settings;
+    let run = closed_loop(lib, &policy, (s.model, s.h), &s.x0, (60.0 / s.h) as usize)?;
     both(
         dir,
         "fig4_limit_cycle",
@@ -561,9 +541,11 @@ pub fn write_task(lib: &Library, dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
         h: lib.settings.h,
         ..task.clone()
     };
+    let policy = lib.policy()?;
+    let steps = (40.0 / task.h).round() as usize;
     let mut traces = Vec::new();
     for model in [lib.settings.model, library::Model::Hard] {
-        traces.push(crate::examples::closed_loop(lib, &task, model, 40.0)?.1);
+        traces.push(closed_loop(lib, &policy, (model, task.h), &task.x0, steps)?.states);
     }
     let holds = lib.progress()?.forward.is_none();
     let files = crate::examples::task_pictures(

@@ -75,11 +75,25 @@ pub(crate) fn write_docs(
     body: &str,
     figures: &[PathBuf],
 ) -> anyhow::Result<()> {
+    write_section(docs, name, command, &stamp_line(), "##", body, figures)
+}
+
+/// [`write_docs`] with the section's own stamp line, its headings demoted by `demote` (`#`s put in front
+/// of each).
+pub(crate) fn write_section(
+    docs: &std::path::Path,
+    name: &str,
+    command: &str,
+    stamp_line: &str,
+    demote: &str,
+    body: &str,
+    figures: &[PathBuf],
+) -> anyhow::Result<()> {
     let demoted: String = body
         .lines()
         .map(|l| {
             if l.starts_with('#') {
-                format!("##{l}\n")
+                format!("{demote}{l}\n")
             } else {
                 format!("{l}\n")
             }
@@ -89,7 +103,7 @@ pub(crate) fn write_docs(
         &docs.join("results.md"),
         name,
         command,
-        &format!("{}\n\n{demoted}", stamp_line()),
+        &format!("{stamp_line}\n\n{demoted}"),
     )?;
     let dir = docs.join("figures");
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;

@@ -504,10 +504,13 @@ impl Progress {
     }
 }
 
-/// The cost a library's trajectories minimise: the finger's built in, or a task's from a scene file.
+/// The cost a library's trajectories (and the viewer's online optimiser) minimise: the finger's built
+/// in, or a task's from a scene file.
 #[derive(Debug, Clone)]
-pub(crate) enum Objective {
+pub enum Objective {
+    /// The finger's: [`crate::finger_cost`].
     Finger(ddp::QuadraticCost),
+    /// A task's.
     Task(TaskCost),
 }
 

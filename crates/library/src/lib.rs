@@ -16,8 +16,8 @@ mod task;
 pub use anneal::{AnnealStep, anneal};
 pub use build::{
     Entry, Exploration, GROWTH_BRANCHES, GROWTH_SECONDS, LibrarySettings, LocalValue,
-    MAX_NEIGHBOURS, Model, Progress, STALL_ADVANCE, STALL_WINDOW, build_entries, build_entries_for,
-    free_joint,
+    MAX_NEIGHBOURS, Model, Objective, Progress, STALL_ADVANCE, STALL_WINDOW, build_entries,
+    build_entries_for, free_joint,
 };
 pub use error::LibraryError;
 pub use evaluate::{

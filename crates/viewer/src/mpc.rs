@@ -4,11 +4,9 @@
 //! real-time iteration scheme), so one pass per step is enough once it has caught on.
 
 use crate::error::ViewerError;
-use ddp::{
-    ControlLimits, Cost, CostDerivatives, Ddp, DdpError, DdpSettings, QuadraticCost, Solution,
-};
+use ddp::{ControlLimits, Ddp, DdpError, DdpSettings, Solution};
 use dynamics::{Complementarity, Scene, Simulator, StepSettings};
-use library::{FingerDynamics, Policy, Progress, Task, TaskCost, finger_cost};
+use library::{FingerDynamics, Objective, Policy, Progress, Task, finger_cost};
 
 /// The largest regularisation carried from one control step to the next (a solve that gave up at a
 /// huge `mu` should not freeze the next ones).
@@ -37,43 +35,6 @@ impl Default for MpcSettings {
             h: 0.05,
             horizon: 60,
             passes: 1,
-        }
-    }
-}
-
-/// What the online optimiser minimises: the finger's built-in cost, or a task's.
-#[derive(Debug, Clone)]
-enum Objective {
-    Finger(QuadraticCost),
-    Task(TaskCost),
-}
-
-impl Cost for Objective {
-    fn running(&self, i: usize, x: &[f64], u: &[f64]) -> f64 {
-        match self {
-            Objective::Finger(c) => c.running(i, x, u),
-            Objective::Task(c) => c.running(i, x, u),
-        }
-    }
-
-    fn terminal(&self, x: &[f64]) -> f64 {
-        match self {
-            Objective::Finger(c) => c.terminal(x),
-            Objective::Task(c) => c.terminal(x),
-        }
-    }
-
-    fn running_derivatives(&self, i: usize, x: &[f64], u: &[f64], out: &mut CostDerivatives) {
-        match self {
-            Objective::Finger(c) => c.running_derivatives(i, x, u, out),
-            Objective::Task(c) => c.running_derivatives(i, x, u, out),
-        }
-    }
-
-    fn terminal_derivatives(&self, x: &[f64], lx: &mut [f64], lxx: &mut [f64]) {
-        match self {
-            Objective::Finger(c) => c.terminal_derivatives(x, lx, lxx),
-            Objective::Task(c) => c.terminal_derivatives(x, lx, lxx),
         }
     }
 }
