@@ -108,7 +108,7 @@ fn the_world_geometry_is_read_and_checked() {
     for f in [
         "plane[0].point/normal",
         "fixed[0].semi_axes",
-        "fixed[0].centre/angle",
+        "fixed[0].angle",
         "contact[0].b",
     ] {
         assert!(fields.contains(&f), "{f} not in {fields:?}");

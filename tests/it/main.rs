@@ -16,6 +16,7 @@ mod library_tasks;
 mod ncp_functions;
 mod ncp_solvers;
 mod support;
+mod trust_inputs;
 mod viewer_browser;
 mod viewer_protocol;
 mod viewer_world;

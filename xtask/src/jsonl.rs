@@ -1,12 +1,17 @@
 //! The JSON-lines filter loop shared by the commands that answer one line at a time.
 
-use std::io::{BufRead, Write};
+use std::io::{BufRead, Read, Write};
 
 /// What `--help` says about the stream, for every filter command.
 pub const STREAM_HELP: &str = "Reads JSON lines on stdin and writes one answer line per input line, \
 flushed as soon as it is computed (a script may write a line and wait for its answer). Blank lines get \
-no answer. A bad line (not JSON, not UTF-8, out of range, or a result that is not finite) gets \
-{\"error\": \"...\"} and the stream goes on.";
+no answer. A bad line (not JSON, not UTF-8, out of range, longer than 8 MiB, or a result that is not \
+finite) gets {\"error\": \"...\"} and the stream goes on.";
+
+/// The longest input line a stream reads (8 MiB: a 500 x 500 problem, the largest Lemke's method takes,
+/// is about 6 MiB of JSON); the rest of a longer line is skipped unread into memory and the line answered
+/// with an error.
+pub const MAX_LINE: usize = 8 << 20;
 
 /// Read `input` line by line, skip blank lines, and write `answer(line)` or `{"error": message}` per
 /// line to `output`, flushing after each; a bad line (not UTF-8 included) never stops the stream, and a
@@ -21,10 +26,38 @@ pub fn filter_with(
     let mut buf = Vec::new();
     for number in 1usize.. {
         buf.clear();
-        if input.read_until(b'\n', &mut buf)? == 0 {
+        if input
+            .by_ref()
+            .take(MAX_LINE as u64 + 1)
+            .read_until(b'\n', &mut buf)?
+            == 0
+        {
             break;
         }
+        let too_long = buf.len() > MAX_LINE && buf.last() != Some(&b'\n');
+        if too_long {
+            // Skip the rest of the line a buffer at a time, never holding more than one.
+            loop {
+                let chunk = input.fill_buf()?;
+                if chunk.is_empty() {
+                    break;
+                }
+                match chunk.iter().position(|&b| b == b'\n') {
+                    Some(end) => {
+                        input.consume(end + 1);
+                        break;
+                    }
+                    None => {
+                        let len = chunk.len();
+                        input.consume(len);
+                    }
+                }
+            }
+        }
         let reply = match std::str::from_utf8(&buf) {
+            _ if too_long => Err(format!(
+                "line {number} is longer than {MAX_LINE} bytes (8 MiB, the stream's limit)"
+            )),
             Ok(line) if line.trim().is_empty() => continue,
             Ok(line) => answer(line.trim_end_matches(['\n', '\r'])),
             Err(e) => Err(format!(
@@ -114,6 +147,21 @@ mod tests {
         assert!(lines[1].contains("line 4 is not UTF-8"), "{}", lines[1]);
         assert_eq!(lines[2], r#"{"error":"bad c"}"#);
         assert_eq!(lines[3], "\"last\"");
+    }
+
+    #[test]
+    fn a_line_past_the_limit_gets_an_error_and_the_next_line_its_answer() {
+        let mut input = vec![b'['; MAX_LINE + 1000];
+        input.extend_from_slice(b"\nnext\n");
+        let mut out = Vec::new();
+        filter_with(&input[..], &mut out, |line| {
+            Ok(format!("\"{}\"", line.len()))
+        })
+        .unwrap();
+        let lines: Vec<&str> = std::str::from_utf8(&out).unwrap().lines().collect();
+        assert_eq!(lines.len(), 2, "{}", lines.len());
+        assert!(lines[0].contains("longer than"), "{}", lines[0]);
+        assert_eq!(lines[1], "\"4\"");
     }
 
     /// A writer that records how many lines had been flushed when each answer was asked for.

@@ -36,6 +36,10 @@ pub struct Args {
     sigma: f64,
 }
 
+/// The most rows a line may pose, for every method (Lemke's own limit: each solve is `O(n^3)`, about a
+/// second at this size); ERM takes at most 300 complementarity rows, enumeration 20.
+pub const MAX_ROWS: usize = 500;
+
 /// One problem: `0 <= z _|_ M z + q >= 0`, the first `n_free` rows equalities with free variables.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -63,8 +67,22 @@ struct Answer {
 /// Answers one input line: the JSON answer or the error message.
 pub fn answer_line(line: &str, args: &Args) -> Result<String, String> {
     let q: Query = serde_json::from_str(line).map_err(|e| format!("bad input line: {e}"))?;
+    if q.q.len() > MAX_ROWS {
+        return Err(format!(
+            "the problem has {} rows: this command takes at most {MAX_ROWS} (MAX_ROWS)",
+            q.q.len()
+        ));
+    }
     let p = LinearMcp::from_rows(q.n_free, &q.m, &q.q).map_err(|e| e.to_string())?;
     let n = q.q.len();
+    if let Some(z0) = &q.z0
+        && z0.len() != n
+    {
+        return Err(format!(
+            "z0 has {} entries but q has {n}: a warm start has one entry per row",
+            z0.len()
+        ));
+    }
     let z0 = q.z0.unwrap_or_else(|| vec![0.0; n]);
     let smooth =
         |f: fn(f64) -> Result<NcpFunction, ncp::NcpError>| f(args.sigma).map_err(|e| e.to_string());
@@ -172,8 +190,16 @@ mod tests {
             r#"{"M":[[1,0],[0,1]],"q":[1,2],"extra":3}"#,
             r#"{"M":[[1,0],[0,1]],"q":[1,2],"n_free":5}"#,
             r#"{"M":[[0,1],[-1,0]],"q":[-1,-1]}"#,
+            // Issue 27: a subnormal row panicked Lemke's method; a warm start of the wrong length was
+            // ignored by the exact methods.
+            r#"{"M":[[0,0],[0,1]],"q":[-5e-324,-0.5]}"#,
+            r#"{"M":[[1,0],[0,1]],"q":[1,2],"z0":[0,0,0]}"#,
         ] {
             assert!(answer_line(bad, &args(Method::Lemke)).is_err(), "{bad}");
+        }
+        for m in [Method::Enumerate, Method::Lemke] {
+            let e = answer_line(r#"{"M":[[1,0],[0,1]],"q":[1,2],"z0":[0]}"#, &args(m)).unwrap_err();
+            assert!(e.contains("z0 has 1 entries"), "{m:?}: {e}");
         }
         let neg = Args {
             method: Method::Logistic,

@@ -57,7 +57,8 @@ enum Command {
     ///
     /// Each input line is {"M":[[...],...],"q":[...]} with optional "n_free" (leading equality rows)
     /// and "z0" (warm start); each output line is {"z":[...],"w":[...],"iterations":k,
-    /// "status":"converged"|...,"residual":r} or {"error":"..."}.
+    /// "status":"converged"|...,"residual":r} or {"error":"..."}. Limits: at most 500 rows a line (ERM
+    /// 300 complementarity rows, enumeration 20).
     #[command(after_help = jsonl::STREAM_HELP)]
     Lcp(lcp::Args),
     /// One step of the simulator per JSON line on stdin: {"x":[6],"u":[2]} ->

@@ -42,8 +42,9 @@ pub use error::{DynamicsError, SceneProblem};
 pub use jet::{Jet, Jet1};
 pub use kinematics::{Kinematics, Ring, Scalar};
 pub use scene::{
-    Body, BodySpec, ContactPair, ContactSpec, Coordinate, CoordinateKind, FLICKING_FINGER_X0,
-    Fixed, FixedSpec, JointKind, JointSpec, Plane, PlaneSpec, Scene, SceneSpec, Side,
+    Body, BodySpec, ContactPair, ContactSpec, Coordinate, CoordinateKind, DENSITY_RANGE,
+    FLICKING_FINGER_X0, Fixed, FixedSpec, JointKind, JointSpec, MAX_BODIES, MAX_CONTACTS,
+    MAX_DAMPING, MAX_FRICTION, MAX_GRAVITY, MAX_LENGTH, Plane, PlaneSpec, Scene, SceneSpec, Side,
 };
 pub use simulator::Simulator;
 pub use step::{Complementarity, Drag, Model, StateCovariance, Step, StepData, StepSettings};

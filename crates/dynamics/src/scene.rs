@@ -191,6 +191,25 @@ pub struct SceneSpec {
     pub fixed: Vec<FixedSpec>,
 }
 
+/// The most bodies a scene holds: every derivative pass is dense in the joints (a free body has three), so
+/// a bigger scene is refused by name rather than left to run out of memory.
+pub const MAX_BODIES: usize = 100;
+/// The most contact pairs a scene lists (two complementarity rows each).
+pub const MAX_CONTACTS: usize = 200;
+/// The largest size of a position, an anchor, a joint limit or a plane's point (the semi-axes' own bound,
+/// `geometry::SEMI_AXIS_RANGE`): past it `M` and the contact rows lose every significant digit of the
+/// scene's own scale.
+pub const MAX_LENGTH: f64 = 1e6;
+/// The largest gravity entry.
+pub const MAX_GRAVITY: f64 = 1e6;
+/// The largest friction coefficient of a contact pair (physical ones are below 2): past it the friction
+/// rows dwarf the normal ones and the step's problem loses the normal rows to rounding.
+pub const MAX_FRICTION: f64 = 100.0;
+/// The largest joint drag coefficient.
+pub const MAX_DAMPING: f64 = 1e6;
+/// The admissible densities (mass per unit area).
+pub const DENSITY_RANGE: std::ops::RangeInclusive<f64> = 1e-6..=1e6;
+
 /// A checked body.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Body {
@@ -300,12 +319,38 @@ impl Scene {
                 problem: problem.into(),
             })
         };
-        if !spec.gravity.iter().all(|g| g.is_finite()) {
-            bad("gravity".into(), "must be finite");
+        if !spec
+            .gravity
+            .iter()
+            .all(|g| g.is_finite() && g.abs() <= MAX_GRAVITY)
+        {
+            bad(
+                "gravity".into(),
+                "must be finite, each entry at most 1e6 in size (MAX_GRAVITY)",
+            );
         }
         if spec.bodies.is_empty() {
             bad("body".into(), "a scene needs at least one body");
         }
+        if spec.bodies.len() > MAX_BODIES {
+            bad(
+                "body".into(),
+                &format!(
+                    "{} bodies: a scene holds at most {MAX_BODIES} (MAX_BODIES)",
+                    spec.bodies.len()
+                ),
+            );
+        }
+        if spec.contacts.len() > MAX_CONTACTS {
+            bad(
+                "contact".into(),
+                &format!(
+                    "{} contact pairs: a scene holds at most {MAX_CONTACTS} (MAX_CONTACTS)",
+                    spec.contacts.len()
+                ),
+            );
+        }
+        let length = |v: &f64| v.is_finite() && v.abs() <= MAX_LENGTH;
         let mut bodies = Vec::new();
         let mut coordinates = Vec::new();
         let mut n_controls = 0;
@@ -324,8 +369,8 @@ impl Scene {
                     None
                 }
             };
-            if !(b.density.is_finite() && b.density > 0.0) {
-                bad(f("density"), "must be finite and positive");
+            if !(DENSITY_RANGE.contains(&b.density)) {
+                bad(f("density"), "must be between 1e-6 and 1e6 (DENSITY_RANGE)");
             }
             let parent = if b.parent == "world" {
                 Some(None)
@@ -341,16 +386,34 @@ impl Scene {
                     }
                 }
             };
-            if !b.anchor.iter().chain(&b.centre).all(|v| v.is_finite()) {
-                bad(f("anchor/centre"), "must be finite");
+            if !b.anchor.iter().all(length) {
+                bad(
+                    f("anchor"),
+                    "must be finite, each entry at most 1e6 in size (MAX_LENGTH)",
+                );
+            }
+            if !b.centre.iter().all(length) {
+                bad(
+                    f("centre"),
+                    "must be finite, each entry at most 1e6 in size (MAX_LENGTH)",
+                );
             }
             if let Some([lo, hi]) = b.joint.limits
-                && !(lo.is_finite() && hi.is_finite() && lo < hi)
+                && !(length(&lo) && length(&hi) && lo < hi)
             {
-                bad(f("joint.limits"), "must be finite with lower < upper");
+                bad(
+                    f("joint.limits"),
+                    "must be finite, at most 1e6 in size (MAX_LENGTH), with lower < upper",
+                );
             }
-            if !(b.joint.damping.is_finite() && b.joint.damping >= 0.0) {
-                bad(f("joint.damping"), "must be finite and non-negative");
+            if !(b.joint.damping.is_finite()
+                && b.joint.damping >= 0.0
+                && b.joint.damping <= MAX_DAMPING)
+            {
+                bad(
+                    f("joint.damping"),
+                    "must be between 0 and 1e6 (MAX_DAMPING)",
+                );
             }
             let axis = match (b.joint.kind, b.joint.axis) {
                 (JointKind::Slider, Some([x, y])) => {
@@ -438,6 +501,12 @@ impl Scene {
         let mut planes = Vec::new();
         for (i, p) in spec.planes.iter().enumerate() {
             let f = |name: &str| format!("plane[{i}].{name}");
+            if !p.point.iter().all(length) {
+                bad(
+                    f("point"),
+                    "must be finite, each entry at most 1e6 in size (MAX_LENGTH)",
+                );
+            }
             match geometry::HalfPlane::new(p.point, p.normal) {
                 Ok(shape) => planes.push(Plane {
                     name: p.name.clone(),
@@ -452,8 +521,17 @@ impl Scene {
         let mut fixed = Vec::new();
         for (i, e) in spec.fixed.iter().enumerate() {
             let f = |name: &str| format!("fixed[{i}].{name}");
-            if !(e.centre.iter().all(|v| v.is_finite()) && e.angle.is_finite()) {
-                bad(f("centre/angle"), "must be finite");
+            if !e.centre.iter().all(length) {
+                bad(
+                    f("centre"),
+                    "must be finite, each entry at most 1e6 in size (MAX_LENGTH)",
+                );
+            }
+            if !length(&e.angle) {
+                bad(
+                    f("angle"),
+                    "must be finite, at most 1e6 in size (MAX_LENGTH)",
+                );
             }
             match Ellipse::new(e.semi_axes[0], e.semi_axes[1]) {
                 Ok(shape) => fixed.push(Fixed {
@@ -501,8 +579,20 @@ impl Scene {
                     "a pair needs a moving body on one side (both are fixed parts of the world)",
                 );
             }
-            if !(c.friction.is_finite() && c.friction >= 0.0) {
-                bad(f("friction"), "must be finite and non-negative");
+            if !(c.friction.is_finite() && c.friction >= 0.0 && c.friction <= MAX_FRICTION) {
+                bad(f("friction"), "must be between 0 and 100 (MAX_FRICTION)");
+            }
+            if let Some(j) = spec.contacts[..k]
+                .iter()
+                .position(|o| (o.a == c.a && o.b == c.b) || (o.a == c.b && o.b == c.a))
+            {
+                bad(
+                    f("b"),
+                    &format!(
+                        "the pair {} / {} is already contact[{j}]: each pair is listed once",
+                        c.a, c.b
+                    ),
+                );
             }
             if let (Some(a), Some(b)) = (a, b) {
                 contacts.push(ContactPair {
@@ -554,6 +644,28 @@ impl Scene {
             .parse()
             .map_err(|e: toml::de::Error| DynamicsError::Parse(e.to_string()))?;
         table.remove("task");
+        // Each listed item on its own first, so that an error names the item (`body[2]: missing field
+        // `name``) rather than only the field.
+        fn each<T: serde::de::DeserializeOwned>(
+            table: &toml::Table,
+            key: &str,
+        ) -> Result<(), DynamicsError> {
+            if let Some(toml::Value::Array(items)) = table.get(key) {
+                for (i, item) in items.iter().enumerate() {
+                    if let Err(e) = T::deserialize(item.clone()) {
+                        return Err(DynamicsError::Parse(format!(
+                            "{key}[{i}]: {}",
+                            e.to_string().trim_end()
+                        )));
+                    }
+                }
+            }
+            Ok(())
+        }
+        each::<BodySpec>(&table, "body")?;
+        each::<ContactSpec>(&table, "contact")?;
+        each::<PlaneSpec>(&table, "plane")?;
+        each::<FixedSpec>(&table, "fixed")?;
         let spec: SceneSpec = toml::Value::Table(table)
             .try_into()
             .map_err(|e: toml::de::Error| DynamicsError::Parse(e.to_string()))?;

@@ -72,6 +72,9 @@ pub fn lemke(problem: &LinearMcp, settings: &LemkeSettings) -> Result<Solution, 
     // end on a ray that does not exist. Before saying "infeasible", retry with other covering vectors (the
     // row scales, then ones, then seeded random multiples of them).
     let c = lcp.q().len();
+    if infeasible_row(lcp.m_row_major(), lcp.q()).is_some() {
+        return Err(NcpError::Infeasible { pivots: 0 });
+    }
     // Judged row by row in the equilibrated problem (each row divided by its largest entry), so that a
     // row scaled by 1e-8 is held to the same standard as one scaled by 1e8.
     let accuracy = 1e-10;
@@ -90,7 +93,7 @@ pub fn lemke(problem: &LinearMcp, settings: &LemkeSettings) -> Result<Solution, 
                         let r = m[i * c..(i + 1) * c]
                             .iter()
                             .fold(lcp.q()[i].abs(), |s, v| s.max(v.abs()));
-                        if r > 0.0 { 1.0 / r } else { 1.0 }
+                        row_scale(r)
                     })
                     .collect()
             }
@@ -150,6 +153,27 @@ pub fn lemke(problem: &LinearMcp, settings: &LemkeSettings) -> Result<Solution, 
     })
 }
 
+/// `1 / r` for a row's largest magnitude `r`; outside `[1e-300, 1e300]` a power of two held within
+/// `[2^-600, 2^600]`: a row whose entries are all subnormal would otherwise scale to infinity, and
+/// `0 * inf` is NaN.
+fn row_scale(r: f64) -> f64 {
+    if !(r > 0.0) {
+        return 1.0;
+    }
+    if (1e-300..=1e300).contains(&r) {
+        return 1.0 / r;
+    }
+    let exponent = r.log2().round().clamp(-600.0, 600.0);
+    (-exponent).exp2()
+}
+
+/// A row that certifies infeasibility on its own: `q_i < 0` with no positive entry in row `i` of `M`, so
+/// `w_i = q_i + (M z)_i <= q_i < 0` for every `z >= 0`.
+fn infeasible_row(m: &[f64], q: &[f64]) -> Option<usize> {
+    let n = q.len();
+    (0..n).find(|&i| q[i] < 0.0 && m[i * n..(i + 1) * n].iter().all(|&v| v <= 0.0))
+}
+
 /// `max(|F_i|)` over equality rows and `max |min(z_i, w_i)|` over complementarity rows.
 pub fn complementarity_residual(n_free: usize, z: &[f64], w: &[f64]) -> f64 {
     let eq = inf_norm(&w[..n_free]);
@@ -176,7 +200,7 @@ fn lemke_lcp(m: &[f64], q: &[f64], max_pivots: usize, covering: &[f64]) -> Attem
             let r = m[i * n..(i + 1) * n]
                 .iter()
                 .fold(q[i].abs(), |a, v| a.max(v.abs()));
-            1.0 / (covering[i] * if r > 0.0 { r } else { 1.0 })
+            row_scale(r) / covering[i]
         })
         .collect();
     let z0 = 2 * n;
@@ -199,23 +223,36 @@ fn lemke_lcp(m: &[f64], q: &[f64], max_pivots: usize, covering: &[f64]) -> Attem
     let mut col = vec![0.0; n];
     let mut x = vec![0.0; n];
     let mut a = vec![0.0; n];
+    // The basis is factored from the original data every `REFACTOR` pivots (or after a small pivot, or
+    // before a tie is broken); the pivots in between are kept in product form, one eta column each
+    // (O(n) to apply), so that some n pivots cost O(n^3) in all rather than a factorisation each, O(n^4).
+    let mut etas: Vec<(usize, Vec<f64>)> = Vec::new();
     let mut binv = vec![0.0; n * n];
+    let mut since_refactor = usize::MAX;
     let mut entering = z0;
     let mut pivots = 0;
     let mut seen = std::collections::HashSet::new();
     loop {
-        for (r, &var) in basis.iter().enumerate() {
-            column(var, &mut col);
-            for i in 0..n {
-                b[i * n + r] = col[i];
+        if since_refactor >= REFACTOR {
+            for (r, &var) in basis.iter().enumerate() {
+                column(var, &mut col);
+                for i in 0..n {
+                    b[i * n + r] = col[i];
+                }
             }
-        }
-        if lu.factor(&b).is_err() {
-            // A singular basis only arises from rounding; let the caller retry with another covering vector.
-            return Attempt::Breakdown(pivots);
+            if lu.factor(&b).is_err() {
+                // A singular basis only arises from rounding; let the caller retry with another covering
+                // vector.
+                return Attempt::Breakdown(pivots);
+            }
+            etas.clear();
+            since_refactor = 0;
         }
         x.copy_from_slice(&rhs);
-        lu.solve(&mut x);
+        solve_basis(&mut lu, &etas, &mut x);
+        if !x.iter().all(|v| v.is_finite()) {
+            return Attempt::Breakdown(pivots);
+        }
         // Basic values at rounding level are degenerate zeros: make them exact, so that the ratio ties they
         // create go to the lexicographic rule instead of to noise (which can cycle).
         let x_max = x.iter().fold(0.0f64, |acc, v| acc.max(v.abs()));
@@ -225,7 +262,10 @@ fn lemke_lcp(m: &[f64], q: &[f64], max_pivots: usize, covering: &[f64]) -> Attem
             }
         }
         column(entering, &mut a);
-        lu.solve(&mut a);
+        solve_basis(&mut lu, &etas, &mut a);
+        if !a.iter().all(|v| v.is_finite()) {
+            return Attempt::Breakdown(pivots);
+        }
         // The first pivot (z0 entering) blocks where the scaled q is most negative; later pivots by the
         // minimum ratio x_i / a_i over a_i > 0. Ties go to the lexicographic rule on rows of B^-1.
         let first = entering == z0 && pivots == 0;
@@ -249,6 +289,12 @@ fn lemke_lcp(m: &[f64], q: &[f64], max_pivots: usize, covering: &[f64]) -> Attem
             .copied()
             .filter(|&i| near(ratio(i)))
             .collect();
+        if ties.len() > 1 && since_refactor > 0 {
+            // The tie rule reads the inverse's rows: take them fresh from the original data, not from
+            // the updates, and look again.
+            since_refactor = REFACTOR;
+            continue;
+        }
         if ties.len() > 1 {
             for k in 0..n {
                 col.fill(0.0);
@@ -268,15 +314,32 @@ fn lemke_lcp(m: &[f64], q: &[f64], max_pivots: usize, covering: &[f64]) -> Attem
                 }
             }
         }
-        let row = ties[0];
+        // Rounding can leave no row within the tolerance of the minimum (a NaN ratio, a tie rule that
+        // drops every row): a breakdown of this attempt, never a panic.
+        let Some(&row) = ties.first() else {
+            return Attempt::Breakdown(pivots);
+        };
         let left = basis[row];
         basis[row] = entering;
         pivots += 1;
+        // The pivot in product form: a small one (against its column) asks for a fresh factorisation.
+        since_refactor += 1;
+        if a[row].abs() < 1e-8 * a_max {
+            since_refactor = REFACTOR;
+        }
+        etas.push((row, a.clone()));
         // The lexicographic rule cannot cycle in exact arithmetic; rounding can make it. A basis seen before
         // (with the same entering variable) means a cycle.
         let mut key = basis.clone();
         key.sort_unstable();
         key.push(left);
+        // Only a hash of each basis is kept (8 bytes a pivot, whatever n).
+        let key = {
+            use std::hash::{Hash, Hasher};
+            let mut hasher = std::collections::hash_map::DefaultHasher::new();
+            key.hash(&mut hasher);
+            hasher.finish()
+        };
         if !seen.insert(key) {
             return Attempt::Breakdown(pivots);
         }
@@ -291,6 +354,25 @@ fn lemke_lcp(m: &[f64], q: &[f64], max_pivots: usize, covering: &[f64]) -> Attem
     }
     let z = basic_z(&basis, &mut lu, &mut b, &column, &rhs, n);
     Attempt::Solved(refine(m, q, &basis, z), pivots, true)
+}
+
+/// Pivots between two factorisations of the basis from the original data.
+const REFACTOR: usize = 32;
+
+/// `B^-1 v` in place, with `B` the factored basis followed by the pivots `etas` (each the pivot row and
+/// the entering column in the basis before it).
+fn solve_basis(lu: &mut DenseLu, etas: &[(usize, Vec<f64>)], v: &mut [f64]) {
+    lu.solve(v);
+    for (row, a) in etas {
+        let pivot = v[*row] / a[*row];
+        for (i, (e, ai)) in v.iter_mut().zip(a).enumerate() {
+            if i == *row {
+                *e = pivot;
+            } else {
+                *e -= ai * pivot;
+            }
+        }
+    }
 }
 
 /// How one run of Lemke's method ended.
