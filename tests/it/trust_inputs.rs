@@ -89,3 +89,89 @@ fn a_scene_past_the_body_limit_is_refused_with_the_limit() {
         "{found:?}"
     );
 }
+
+/// A library header around `body` with its true length and checksum.
+fn library_file(body: &[u8]) -> Vec<u8> {
+    let mut out = library::MAGIC.to_vec();
+    out.extend_from_slice(&library::VERSION.to_le_bytes());
+    out.extend_from_slice(&(body.len() as u64).to_le_bytes());
+    out.extend_from_slice(&crc32fast_hash(body).to_le_bytes());
+    out.extend_from_slice(body);
+    out
+}
+
+/// CRC-32 (IEEE), as the library header carries it.
+fn crc32fast_hash(bytes: &[u8]) -> u32 {
+    let mut crc = !0u32;
+    for &b in bytes {
+        crc ^= u32::from(b);
+        for _ in 0..8 {
+            crc = if crc & 1 == 1 { (crc >> 1) ^ 0xEDB8_8320 } else { crc >> 1 };
+        }
+    }
+    !crc
+}
+
+/// Issue 27: a payload whose first length prefix claimed 2^62 bytes, with a recomputed checksum, aborted
+/// the process (and Python's interpreter) on the allocation. Every prefix is now claimed against a limit
+/// of at most twice the file's size before anything is allocated.
+#[test]
+fn a_crafted_length_prefix_is_refused_without_allocating_it() {
+    for claim in [1u64 << 62, 1 << 40, 1 << 31, u64::MAX] {
+        // bincode's varint: 253 then the u64 little-endian; then a few bytes of "string".
+        let mut body = vec![253u8];
+        body.extend_from_slice(&claim.to_le_bytes());
+        body.extend_from_slice(b"gravity = ");
+        let err = library::Library::from_bytes(&library_file(&body)).unwrap_err();
+        assert!(
+            matches!(err, library::LibraryError::Invalid(_)),
+            "{claim}: {err}"
+        );
+    }
+}
+
+#[test]
+fn a_library_used_with_another_scene_says_what_differs() {
+    let lib = crate::support::paper_library();
+    let mut spec = dynamics::Scene::flicking_finger().spec().clone();
+    spec.bodies[1].joint.damping = 0.7;
+    let other = dynamics::Scene::new(spec).unwrap();
+    let err = lib.check_scene(&other).unwrap_err().to_string();
+    assert!(
+        err.contains("body[1].joint.damping") && err.contains("0.7"),
+        "{err}"
+    );
+}
+
+/// Every file a command writes is written whole or not at all: a reader never sees part of it, while a
+/// writer replaces a large file again and again (with `std::fs::write`, which truncates first, the reader
+/// sees short files).
+#[test]
+fn a_file_being_replaced_is_never_seen_in_part() {
+    let dir = std::env::temp_dir().join(format!("slcp-atomic-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("out.json");
+    let sizes = [1usize << 20, 3 << 20];
+    library::write_atomically(&path, &vec![b'a'; sizes[0]]).unwrap();
+    let done = std::sync::atomic::AtomicBool::new(false);
+    std::thread::scope(|s| {
+        s.spawn(|| {
+            for k in 0..30 {
+                let byte = if k % 2 == 0 { b'b' } else { b'a' };
+                library::write_atomically(&path, &vec![byte; sizes[(k + 1) % 2]]).unwrap();
+            }
+            done.store(true, std::sync::atomic::Ordering::SeqCst);
+        });
+        let mut reads = 0;
+        while !done.load(std::sync::atomic::Ordering::SeqCst) || reads < 10 {
+            let bytes = std::fs::read(&path).unwrap();
+            assert!(sizes.contains(&bytes.len()), "read {} bytes", bytes.len());
+            reads += 1;
+        }
+    });
+    let left: Vec<_> = std::fs::read_dir(&dir).unwrap().collect();
+    assert_eq!(left.len(), 1, "temporary files left behind");
+    // A destination that is a directory is refused and left alone.
+    assert!(library::write_atomically(&dir, b"x").is_err());
+    std::fs::remove_dir_all(&dir).unwrap();
+}

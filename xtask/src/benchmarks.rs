@@ -135,7 +135,7 @@ pub(crate) fn replace_section(
         }
         _ => format!("{text}\n{begin}\n{body}\n{end}\n"),
     };
-    std::fs::write(path, new).with_context(|| format!("writing {}", path.display()))
+    crate::write_file(path, new).with_context(|| format!("writing {}", path.display()))
 }
 
 /// A table row: name, timed call, worst errors (distance, normal, witness, unanswered).

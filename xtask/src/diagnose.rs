@@ -327,8 +327,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         "\n![each run's last 20 s in (theta1, theta2), coloured by contact impulse](figures/diagnose.png)\n\n{:.0} s in all.",
         start.elapsed().as_secs_f64()
     );
-    std::fs::write(args.out.join("diagnose.md"), &md)?;
-    std::fs::write(
+    crate::write_file(args.out.join("diagnose.md"), &md)?;
+    crate::write_file(
         args.out.join("diagnose.json"),
         serde_json::to_string_pretty(&rows)?,
     )?;

@@ -214,7 +214,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         return Ok(());
     }
     if let Some(path) = &args.out {
-        std::fs::write(path, serde_json::to_string_pretty(&rows)?)
+        crate::write_file(path, serde_json::to_string_pretty(&rows)?)
             .with_context(|| format!("writing {}", path.display()))?;
         let _ = writeln!(out, "wrote {}", path.display());
         emit(&mut out);

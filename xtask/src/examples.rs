@@ -799,8 +799,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         figures.extend(f);
     }
     let body = report(&results, args.seconds);
-    std::fs::write(args.out.join("examples.md"), &body)?;
-    std::fs::write(
+    crate::write_file(args.out.join("examples.md"), &body)?;
+    crate::write_file(
         args.out.join("examples.json"),
         serde_json::to_string_pretty(&results)?,
     )?;

@@ -97,6 +97,20 @@ enum Command {
     View(view::Args),
 }
 
+/// Write a file whole or not at all (a temporary file beside it, renamed into place): a failed write never
+/// leaves half a file where a good one was. Every file a command writes goes through here.
+pub(crate) fn write_file(
+    path: impl AsRef<std::path::Path>,
+    bytes: impl AsRef<[u8]>,
+) -> std::io::Result<()> {
+    library::write_atomically(path.as_ref(), bytes.as_ref()).map_err(|e| match e {
+        library::LibraryError::Io { source, path } => {
+            std::io::Error::new(source.kind(), format!("{path}: {source}"))
+        }
+        other => std::io::Error::other(other.to_string()),
+    })
+}
+
 /// `work` on every job, on two threads taking the next job as they finish one; results in job order.
 pub(crate) fn on_two_threads<J: Sync, R: Send>(
     jobs: &[J],

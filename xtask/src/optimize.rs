@@ -269,7 +269,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             seconds,
             solution: &solution,
         };
-        std::fs::write(path, serde_json::to_string(&report)?)
+        crate::write_file(path, serde_json::to_string(&report)?)
             .with_context(|| format!("writing {}", path.display()))?;
         println!("wrote {}", path.display());
     }

@@ -519,8 +519,8 @@ fn finish(
     };
     let text = report(&summary);
     println!("{text}");
-    std::fs::write(args.out.join("summary.md"), &text)?;
-    std::fs::write(
+    crate::write_file(args.out.join("summary.md"), &text)?;
+    crate::write_file(
         args.out.join("summary.json"),
         serde_json::to_string_pretty(&summary)?,
     )?;

@@ -65,8 +65,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let mut text = String::new();
     seed_table(&mut text, &summary);
     println!("{text}");
-    std::fs::write(args.out.join("seeds.md"), &text)?;
-    std::fs::write(
+    crate::write_file(args.out.join("seeds.md"), &text)?;
+    crate::write_file(
         args.out.join("seeds.json"),
         serde_json::to_string_pretty(&summary)?,
     )?;

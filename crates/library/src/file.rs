@@ -46,6 +46,65 @@ struct Payload {
     entries: Vec<Entry>,
 }
 
+/// The first place two scene descriptions differ: its path (`body[1].joint.limits`, `contact[0].friction`)
+/// and the two values (`missing` where one has none).
+fn first_difference(
+    a: &toml::Value,
+    b: &toml::Value,
+    path: String,
+) -> Option<(String, String, String)> {
+    use toml::Value;
+    let show = |v: Option<&Value>| v.map_or("missing".to_string(), |v| v.to_string());
+    match (a, b) {
+        (Value::Table(x), Value::Table(y)) => {
+            let mut keys: Vec<&String> = x.keys().chain(y.keys()).collect();
+            keys.sort();
+            keys.dedup();
+            keys.into_iter().find_map(|k| {
+                let here = if path.is_empty() { k.clone() } else { format!("{path}.{k}") };
+                match (x.get(k), y.get(k)) {
+                    (Some(p), Some(q)) => first_difference(p, q, here),
+                    (p, q) => Some((here, show(p), show(q))),
+                }
+            })
+        }
+        (Value::Array(x), Value::Array(y)) => {
+            let found = x
+                .iter()
+                .zip(y)
+                .enumerate()
+                .find_map(|(i, (p, q))| first_difference(p, q, format!("{path}[{i}]")));
+            found.or_else(|| {
+                (x.len() != y.len()).then(|| {
+                    (format!("{path} (its length)"), x.len().to_string(), y.len().to_string())
+                })
+            })
+        }
+        _ if a == b => None,
+        _ => Some((path, a.to_string(), b.to_string())),
+    }
+}
+
+/// Decode a payload with bincode's byte limit set to the smallest power of two at least the payload's
+/// size: every length prefix is claimed against the limit before anything is allocated, so no prefix (a
+/// crafted 2^62, say) can allocate more than twice the file's size; past the limit it is an error.
+fn decode_bounded(body: &[u8]) -> Result<(Payload, usize), bincode::error::DecodeError> {
+    fn with<const LIMIT: usize>(
+        body: &[u8],
+    ) -> Result<(Payload, usize), bincode::error::DecodeError> {
+        bincode::serde::decode_from_slice(body, bincode::config::standard().with_limit::<LIMIT>())
+    }
+    macro_rules! ladder {
+        ($($bits:literal)*) => {
+            match body.len().max(1).next_power_of_two().trailing_zeros() {
+                $(b if b <= $bits => with::<{ 1usize << $bits }>(body),)*
+                _ => Err(bincode::error::DecodeError::LimitExceeded),
+            }
+        };
+    }
+    ladder!(12 14 16 18 20 22 24 26 28 30 32 34 36)
+}
+
 fn io(path: &Path) -> impl Fn(std::io::Error) -> LibraryError + '_ {
     move |source| LibraryError::Io {
         path: path.display().to_string(),
@@ -144,13 +203,21 @@ impl Library {
     /// `Err` unless the library was built for `scene`.
     pub fn check_scene(&self, scene: &Scene) -> Result<(), LibraryError> {
         if self.scene.spec() != scene.spec() {
-            return Err(LibraryError::SceneMismatch(format!(
-                "built for {} bodies and {} contact pairs, used with {} and {}, or the same counts with other values",
-                self.scene.spec().bodies.len(),
-                self.scene.spec().contacts.len(),
-                scene.spec().bodies.len(),
-                scene.spec().contacts.len()
-            )));
+            let value = |s: &Scene| toml::Value::try_from(s.spec()).ok();
+            let what = match (value(&self.scene), value(scene)) {
+                (Some(built), Some(used)) => first_difference(&built, &used, String::new())
+                    .map(|(path, b, u)| format!("{path} is {b} in the library's scene and {u} in this one")),
+                _ => None,
+            };
+            return Err(LibraryError::SceneMismatch(what.unwrap_or_else(|| {
+                format!(
+                    "built for {} bodies and {} contact pairs, used with {} and {}",
+                    self.scene.spec().bodies.len(),
+                    self.scene.spec().contacts.len(),
+                    scene.spec().bodies.len(),
+                    scene.spec().contacts.len()
+                )
+            })));
         }
         Ok(())
     }
@@ -217,9 +284,8 @@ impl Library {
         if found != expected {
             return Err(LibraryError::Corrupt { expected, found });
         }
-        let (payload, used): (Payload, usize) =
-            bincode::serde::decode_from_slice(body, bincode::config::standard())
-                .map_err(|e| LibraryError::Invalid(format!("decoding: {e}")))?;
+        let (payload, used) = decode_bounded(body)
+            .map_err(|e| LibraryError::Invalid(format!("decoding: {e}")))?;
         if used != body.len() {
             return Err(LibraryError::Invalid(
                 "trailing bytes in the payload".into(),
@@ -248,16 +314,7 @@ impl Library {
     /// so that a crash never leaves half a library under the name and no other file is touched; the
     /// temporary file is removed if anything fails).
     pub fn save(&self, path: &Path) -> Result<(), LibraryError> {
-        let bytes = self.to_bytes()?;
-        let (tmp, mut file) = temporary_beside(path)?;
-        let written = std::io::Write::write_all(&mut file, &bytes)
-            .and_then(|()| file.sync_all())
-            .map_err(io(&tmp))
-            .and_then(|()| std::fs::rename(&tmp, path).map_err(io(path)));
-        if written.is_err() {
-            let _ = std::fs::remove_file(&tmp);
-        }
-        written
+        write_atomically(path, &self.to_bytes()?)
     }
 
     /// Check, before a long build, that [`Library::save`] could write `path`: not a directory, and a file
@@ -279,6 +336,28 @@ impl Library {
         let bytes = std::fs::read(path).map_err(io(path))?;
         Library::from_bytes(&bytes)
     }
+}
+
+/// Write `bytes` to `path` whole or not at all: through a temporary file of a fresh name beside it, synced
+/// and renamed into place, so that a failed or interrupted write never leaves part of a file where a good
+/// one was (the temporary file is removed if anything fails). Every file the project's commands write
+/// goes through here.
+pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), LibraryError> {
+    if path.is_dir() {
+        return Err(LibraryError::Io {
+            path: path.display().to_string(),
+            source: std::io::Error::new(std::io::ErrorKind::IsADirectory, "is a directory"),
+        });
+    }
+    let (tmp, mut file) = temporary_beside(path)?;
+    let written = std::io::Write::write_all(&mut file, bytes)
+        .and_then(|()| file.sync_all())
+        .map_err(io(&tmp))
+        .and_then(|()| std::fs::rename(&tmp, path).map_err(io(path)));
+    if written.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    written
 }
 
 /// A new file beside `path` with a name no other file has (`.NAME.PID-N.partial`, created exclusively).

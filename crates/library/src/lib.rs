@@ -24,7 +24,7 @@ pub use evaluate::{
     CONTACT_IMPULSE, ContactEvents, CoordinateRate, Evaluation, EvaluationSettings, TargetDistance,
     TaskMeasures, evaluate, evaluate_in,
 };
-pub use file::{Library, MAGIC, VERSION};
+pub use file::{Library, MAGIC, VERSION, write_atomically};
 pub use policy::Policy;
 pub use problem::{ProblemFile, Task, TaskCost, TaskSpec, Term, TermSpec};
 pub use task::{CONTROL_WEIGHT, FingerDynamics, StepData, TaskError, finger_cost};
