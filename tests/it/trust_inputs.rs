@@ -175,3 +175,68 @@ fn a_file_being_replaced_is_never_seen_in_part() {
     assert!(library::write_atomically(&dir, b"x").is_err());
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Issue 27: a finger step under `u = [1e20, 0]` returned link 1 at -5.94 rad (limits [-pi, 0]) with the
+/// status "converged". An answer that leaves a joint past its limit or a contact in penetration by more
+/// than `STEP_TOLERANCE` is now `Violated`; every answer still called converged keeps the limits, for
+/// states and controls up to 1e9 and beyond.
+#[test]
+fn a_converged_step_keeps_its_joint_limits_at_any_input_scale() {
+    use dynamics::{Complementarity, Simulator, StepSettings};
+    use rand::{Rng, SeedableRng};
+    let scene = dynamics::Scene::flicking_finger();
+    let n = scene.n_dof();
+    let limits: Vec<Option<[f64; 2]>> = scene.coordinates.iter().map(|c| c.limits).collect();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(27);
+    for model in [
+        Complementarity::Hard,
+        Complementarity::Logistic { sigma: 0.1 },
+    ] {
+        let mut sim = Simulator::new(
+            scene.clone(),
+            StepSettings {
+                model,
+                ..StepSettings::default()
+            },
+        )
+        .unwrap();
+        let x0 = dynamics::FLICKING_FINGER_X0.to_vec();
+        let s = sim.step(&x0, &[1e20, 0.0]).unwrap();
+        let [lo, hi] = limits[0].unwrap();
+        assert!(
+            s.info.status != ncp::Status::Converged
+                || (s.x_next[0] >= lo - 1e-6 && s.x_next[0] <= hi + 1e-6),
+            "{model:?}: link1 at {} reported converged",
+            s.x_next[0]
+        );
+        let (mut converged, mut tried) = (0, 0);
+        for _ in 0..150 {
+            let scale = 10f64.powi(rng.random_range(0..=9));
+            let mut x = x0.clone();
+            for v in &mut x[n..] {
+                *v = rng.random_range(-1.0..1.0) * scale;
+            }
+            let u = [
+                rng.random_range(-1.0..1.0) * scale,
+                rng.random_range(-1.0..1.0) * scale,
+            ];
+            sim.reset_warm_start();
+            let Ok(s) = sim.step(&x, &u) else { continue };
+            tried += 1;
+            if s.info.status != ncp::Status::Converged {
+                continue;
+            }
+            converged += 1;
+            for (j, l) in limits.iter().enumerate() {
+                if let Some([lo, hi]) = l {
+                    let q = s.x_next[j];
+                    assert!(
+                        q >= lo - 2e-6 && q <= hi + 2e-6,
+                        "{model:?}: joint {j} at {q} past [{lo}, {hi}] (scale {scale})"
+                    );
+                }
+            }
+        }
+        assert!(tried > 100 && converged > 30, "{tried} tried, {converged} converged");
+    }
+}

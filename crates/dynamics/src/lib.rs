@@ -47,7 +47,9 @@ pub use scene::{
     MAX_DAMPING, MAX_FRICTION, MAX_GRAVITY, MAX_LENGTH, Plane, PlaneSpec, Scene, SceneSpec, Side,
 };
 pub use simulator::Simulator;
-pub use step::{Complementarity, Drag, Model, StateCovariance, Step, StepData, StepSettings};
+pub use step::{
+    Complementarity, Drag, Model, STEP_TOLERANCE, StateCovariance, Step, StepData, StepSettings,
+};
 
 /// The README's examples, compiled and run as doctests so that they cannot go stale.
 #[doc = include_str!("../README.md")]

@@ -19,6 +19,11 @@ use ncp::{
 };
 use serde::{Deserialize, Serialize};
 
+/// How far a converged step may leave a joint past its limit or a contact in penetration, in the scene's
+/// units (`d + h J v'` of every row, [`Model::step`]): beyond it the step's status is
+/// [`ncp::Status::Violated`], not converged.
+pub const STEP_TOLERANCE: f64 = 1e-6;
+
 /// How the complementarity rows are modelled.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "model", rename_all = "snake_case")]
@@ -559,6 +564,22 @@ impl Model {
         Ok((LinearMcp::from_row_major(n, a, b)?, cons))
     }
 
+    /// How far the answer `z` of the step's problem leaves a row's constraint broken at the end of the step:
+    /// `max_k -h w_k`, the linearised distance (or joint-limit margin) after the step, for the models
+    /// whose rows are never negative at an exact answer (hard and logistic; the normal model's expected
+    /// residual lets `w` go below zero by about its noise, so it is not judged).
+    fn violation(&self, problem: &LinearMcp, z: &[f64]) -> f64 {
+        if matches!(self.settings.model, Complementarity::Normal { .. }) {
+            return 0.0;
+        }
+        let n = self.scene.n_dof();
+        let mut w = vec![0.0; z.len()];
+        ncp::Mcp::evaluate(problem, z, &mut w, None);
+        w[n..]
+            .iter()
+            .fold(0.0f64, |v, wk| v.max(-self.settings.h * wk))
+    }
+
     /// One step from `x` under the controls `u`, with `data`'s applied forces, started from its warm
     /// start; the step is kept in `data` (for [`Model::derivatives`], and its solution as the next warm
     /// start) and returned.
@@ -626,6 +647,10 @@ impl Model {
             }
         };
         let h = self.settings.h;
+        let mut info = info;
+        if info.status == ncp::Status::Converged && self.violation(&problem, &z) > STEP_TOLERANCE {
+            info.status = ncp::Status::Violated;
+        }
         let mut x_next = vec![0.0; 2 * n];
         for i in 0..n {
             x_next[i] = x[i] + h * z[i];

@@ -20,6 +20,10 @@ pub enum Status {
     Inaccurate,
     /// The problem returned a non-finite value at a trial point; the last finite iterate is kept.
     NonFinite,
+    /// The solve finished, but its answer breaks a constraint of the problem it belongs to by more than
+    /// that problem's tolerance (a time step's answer that leaves a joint past its limit or a body inside
+    /// another, as rounding does at inputs of 1e20): not an answer to trust.
+    Violated,
 }
 
 /// How a solve went.
