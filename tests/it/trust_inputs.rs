@@ -106,7 +106,11 @@ fn crc32fast_hash(bytes: &[u8]) -> u32 {
     for &b in bytes {
         crc ^= u32::from(b);
         for _ in 0..8 {
-            crc = if crc & 1 == 1 { (crc >> 1) ^ 0xEDB8_8320 } else { crc >> 1 };
+            crc = if crc & 1 == 1 {
+                (crc >> 1) ^ 0xEDB8_8320
+            } else {
+                crc >> 1
+            };
         }
     }
     !crc
@@ -237,6 +241,43 @@ fn a_converged_step_keeps_its_joint_limits_at_any_input_scale() {
                 }
             }
         }
-        assert!(tried > 100 && converged > 30, "{tried} tried, {converged} converged");
+        assert!(
+            tried > 100 && converged > 30,
+            "{tried} tried, {converged} converged"
+        );
     }
+}
+
+/// Issue 27: full DDP on a scene of many bodies asked for 195 GB and was killed. The solver now estimates
+/// the second-order data it would keep before allocating and refuses with the estimate and the
+/// alternative; Gauss-Newton (iLQR) runs the same problem.
+#[test]
+fn full_ddp_past_its_memory_limit_is_refused_with_the_estimate_and_ilqr_runs() {
+    let mut text = String::from("gravity = [0.0, -1.0]\n");
+    for i in 0..30 {
+        text.push_str(&format!(
+            "[[body]]\nname = \"b{i}\"\nsemi_axes = [0.1, 0.05]\nparent = \"world\"\nanchor = [{i}.0, 0.0]\ncentre = [0.0, 0.0]\njoint = {{ type = \"free\", actuated = true }}\n"
+        ));
+    }
+    let scene = Scene::from_toml_str(&text).unwrap();
+    let (n, nu) = (scene.n_state(), scene.n_controls);
+    let model = dynamics::Model::new(scene, dynamics::StepSettings::default()).unwrap();
+    let per_knot = model.second_order_bytes();
+    assert!(per_knot > 100 << 20, "{per_knot}");
+    let mut dynamics = library::FingerDynamics::from_model(model);
+    let cost = ddp::QuadraticCost::diagonal(&vec![1.0; n], &vec![0.1; nu], &vec![1.0; n]);
+    let x0 = vec![0.0; n];
+    let controls = vec![vec![0.0; nu]; 60];
+    let full = ddp::Ddp::new(ddp::DdpSettings::default()).unwrap();
+    let err = full.solve(&mut dynamics, &cost, &x0, &controls).unwrap_err();
+    assert!(matches!(err, ddp::DdpError::TooLarge { .. }), "{err}");
+    let message = err.to_string();
+    assert!(message.contains("GB") && message.contains("--method ilqr"), "{message}");
+    let ilqr = ddp::Ddp::new(ddp::DdpSettings {
+        method: ddp::Method::GaussNewton,
+        max_iterations: 2,
+        ..ddp::DdpSettings::default()
+    })
+    .unwrap();
+    ilqr.solve(&mut dynamics, &cost, &x0, &controls).unwrap();
 }

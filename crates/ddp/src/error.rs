@@ -42,6 +42,21 @@ pub enum DdpError {
         #[source]
         source: Box<dyn std::error::Error + Send + Sync>,
     },
+    /// Full DDP would keep more second-order data than [`crate::FULL_DDP_MAX_BYTES`] allows: refused
+    /// before anything is allocated.
+    #[error(
+        "full second-order DDP would keep about {:.1} GB of second derivatives ({knots} knots), over the limit of {:.1} GB (ddp::FULL_DDP_MAX_BYTES); use Method::GaussNewton (iLQR, --method ilqr), which needs first derivatives only",
+        *bytes as f64 / 1e9,
+        *limit as f64 / 1e9
+    )]
+    TooLarge {
+        /// The estimate, in bytes.
+        bytes: usize,
+        /// The knots it is for.
+        knots: usize,
+        /// The limit, in bytes.
+        limit: usize,
+    },
     /// Second-order DDP asked of dynamics that provide no second derivatives.
     #[error(
         "full second-order DDP needs the dynamics' second derivatives; use Method::GaussNewton"

@@ -46,8 +46,8 @@ mod work;
 pub use error::DdpError;
 pub use model::{Cost, CostDerivatives, Dynamics, QuadraticCost, SecondOrder};
 pub use solver::{
-    ControlLimits, Ddp, DdpSettings, Iteration, Method, RESOLUTION, Regularisation, Solution,
-    Status, ValueModel, rollout, shift_controls,
+    ControlLimits, Ddp, DdpSettings, FULL_DDP_MAX_BYTES, Iteration, Method, RESOLUTION,
+    Regularisation, Solution, Status, ValueModel, rollout, shift_controls,
 };
 
 /// `Err` unless `v` has `len` finite entries.

@@ -65,6 +65,13 @@ pub trait SecondOrder<Data> {
     /// (`(n + m) x (n + m)`), for the step [`Dynamics::calc`] last computed in `data` (at these `x` and
     /// `u`). Called again with another `c` at the same data (a backward pass retried with more
     /// regularisation), it may reuse what it kept there.
+    /// The bytes the second-order derivatives keep in one knot's data, estimated before anything is
+    /// allocated (0, the default: nothing worth counting). The solver multiplies it by the horizon and
+    /// refuses full DDP past [`crate::FULL_DDP_MAX_BYTES`].
+    fn bytes_per_knot(&self) -> usize {
+        0
+    }
+
     #[allow(clippy::too_many_arguments)]
     fn calc_diff_second(
         &mut self,

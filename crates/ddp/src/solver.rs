@@ -37,6 +37,11 @@ pub struct ControlLimits {
     pub upper: Vec<f64>,
 }
 
+/// The most second-order data full DDP keeps over a horizon (each knot's
+/// [`SecondOrder::bytes_per_knot`](crate::SecondOrder::bytes_per_knot)), 8 GiB: past it a solve is refused
+/// before anything is allocated, with the estimate and the alternative (Gauss-Newton).
+pub const FULL_DDP_MAX_BYTES: usize = 8 << 30;
+
 /// Settings of [`Ddp`].
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct DdpSettings {
@@ -304,10 +309,20 @@ impl Ddp {
                 problem: format!("needs {m} entries, has {}", l.lower.len()),
             });
         }
-        if s.method == Method::Full && dynamics.second_order().is_none() {
-            return Err(DdpError::NoSecondDerivatives);
-        }
         let horizon = controls.len();
+        if s.method == Method::Full {
+            let Some(second) = dynamics.second_order() else {
+                return Err(DdpError::NoSecondDerivatives);
+            };
+            let bytes = second.bytes_per_knot().saturating_mul(horizon);
+            if bytes > FULL_DDP_MAX_BYTES {
+                return Err(DdpError::TooLarge {
+                    bytes,
+                    knots: horizon,
+                    limit: FULL_DDP_MAX_BYTES,
+                });
+            }
+        }
         let mut u: Vec<Vec<f64>> = controls.to_vec();
         if let Some(l) = &s.control_limits {
             for ui in &mut u {

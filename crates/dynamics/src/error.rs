@@ -55,6 +55,23 @@ pub enum DynamicsError {
         /// The largest stable time step at this state.
         h_max: f64,
     },
+    /// A computation would need more memory than its limit: refused before allocating, with the estimate
+    /// and what to use instead.
+    #[error(
+        "{what} would need about {:.1} GB, over its limit of {:.1} GB; use {alternative}",
+        *bytes as f64 / 1e9,
+        *limit as f64 / 1e9
+    )]
+    TooLarge {
+        /// What would be computed.
+        what: &'static str,
+        /// The estimate, in bytes.
+        bytes: usize,
+        /// The limit, in bytes.
+        limit: usize,
+        /// What to do instead.
+        alternative: &'static str,
+    },
     /// A capability this model does not have (yet), or a degenerate state it cannot differentiate at.
     #[error("unsupported: {0}")]
     Unsupported(&'static str),

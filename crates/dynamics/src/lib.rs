@@ -37,7 +37,9 @@ mod simulator;
 mod step;
 
 pub use constraint::{ConstraintRow, Constraints, ContactFrame, ContactImpulse};
-pub use derivative::{SecondOrderStep, StepDerivatives, step_residual, step_residual_at};
+pub use derivative::{
+    SECOND_ORDER_MAX_BYTES, SecondOrderStep, StepDerivatives, step_residual, step_residual_at,
+};
 pub use error::{DynamicsError, SceneProblem};
 pub use jet::{Jet, Jet1};
 pub use kinematics::{Kinematics, Ring, Scalar};

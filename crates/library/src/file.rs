@@ -61,7 +61,11 @@ fn first_difference(
             keys.sort();
             keys.dedup();
             keys.into_iter().find_map(|k| {
-                let here = if path.is_empty() { k.clone() } else { format!("{path}.{k}") };
+                let here = if path.is_empty() {
+                    k.clone()
+                } else {
+                    format!("{path}.{k}")
+                };
                 match (x.get(k), y.get(k)) {
                     (Some(p), Some(q)) => first_difference(p, q, here),
                     (p, q) => Some((here, show(p), show(q))),
@@ -76,7 +80,11 @@ fn first_difference(
                 .find_map(|(i, (p, q))| first_difference(p, q, format!("{path}[{i}]")));
             found.or_else(|| {
                 (x.len() != y.len()).then(|| {
-                    (format!("{path} (its length)"), x.len().to_string(), y.len().to_string())
+                    (
+                        format!("{path} (its length)"),
+                        x.len().to_string(),
+                        y.len().to_string(),
+                    )
                 })
             })
         }
@@ -205,8 +213,11 @@ impl Library {
         if self.scene.spec() != scene.spec() {
             let value = |s: &Scene| toml::Value::try_from(s.spec()).ok();
             let what = match (value(&self.scene), value(scene)) {
-                (Some(built), Some(used)) => first_difference(&built, &used, String::new())
-                    .map(|(path, b, u)| format!("{path} is {b} in the library's scene and {u} in this one")),
+                (Some(built), Some(used)) => {
+                    first_difference(&built, &used, String::new()).map(|(path, b, u)| {
+                        format!("{path} is {b} in the library's scene and {u} in this one")
+                    })
+                }
                 _ => None,
             };
             return Err(LibraryError::SceneMismatch(what.unwrap_or_else(|| {
@@ -284,8 +295,8 @@ impl Library {
         if found != expected {
             return Err(LibraryError::Corrupt { expected, found });
         }
-        let (payload, used) = decode_bounded(body)
-            .map_err(|e| LibraryError::Invalid(format!("decoding: {e}")))?;
+        let (payload, used) =
+            decode_bounded(body).map_err(|e| LibraryError::Invalid(format!("decoding: {e}")))?;
         if used != body.len() {
             return Err(LibraryError::Invalid(
                 "trailing bytes in the payload".into(),

@@ -146,6 +146,10 @@ impl Dynamics for FingerDynamics {
 impl SecondOrder<StepData> for FingerDynamics {
     type Error = TaskError;
 
+    fn bytes_per_knot(&self) -> usize {
+        self.model.second_order_bytes()
+    }
+
     fn calc_diff_second(
         &mut self,
         data: &mut StepData,

@@ -251,6 +251,15 @@ impl Model {
             self.settings().h,
         );
         let cols = 2 * n + nu;
+        let bytes = self.second_order_bytes();
+        if bytes > super::SECOND_ORDER_MAX_BYTES {
+            return Err(DynamicsError::TooLarge {
+                what: "one step's second-order expansion",
+                bytes,
+                limit: super::SECOND_ORDER_MAX_BYTES,
+                alternative: "first derivatives only: iLQR / Gauss-Newton (--method ilqr)",
+            });
+        }
         let ing = self.expansion(x, u)?;
         let lin = self.linearise(x, u, Some(&ing), &mut source)?;
         let derivatives = self.first_derivatives(&lin);

@@ -38,7 +38,32 @@ pub struct StepDerivatives {
     pub fu: Vec<f64>,
 }
 
+/// The most memory one step's second-order expansion may take ([`Model::second_order_bytes`]): 1 GiB.
+/// Its Taylor expansion of `M(q)` grows like the fourth power of the joints, so a scene of a few hundred
+/// joints would ask for tens of gigabytes a knot; it is refused with the estimate instead.
+pub const SECOND_ORDER_MAX_BYTES: usize = 1 << 30;
+
 impl Model {
+    /// An estimate, before anything is allocated, of the bytes one step's second-order expansion
+    /// ([`Model::second_order`]) holds: the second-order Taylor expansions of `M`, `J`, `d` and the
+    /// noise over `q` and of the forces over `(q, v)`, and the Hessians of the step's equations over
+    /// `(x, u)`. An optimiser that keeps one per knot needs this times its knots.
+    pub fn second_order_bytes(&self) -> usize {
+        let scene = self.scene();
+        let (n, m, nu) = (scene.n_dof(), scene.n_constraints(), scene.n_controls);
+        let taylor = |len: usize, dim: usize| len.saturating_mul(1 + dim + dim.saturating_mul(dim));
+        let cols = 2 * n + nu;
+        let doubles = taylor(n * n + m * n + 2 * m, n)
+            .saturating_add(taylor(n, 2 * n))
+            .saturating_add(
+                (n + m)
+                    .saturating_mul(cols)
+                    .saturating_mul(cols)
+                    .saturating_mul(2),
+            );
+        doubles.saturating_mul(std::mem::size_of::<f64>())
+    }
+
     /// The exact derivatives of the step `data` holds (the last [`Model::step`] computed with it), at the
     /// `(x, u)` it was computed from: its solution is linearised as it is, never solved again, so the
     /// derivatives belong to exactly that step. For every model: the hard model's are its active set's
