@@ -30,6 +30,21 @@ fn error(e: impl std::fmt::Display) -> PyErr {
     SlcpError::new_err(e.to_string())
 }
 
+/// Run `f`, turning a panic below (a bug of the crates) into `SlcpError` naming it, so that Python sees
+/// the package's one error type and the interpreter goes on.
+fn shielded<T>(f: impl FnOnce() -> PyResult<T>) -> PyResult<T> {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).unwrap_or_else(|payload| {
+        let what = payload
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| payload.downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "a panic without a message".into());
+        Err(error(format!(
+            "internal error of the slcp crates (a bug; please report it with its input): {what}"
+        )))
+    })
+}
+
 /// A 1-D input as a vector, its length checked.
 fn vector(
     a: &PyArrayLike1<'_, f64, AllowTypeChange>,
@@ -136,9 +151,13 @@ type Linearised<'py> = (
 
 /// The simulator: one time step of a scene under a contact model, its exact first derivatives and the
 /// Hessian of `c^T f`. Warm starts carry from one step to the next, as in the crates.
-#[pyclass(module = "slcp")]
+#[pyclass(module = "slcp", frozen)]
 struct Simulator {
-    sim: RsSimulator,
+    /// The simulator, one caller at a time: a second thread using the same object gets a clear error
+    /// (never a half-done step), and the sizes below are read without it.
+    sim: std::sync::Mutex<RsSimulator>,
+    scene: Scene,
+    h: f64,
 }
 
 #[pymethods]
@@ -172,42 +191,46 @@ impl Simulator {
             },
         )
         .map_err(error)?;
-        Ok(Simulator { sim })
+        Ok(Simulator {
+            scene: sim.scene().clone(),
+            h: sim.settings().h,
+            sim: std::sync::Mutex::new(sim),
+        })
     }
 
     /// Length of the state `x = [q; v]`.
     #[getter]
     fn n_state(&self) -> usize {
-        self.sim.scene().n_state()
+        self.scene.n_state()
     }
 
     /// Number of controls.
     #[getter]
     fn n_controls(&self) -> usize {
-        self.sim.scene().n_controls
+        self.scene.n_controls
     }
 
     /// Names of the state's entries (`link1.angle`, ..., `link1.angle velocity`, ...).
     #[getter]
     fn state_names(&self) -> Vec<String> {
-        self.sim.scene().state_names()
+        self.scene.state_names()
     }
 
     /// The time step.
     #[getter]
     fn h(&self) -> f64 {
-        self.sim.settings().h
+        self.h
     }
 
     /// `step(x, u) -> x_next`.
     fn step<'py>(
-        &mut self,
+        &self,
         py: Python<'py>,
         x: PyArrayLike1<'py, f64, AllowTypeChange>,
         u: PyArrayLike1<'py, f64, AllowTypeChange>,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
         let (x, u) = self.inputs(&x, &u)?;
-        let step = self.sim.step(&x, &u).map_err(error)?;
+        let step = shielded(|| self.sim()?.step(&x, &u).map_err(error))?;
         Ok(step.x_next.into_pyarray(py))
     }
 
@@ -215,13 +238,13 @@ impl Simulator {
     /// scene's complementarity rows), each contact pair's distance, normal and tangential impulse, and
     /// the complementarity solve's status, iterations and residual.
     fn step_info<'py>(
-        &mut self,
+        &self,
         py: Python<'py>,
         x: PyArrayLike1<'py, f64, AllowTypeChange>,
         u: PyArrayLike1<'py, f64, AllowTypeChange>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let (x, u) = self.inputs(&x, &u)?;
-        let step = self.sim.step(&x, &u).map_err(error)?;
+        let step = shielded(|| self.sim()?.step(&x, &u).map_err(error))?;
         let out = PyDict::new(py);
         let pairs = |f: fn(&dynamics::ContactImpulse) -> f64| {
             Array1::from_iter(step.impulses.iter().map(f)).into_pyarray(py)
@@ -245,14 +268,14 @@ impl Simulator {
     /// `derivatives(x, u) -> (x_next, fx, fu)`: one step and its exact first derivatives,
     /// `fx[i, j] = d x_next[i] / d x[j]`, `fu[i, j] = d x_next[i] / d u[j]`.
     fn derivatives<'py>(
-        &mut self,
+        &self,
         py: Python<'py>,
         x: PyArrayLike1<'py, f64, AllowTypeChange>,
         u: PyArrayLike1<'py, f64, AllowTypeChange>,
     ) -> PyResult<Linearised<'py>> {
         let (x, u) = self.inputs(&x, &u)?;
         let (n, m) = (x.len(), u.len());
-        let (step, d) = self.sim.step_with_derivatives(&x, &u).map_err(error)?;
+        let (step, d) = shielded(|| self.sim()?.step_with_derivatives(&x, &u).map_err(error))?;
         Ok((
             step.x_next.into_pyarray(py),
             matrix(py, d.fx, n, n)?,
@@ -263,7 +286,7 @@ impl Simulator {
     /// `hessian(x, u, c) -> H`: the Hessian of `c . f(x, u)` over `y = (x, u)`, square of side
     /// `n_state + n_controls` (the second-order term of full DDP, with `c` the value gradient).
     fn hessian<'py>(
-        &mut self,
+        &self,
         py: Python<'py>,
         x: PyArrayLike1<'py, f64, AllowTypeChange>,
         u: PyArrayLike1<'py, f64, AllowTypeChange>,
@@ -272,14 +295,14 @@ impl Simulator {
         let (x, u) = self.inputs(&x, &u)?;
         let c = vector(&c, "c", x.len())?;
         let side = x.len() + u.len();
-        let (_, _, h) = self.sim.step_with_hessian(&x, &u, &c).map_err(error)?;
+        let (_, _, h) = shielded(|| self.sim()?.step_with_hessian(&x, &u, &c).map_err(error))?;
         matrix(py, h, side, side)
     }
 
     /// `rollout(x0, us) -> xs`: the states from `x0` under the controls `us` (shape `(N, n_controls)`),
     /// shape `(N + 1, n_state)`. The GIL is released while it runs.
     fn rollout<'py>(
-        &mut self,
+        &self,
         py: Python<'py>,
         x0: PyArrayLike1<'py, f64, AllowTypeChange>,
         us: PyArrayLike2<'py, f64, AllowTypeChange>,
@@ -287,27 +310,48 @@ impl Simulator {
         let n = self.n_state();
         let x0 = vector(&x0, "x0", n)?;
         let us = rows(&us, "us", self.n_controls())?;
-        let sim = &mut self.sim;
-        let states = py.allow_threads(move || -> Result<Vec<Vec<f64>>, String> {
-            let mut xs = Vec::with_capacity(us.len() + 1);
-            xs.push(x0);
-            for (k, u) in us.iter().enumerate() {
-                let x = xs.last().expect("x0 pushed");
-                let next = sim.step(x, u).map_err(|e| format!("step {k}: {e}"))?.x_next;
-                xs.push(next);
-            }
-            Ok(xs)
+        let mut guard = self.sim()?;
+        let sim = &mut *guard;
+        let states = py.allow_threads(move || {
+            shielded(|| {
+                let mut xs = Vec::with_capacity(us.len() + 1);
+                xs.push(x0);
+                for (k, u) in us.iter().enumerate() {
+                    let x = xs.last().expect("x0 pushed");
+                    let next = sim
+                        .step(x, u)
+                        .map_err(|e| error(format!("step {k}: {e}")))?
+                        .x_next;
+                    xs.push(next);
+                }
+                Ok(xs)
+            })
         });
-        stacked(py, states.map_err(error)?, n)
+        stacked(py, states?, n)
     }
 
     /// Forget the warm start: the next step's solve starts from `[v; 0]`.
-    fn reset_warm_start(&mut self) {
-        self.sim.reset_warm_start();
+    fn reset_warm_start(&self) -> PyResult<()> {
+        self.sim()?.reset_warm_start();
+        Ok(())
     }
 }
 
 impl Simulator {
+    /// The simulator for this call, or a clear error while another thread is using it.
+    fn sim(&self) -> PyResult<std::sync::MutexGuard<'_, RsSimulator>> {
+        match self.sim.try_lock() {
+            Ok(guard) => Ok(guard),
+            // A step that panicked (a bug, reported as SlcpError) left nothing half-written that the
+            // next step reads: each step starts from its inputs and the warm start it sets whole.
+            Err(std::sync::TryLockError::Poisoned(p)) => Ok(p.into_inner()),
+            Err(std::sync::TryLockError::WouldBlock) => Err(error(
+                "this Simulator is in use by another thread: give each thread its own \
+                 slcp.Simulator (they are cheap), or hold a lock around the shared one",
+            )),
+        }
+    }
+
     fn inputs(
         &self,
         x: &PyArrayLike1<'_, f64, AllowTypeChange>,
@@ -407,9 +451,12 @@ fn optimize<'py>(
     })
     .map_err(error)?;
     let cost = task.cost.clone();
-    let sol = py
-        .allow_threads(move || ddp.solve(&mut FingerDynamics::new(sim), &cost, &x0, &us))
-        .map_err(error)?;
+    let sol = py.allow_threads(move || {
+        shielded(|| {
+            ddp.solve(&mut FingerDynamics::new(sim), &cost, &x0, &us)
+                .map_err(error)
+        })
+    })?;
     let out = PyDict::new(py);
     let steps = sol.controls.len();
     out.set_item("states", stacked(py, sol.states, n)?)?;
@@ -536,21 +583,26 @@ impl Library {
             exploration,
             ..base
         };
-        let lib = py
-            .allow_threads(move || match &chosen {
-                Some(t) => RsLibrary::build_task(&file, Some(&t.name), &settings, |_, _| {}),
-                None => RsLibrary::build(&file.scene, &settings, |_, _| {}),
+        let lib = py.allow_threads(move || {
+            shielded(|| {
+                match &chosen {
+                    Some(t) => RsLibrary::build_task(&file, Some(&t.name), &settings, |_, _| {}),
+                    None => RsLibrary::build(&file.scene, &settings, |_, _| {}),
+                }
+                .map_err(error)
             })
-            .map_err(error)?;
+        })?;
         Library::wrap(lib)
     }
 
     /// `Library.load(path)`: a library file written by `save` or `cargo xtask train`.
     #[staticmethod]
     fn load(py: Python<'_>, path: PathBuf) -> PyResult<Self> {
-        let lib = py
-            .allow_threads(|| RsLibrary::load(&path))
-            .map_err(|e| error(format!("{}: {e}", path.display())))?;
+        let lib = py.allow_threads(|| {
+            shielded(|| {
+                RsLibrary::load(&path).map_err(|e| error(format!("{}: {e}", path.display())))
+            })
+        })?;
         Library::wrap(lib)
     }
 
@@ -646,9 +698,9 @@ impl Library {
             x0,
         };
         let (lib, policy) = (&self.lib, &self.policy);
-        let e: Evaluation = py
-            .allow_threads(|| ::library::evaluate(lib, policy, &settings))
-            .map_err(error)?;
+        let e: Evaluation = py.allow_threads(|| {
+            shielded(|| ::library::evaluate(lib, policy, &settings).map_err(error))
+        })?;
         to_python(py, &e)
     }
 }

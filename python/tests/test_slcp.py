@@ -192,6 +192,48 @@ def test_long_work_releases_the_gil():
     assert rate > 1e5, f"the main thread counted {count} in {elapsed:.2f} s while the build ran"
 
 
+def test_one_simulator_shared_by_threads_answers_or_says_why(root, tmp_path):
+    # Issue 27: a Simulator used by two threads at once raised `RuntimeError: Already borrowed`. Each call
+    # now either runs or raises SlcpError saying the object is in use and what to do; a bad library file
+    # (a crafted length prefix with a recomputed checksum) is SlcpError, not an abort.
+    sim = slcp.Simulator()
+    us = np.zeros((2000, 2))
+    errors, done = [], threading.Event()
+
+    def roll():
+        try:
+            sim.rollout(X0, us)
+        except slcp.SlcpError as e:
+            errors.append(str(e))
+        finally:
+            done.set()
+
+    thread = threading.Thread(target=roll)
+    thread.start()
+    other = []
+    while not done.is_set():
+        try:
+            sim.step(X0, [0.0, 0.0])
+        except slcp.SlcpError as e:
+            other.append(str(e))
+    thread.join()
+    for message in errors + other:
+        assert "in use by another thread" in message, message
+    assert sim.n_state == 6 and sim.h == 0.05
+    import struct
+    import zlib
+
+    body = bytes([253]) + struct.pack("<Q", 1 << 62) + b"gravity = "
+    good = tmp_path / "good.lib"
+    slcp.Library.train(trajectories=4, horizon=20, growth=0, trunk=2, settle=1, length=2).save(good)
+    raw = good.read_bytes()
+    crafted = raw[:12] + struct.pack("<Q", len(body)) + struct.pack("<I", zlib.crc32(body)) + body
+    bad = tmp_path / "crafted.lib"
+    bad.write_bytes(crafted)
+    with pytest.raises(slcp.SlcpError, match="decoding"):
+        slcp.Library.load(bad)
+
+
 def test_the_package_ships_its_typed_stubs_and_docstrings():
     import pathlib
 

@@ -17,6 +17,7 @@ mod ncp_functions;
 mod ncp_solvers;
 mod support;
 mod trust_inputs;
+mod trust_physics;
 mod viewer_browser;
 mod viewer_protocol;
 mod viewer_world;

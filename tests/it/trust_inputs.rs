@@ -269,10 +269,15 @@ fn full_ddp_past_its_memory_limit_is_refused_with_the_estimate_and_ilqr_runs() {
     let x0 = vec![0.0; n];
     let controls = vec![vec![0.0; nu]; 60];
     let full = ddp::Ddp::new(ddp::DdpSettings::default()).unwrap();
-    let err = full.solve(&mut dynamics, &cost, &x0, &controls).unwrap_err();
+    let err = full
+        .solve(&mut dynamics, &cost, &x0, &controls)
+        .unwrap_err();
     assert!(matches!(err, ddp::DdpError::TooLarge { .. }), "{err}");
     let message = err.to_string();
-    assert!(message.contains("GB") && message.contains("--method ilqr"), "{message}");
+    assert!(
+        message.contains("GB") && message.contains("--method ilqr"),
+        "{message}"
+    );
     let ilqr = ddp::Ddp::new(ddp::DdpSettings {
         method: ddp::Method::GaussNewton,
         max_iterations: 2,

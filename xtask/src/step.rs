@@ -36,10 +36,12 @@ pub struct SimArgs {
     /// body on a draggy joint, is an error) or implicit (dissipative at any h).
     #[arg(long, value_enum, default_value = "explicit")]
     drag: DragArg,
-    /// The most penetration one step pushes out (default: all of it, SCENE.md's d / h); 0 keeps
-    /// penetration from deepening without pushing it out, so that contact never creates energy.
-    #[arg(long, allow_negative_numbers = true)]
-    recovery: Option<f64>,
+    /// How deep a penetration the velocities push out; deeper is projected out at the position level
+    /// (default 0: velocities never push out, positions recover everything, so contact never creates
+    /// energy and nothing sinks). `inf`: SCENE.md's d / h, all of it at the velocity level (the reference
+    /// answers' step; a rocking body gains energy from it).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    recovery: f64,
 }
 
 /// `--drag`.
@@ -96,7 +98,7 @@ impl SimArgs {
                 model,
                 h: self.h.or(task.map(|t| t.h)).unwrap_or(0.05),
                 drag: self.drag.into(),
-                recovery: self.recovery,
+                recovery: Some(self.recovery),
                 ..StepSettings::default()
             },
         )?)
@@ -471,7 +473,7 @@ mod tests {
             h,
             scene: None,
             drag: DragArg::Explicit,
-            recovery: None,
+            recovery: 0.0,
         };
         let settings = |a: SimArgs, task: &library::Task| {
             let sim = a.simulator_of(file.scene.clone(), Some(task)).unwrap();
@@ -524,7 +526,7 @@ mod tests {
             h: Some(0.05),
             scene: None,
             drag: DragArg::Explicit,
-            recovery: None,
+            recovery: 0.0,
         }
         .simulator()
         .unwrap()

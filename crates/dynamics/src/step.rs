@@ -9,7 +9,7 @@
 
 #![allow(non_snake_case)]
 
-use crate::constraint::{Constraints, ContactFrame, ContactImpulse};
+use crate::constraint::{ConstraintRow, Constraints, ContactFrame, ContactImpulse};
 use crate::error::DynamicsError;
 use crate::kinematics::{Kinematics, Ring};
 use crate::scene::Scene;
@@ -70,18 +70,26 @@ pub struct StepSettings {
     /// How the joints' drag is integrated (SCENE.md: explicitly).
     #[serde(default)]
     pub drag: Drag,
-    /// The most penetration one step pushes out: each row's constraint velocity is
-    /// `max(d, -recovery) / h + J v'` instead of SCENE.md's `d / h + J v'` (`None`, the default: all of it).
-    /// Pushing a penetration of depth `p` out within one step gives the bodies a separating velocity `p / h`,
-    /// kinetic energy the step creates; a linearised step can let a thin body deep into another (a needle
-    /// turning a radian per step), which then flies off faster than anything hit it. With `Some(0.0)`
-    /// penetration is only kept from deepening, never pushed out, and contact only ever removes energy.
-    #[serde(default)]
+    /// How much penetration one step pushes out at the velocity level; the rest is removed at the position
+    /// level. Each row's constraint velocity is `max(d, -recovery) / h + J v'`, and the positions of the
+    /// step are `q + dq + h v'`, with `dq` the smallest move (in the metric of `M`) that takes every
+    /// penetration deeper than `recovery` back to that depth ([`Model::position_correction`]).
+    ///
+    /// `Some(0.0)`, the default: velocities never push out, so contact only ever removes kinetic energy,
+    /// and penetration (which a linearised step leaves where a convex body rolls: the rocking ellipse) is
+    /// projected out without a velocity, so nothing sinks and nothing is launched. `None`: SCENE.md's
+    /// `d / h + J v'`, all of it at the velocity level: a penetration of depth `p` leaves the step with a
+    /// separating velocity `p / h`, kinetic energy from nothing (a rocking ellipse rolls for ever).
+    #[serde(default = "position_level")]
     pub recovery: Option<f64>,
     /// Newton settings for the logistic model.
     pub newton: NewtonSettings,
     /// ERM settings for the normal model.
     pub erm: ErmSettings,
+}
+
+fn position_level() -> Option<f64> {
+    Some(0.0)
 }
 
 impl Default for StepSettings {
@@ -90,7 +98,7 @@ impl Default for StepSettings {
             model: Complementarity::Logistic { sigma: 0.1 },
             h: 0.05,
             drag: Drag::Explicit,
-            recovery: None,
+            recovery: position_level(),
             newton: NewtonSettings::default(),
             erm: ErmSettings::default(),
         }
@@ -117,12 +125,12 @@ impl StepSettings {
             });
         }
         if let Some(depth) = self.recovery
-            && !(depth.is_finite() && depth >= 0.0)
+            && !(depth >= 0.0)
         {
             return Err(DynamicsError::Setting {
                 name: "recovery",
                 value: depth,
-                expected: "finite and non-negative (None: no limit)",
+                expected: "non-negative (infinity or None: all at the velocity level)",
             });
         }
         self.newton.validate()?;
@@ -435,17 +443,149 @@ impl Model {
     /// The derivative passes' ingredients as the step sees them, in place: explicit drag checked
     /// ([`Model::check_drag`]), implicit drag added to `M` ([`Model::with_drag`]), the rows'
     /// distances limited by the recovery ([`Model::recovered_all`]). Returns the distances as they
-    /// were, which the step reports.
+    /// were, which the step reports, and the position-level correction
+    /// ([`Model::position_correction`]) in the same scalar.
     pub(crate) fn prepare_ingredients<T: Ring>(
         &self,
         M: &mut [T],
+        jacobian: &[T],
         d: &mut [T],
-    ) -> Result<Vec<f64>, DynamicsError> {
+    ) -> Result<(Vec<f64>, Vec<T>), DynamicsError> {
         self.check_drag(M)?;
         self.with_drag(M);
         let distance = d.iter().map(Ring::value).collect();
+        let correction = self.position_correction(M, jacobian, d);
         self.recovered_all(d);
-        Ok(distance)
+        Ok((distance, correction))
+    }
+
+    /// The position-level part of the recovery ([`StepSettings::recovery`]): the smallest `dq` in the
+    /// metric of the step's `M` (implicit drag included) with `d_c + J_c dq = -recovery` for every
+    /// constraint `c` deeper than `recovery` (a contact pair's normal row, the mean of its two
+    /// friction-cone rows, or a joint limit), to first order in `dq`; zero when none is. `d` are the rows'
+    /// true distances. Generic, so that its derivatives come with the rest of the step's.
+    ///
+    /// `dq = M^-1 J_P^T mu`, `(J_P M^-1 J_P^T + eps I) mu = -(d_P + recovery)`, with `eps` a `1e-9` part of
+    /// the largest diagonal entry: constraints that cannot all be met (a body pressed between two walls
+    /// closer than its width) get a bounded least-squares compromise rather than a singular solve.
+    pub fn position_correction<T: Ring>(&self, M: &[T], jacobian: &[T], d: &[T]) -> Vec<T> {
+        let n = self.scene.n_dof();
+        let zero = T::from(0.0);
+        let depth = match self.settings.recovery {
+            Some(r) if r.is_finite() => r,
+            _ => return vec![zero; n],
+        };
+        // The penetrated constraints: (row, second row of the pair if any).
+        let mut active: Vec<(usize, Option<usize>)> = Vec::new();
+        let rows = self.scene.rows();
+        let mut k = 0;
+        while k < rows.len() {
+            let pair = matches!(rows[k], ConstraintRow::FrictionEdge { positive: true, .. });
+            if d[k].value() < -depth {
+                active.push((k, pair.then_some(k + 1)));
+            }
+            k += if pair { 2 } else { 1 };
+        }
+        if active.is_empty() {
+            return vec![zero; n];
+        }
+        let p = active.len();
+        // J_P (p x n): a pair's normal row is the mean of its two edges.
+        let mut jp = vec![zero; p * n];
+        let mut rhs = vec![zero; p];
+        for (a, &(k, other)) in active.iter().enumerate() {
+            for j in 0..n {
+                jp[a * n + j] = match other {
+                    Some(o) => (jacobian[k * n + j] + jacobian[o * n + j]) * 0.5,
+                    None => jacobian[k * n + j],
+                };
+            }
+            rhs[a] = -(d[k] + depth);
+        }
+        // Y = M^-1 J_P^T (n x p), by Cholesky of M.
+        let mut l = M.to_vec();
+        for j in 0..n {
+            let mut diag = l[j * n + j];
+            for k in 0..j {
+                diag -= l[j * n + k] * l[j * n + k];
+            }
+            if !(diag.value() > 0.0) {
+                return vec![zero; n];
+            }
+            let diag = diag.square_root();
+            l[j * n + j] = diag;
+            for i in j + 1..n {
+                let mut e = l[i * n + j];
+                for k in 0..j {
+                    e -= l[i * n + k] * l[j * n + k];
+                }
+                l[i * n + j] = e / diag;
+            }
+        }
+        let mut y = vec![zero; n * p];
+        for a in 0..p {
+            let mut col: Vec<T> = (0..n).map(|j| jp[a * n + j]).collect();
+            for i in 0..n {
+                let mut e = col[i];
+                for k in 0..i {
+                    e -= l[i * n + k] * col[k];
+                }
+                col[i] = e / l[i * n + i];
+            }
+            for i in (0..n).rev() {
+                let mut e = col[i];
+                for k in i + 1..n {
+                    e -= l[k * n + i] * col[k];
+                }
+                col[i] = e / l[i * n + i];
+            }
+            for i in 0..n {
+                y[i * p + a] = col[i];
+            }
+        }
+        // A = J_P Y + eps I, solved by Gaussian elimination without pivoting (A is positive definite).
+        let mut a = vec![zero; p * p];
+        for r in 0..p {
+            for c in 0..p {
+                let mut e = zero;
+                for j in 0..n {
+                    e += jp[r * n + j] * y[j * p + c];
+                }
+                a[r * p + c] = e;
+            }
+        }
+        let largest = (0..p).fold(0.0f64, |m, r| m.max(a[r * p + r].value()));
+        for r in 0..p {
+            a[r * p + r] += T::from(1e-9 * largest + f64::MIN_POSITIVE);
+        }
+        for c in 0..p {
+            for r in c + 1..p {
+                let f = a[r * p + c] / a[c * p + c];
+                for k in c..p {
+                    let v = a[c * p + k];
+                    a[r * p + k] -= f * v;
+                }
+                let v = rhs[c];
+                rhs[r] -= f * v;
+            }
+        }
+        let mut mu = vec![zero; p];
+        for r in (0..p).rev() {
+            let mut e = rhs[r];
+            for k in r + 1..p {
+                e -= a[r * p + k] * mu[k];
+            }
+            mu[r] = e / a[r * p + r];
+        }
+        (0..n)
+            .map(|i| {
+                let mut e = zero;
+                for c in 0..p {
+                    e += y[i * p + c] * mu[c];
+                }
+                e
+            })
+            .collect()
     }
 
     /// Implicit drag ([`Drag::Implicit`]): `M + h D` in place of `M` in the step's equations (with `r`
@@ -651,9 +791,14 @@ impl Model {
         if info.status == ncp::Status::Converged && self.violation(&problem, &z) > STEP_TOLERANCE {
             info.status = ncp::Status::Violated;
         }
+        let dim = n + m;
+        let mass: Vec<f64> = (0..n * n)
+            .map(|e| problem.m_row_major()[(e / n) * dim + e % n])
+            .collect();
+        let correction = self.position_correction(&mass, &cons.jacobian, &cons.d);
         let mut x_next = vec![0.0; 2 * n];
         for i in 0..n {
-            x_next[i] = x[i] + h * z[i];
+            x_next[i] = x[i] + correction[i] + h * z[i];
             x_next[n + i] = z[i];
         }
         let lambda = z[n..].to_vec();

@@ -36,6 +36,8 @@ pub(super) struct Ingredients<T> {
     pub(super) jac: Vec<T>,
     pub(super) d: Vec<T>,
     pub(super) sigma: Vec<T>,
+    /// The position-level correction `dq(q)` ([`Model::position_correction`]), `n`.
+    pub(super) correction: Vec<T>,
 }
 
 /// Values, gradients and Hessians of a list of functions of `dim` arguments, stored flat: function `i`'s
@@ -199,7 +201,8 @@ pub(super) struct Expansion {
     pub(super) distance: Vec<f64>,
     /// `(joint, direction of its control in y)`.
     pub(super) actuated: Vec<(usize, usize)>,
-    /// `M` (`n x n`), then `J` (`m x n`), then `d` (`m`), then the noise (`m`), over `q`.
+    /// `M` (`n x n`), then `J` (`m x n`), then `d` (`m`), then the noise (`m`), then the position-level
+    /// correction (`n`), over `q`.
     pub(super) geometry: Taylor,
     /// `r(q, v)` with `B u` (`n`), over `(q, v)`.
     pub(super) forces: Taylor,
@@ -224,6 +227,11 @@ impl Expansion {
     /// Index of row `k`'s noise.
     pub(super) fn noise(&self, k: usize) -> usize {
         self.n * (self.n + self.m) + self.m + k
+    }
+
+    /// Index of entry `i` of the position-level correction.
+    pub(super) fn correction(&self, i: usize) -> usize {
+        self.n * (self.n + self.m) + 2 * self.m + i
     }
 
     /// The ingredients as numbers over the directions `dirs` of `y`, from each function's value, its
@@ -256,6 +264,7 @@ impl Expansion {
             jac: map(n * n..n * n + m * n),
             d: map(self.dist(0)..self.dist(m)),
             sigma: map(self.noise(0)..self.noise(m)),
+            correction: map(self.correction(0)..self.correction(n)),
         }
     }
 
@@ -351,7 +360,7 @@ impl Model {
         let dual = |v: &[F1]| v.iter().map(jet1_dual).collect::<Vec<_>>();
         let mut M = kin.mass_matrix(scene);
         let mut d = cons.d;
-        let distance = self.prepare_ingredients(&mut M, &mut d)?;
+        let (distance, correction) = self.prepare_ingredients(&mut M, &cons.jacobian, &mut d)?;
         Ok(Ingredients {
             contacts: cons.contacts,
             distance,
@@ -360,10 +369,11 @@ impl Model {
             jac: dual(&cons.jacobian),
             d: dual(&d),
             sigma: dual(&sigma),
+            correction: dual(&correction),
         })
     }
 
-    /// The geometry `[M; J; d; noise]` of `q` in any jet, with the contact frames and true distances.
+    /// The geometry `[M; J; d; noise; correction]` of `q` in any jet, with the contact frames and true distances.
     fn geometry<const K: usize>(
         &self,
         q: &[Jet<K>],
@@ -376,7 +386,7 @@ impl Model {
         let sigma = self.noise(&cons.jacobian, cons.d.len());
         let mut M = kin.mass_matrix(scene);
         let mut d = cons.d;
-        let distance = self.prepare_ingredients(&mut M, &mut d)?;
+        let (distance, correction) = self.prepare_ingredients(&mut M, &cons.jacobian, &mut d)?;
         if side.is_none() {
             *side = Some((cons.contacts, distance));
         }
@@ -384,6 +394,7 @@ impl Model {
         sink.emit(&cons.jacobian);
         sink.emit(&d);
         sink.emit(&sigma);
+        sink.emit(&correction);
         Ok(())
     }
 
@@ -403,7 +414,7 @@ impl Model {
         let n = scene.n_dof();
         let mut side = None;
         let m = scene.n_constraints();
-        let len = n * n + m * n + 2 * m;
+        let len = n * n + m * n + 2 * m + n;
         let geometry = if n <= 3 {
             Taylor::expand::<3>(&x[..n], len, |q, sink| self.geometry(q, &mut side, sink))?
         } else {

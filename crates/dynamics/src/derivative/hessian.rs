@@ -276,7 +276,10 @@ impl Model {
                 Some(general_hessians(&ing, h, x, &lin, cols, normal))
             }
         };
-        let Linearised { p, lu, dp, kinds } = lin;
+        let correction = correction_hessians(&ing);
+        let Linearised {
+            p, lu, dp, kinds, ..
+        } = lin;
         let equations = match (structured, assembled) {
             (Some(sigma), _) => {
                 Equations::Structured(Structured::new(ing, h, x, p, dp, &kinds, sigma))
@@ -291,8 +294,33 @@ impl Model {
             h,
             adjoint: std::cell::RefCell::new(lu),
             equations,
+            correction,
         })
     }
+}
+
+/// The Hessians over `q` of the position-level correction's entries (`n` row-major `n x n` blocks), or
+/// `None` where the correction is zero (no constraint deeper than the recovery).
+fn correction_hessians(ing: &Expansion) -> Option<Vec<f64>> {
+    let n = ing.n;
+    let geo = &ing.geometry;
+    let dim = geo.dim();
+    let any = (0..n).any(|i| {
+        let k = ing.correction(i);
+        geo.re(k) != 0.0 || geo.g(k).iter().any(|&g| g != 0.0)
+    });
+    any.then(|| {
+        let mut out = vec![0.0; n * n * n];
+        for i in 0..n {
+            let h = geo.h(ing.correction(i));
+            for a in 0..n.min(dim) {
+                for b in 0..n.min(dim) {
+                    out[i * n * n + a * n + b] = h[a * dim + b];
+                }
+            }
+        }
+        out
+    })
 }
 
 /// What the second-order adjoint contracts with `mu`: the Hessians of the step's equations along `T`.
@@ -371,6 +399,9 @@ pub struct SecondOrderStep {
     adjoint: std::cell::RefCell<DenseLu>,
     /// The Hessians of the step's equations along `T`, or what they are made of.
     equations: Equations,
+    /// The Hessians over `q` of the position-level correction `dq(q)` (`q' = q + dq + h v'`), `n` blocks of
+    /// `n x n`; `None` when it is zero.
+    correction: Option<Vec<f64>>,
 }
 
 impl std::fmt::Debug for SecondOrderStep {
@@ -434,6 +465,19 @@ impl SecondOrderStep {
                 }
             }
         }
+        // The correction's own curvature: c_q^T dq(q) adds sum_i c_i d^2 dq_i / dq^2 to the (q, q) block.
+        if let Some(blocks) = &self.correction {
+            for (i, block) in blocks.chunks_exact(n * n).enumerate() {
+                if c[i] == 0.0 {
+                    continue;
+                }
+                for a in 0..n {
+                    for b in 0..n {
+                        hess[a * cols + b] += c[i] * block[a * n + b];
+                    }
+                }
+            }
+        }
         Ok(())
     }
 }
@@ -464,6 +508,7 @@ mod tests {
             h,
             adjoint: std::cell::RefCell::new(lin.lu),
             equations: Equations::Assembled(equations),
+            correction: correction_hessians(&ing),
         };
         (
             structured.hessian(c).unwrap(),

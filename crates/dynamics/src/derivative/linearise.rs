@@ -226,7 +226,24 @@ impl Model {
             }
         }
         lu.solve_many(&mut dp, cols);
-        Ok(Linearised { p, lu, dp, kinds })
+        // The position-level correction's derivatives: a function of q alone, read off its duals.
+        let mut dcorrection = vec![0.0; n * cols];
+        for (ing, first) in passes.iter().zip((0..cols).step_by(DIRECTIONS)) {
+            for (i, e) in ing.correction.iter().enumerate() {
+                if let Some(g) = e.eps.0.as_ref() {
+                    for k in 0..DIRECTIONS.min(cols - first) {
+                        dcorrection[i * cols + first + k] = g[k];
+                    }
+                }
+            }
+        }
+        Ok(Linearised {
+            p,
+            lu,
+            dp,
+            kinds,
+            dcorrection,
+        })
     }
 
     /// Logistic and hard models: `p = z`, the Newton matrix with each row's `(d phi/d lambda, d phi/d w)`;
@@ -390,6 +407,8 @@ pub(super) struct Linearised {
     pub(super) dp: Vec<f64>,
     /// Each complementarity row's kind.
     pub(super) kinds: Vec<RowKind>,
+    /// `d dq / d(x, u)` of the position-level correction, row-major `n x (2n + n_u)`.
+    pub(super) dcorrection: Vec<f64>,
 }
 
 /// The logistic NCP function of paper eq. (17) in any dual type: `min(a, b) - s softplus(-|a - b| / s)`.

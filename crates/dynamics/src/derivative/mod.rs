@@ -6,8 +6,9 @@
 //! `Phi = [M (v' - v) - h (r + B u) - J^T lambda; phi_i(lambda_i, w_i)]` and `w = d / h + J v'`,
 //! `dz = -Phi_z^-1 Phi_x dx`. `Phi_z` is the Newton matrix of the solve; `Phi_x` comes from the same
 //! kinematics code run in forward-mode dual numbers, through `geometry::signed_distance_dual` for the
-//! contact rows; then `q' = q + h v'` gives `fx = [[I + h dv'/dq, h dv'/dv]; [dv'/dq, dv'/dv]]` and
-//! `fu = [h dv'/du; dv'/du]`.
+//! contact rows; then `q' = q + dq(q) + h v'` (`dq` the position-level correction,
+//! [`Model::position_correction`], differentiated with the ingredients) gives
+//! `fx = [[I + d dq/dq + h dv'/dq, h dv'/dv]; [dv'/dq, dv'/dv]]` and `fu = [h dv'/du; dv'/du]`.
 //!
 //! For the hard model the derivative is that of the active set: rows with `lambda_i > 0` are held as
 //! equalities `w_i = 0`, the others dropped (`lambda_i = 0`); it is the derivative of the step wherever the
@@ -120,15 +121,16 @@ impl Model {
         let nx = 2 * n;
         let mut fx = vec![0.0; nx * nx];
         let mut fu = vec![0.0; nx * nu];
+        let dc = &lin.dcorrection;
         for i in 0..n {
             for j in 0..nx {
                 let d = dv[i * cols + j];
-                fx[i * nx + j] = h * d + if i == j { 1.0 } else { 0.0 };
+                fx[i * nx + j] = h * d + dc[i * cols + j] + if i == j { 1.0 } else { 0.0 };
                 fx[(n + i) * nx + j] = d;
             }
             for k in 0..nu {
                 let d = dv[i * cols + nx + k];
-                fu[i * nu + k] = h * d;
+                fu[i * nu + k] = h * d + dc[i * cols + nx + k];
                 fu[(n + i) * nu + k] = d;
             }
         }
