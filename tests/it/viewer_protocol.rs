@@ -290,3 +290,52 @@ async fn a_flood_of_refused_messages_and_a_silent_connection_change_nothing_for_
         .unwrap()
         .unwrap();
 }
+
+/// Issue 27: a `reset` carrying a field it does not have was accepted, and a message over the size limit
+/// dropped the connection without a close frame. The first is now answered with an error, the second
+/// closes with code 1009 (message too big) and a reason.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn extra_fields_are_refused_and_an_oversized_message_closes_with_its_reason() {
+    let viewer = Viewer::bind(config(0)).await.unwrap();
+    let addr = viewer.local_addr().unwrap();
+    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
+    let server = tokio::spawn(viewer.run(async {
+        let _ = stopped.await;
+    }));
+    let url = format!("ws://{addr}/ws");
+    let (mut a, _) = tokio_tungstenite::connect_async(&url).await.unwrap();
+    assert_eq!(next(&mut a).await["type"], "hello");
+    send(&mut a, json!({"type": "reset", "hard": true})).await;
+    let e = next_of(&mut a, "error").await;
+    assert!(
+        e["message"]
+            .as_str()
+            .unwrap()
+            .contains("unknown field `hard`"),
+        "{e}"
+    );
+    let big = format!(
+        "{{\"type\":\"kick\",\"std\":1.0,\"pad\":\"{}\"}}",
+        "x".repeat(viewer::MAX_CLIENT_MESSAGE + 10)
+    );
+    a.send(Message::Text(big.into())).await.unwrap();
+    let close = loop {
+        match tokio::time::timeout(Duration::from_secs(10), a.next())
+            .await
+            .expect("an answer within 10 s")
+        {
+            Some(Ok(Message::Close(frame))) => break frame,
+            Some(Ok(_)) => continue,
+            other => panic!("the connection ended without a close frame: {other:?}"),
+        }
+    };
+    let frame = close.expect("a close frame with a code");
+    assert_eq!(u16::from(frame.code), 1009, "{frame:?}");
+    assert!(frame.reason.contains("limit"), "{frame:?}");
+    stop.send(()).unwrap();
+    tokio::time::timeout(Duration::from_secs(10), server)
+        .await
+        .expect("the server stops")
+        .unwrap()
+        .unwrap();
+}

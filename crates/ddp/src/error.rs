@@ -8,7 +8,7 @@ use thiserror::Error;
 #[derive(Debug, Error)]
 pub enum DdpError {
     /// A setting out of its range.
-    #[error("setting {name} = {value} is out of range: {expected}")]
+    #[error("setting {name} = {value:?} is out of range: {expected}")]
     Setting {
         /// The setting's name.
         name: &'static str,

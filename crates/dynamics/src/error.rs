@@ -34,7 +34,7 @@ pub enum DynamicsError {
         problem: String,
     },
     /// A setting is out of range.
-    #[error("setting `{name}` = {value} is out of range: {expected}")]
+    #[error("setting `{name}` = {value:?} is out of range: {expected}")]
     Setting {
         /// The field.
         name: &'static str,

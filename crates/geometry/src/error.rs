@@ -15,7 +15,7 @@ pub enum GeometryError {
         value: f64,
     },
     /// A pose coordinate was infinite or NaN.
-    #[error("pose of {shape} has non-finite {coordinate} = {value}")]
+    #[error("pose of {shape} has non-finite {coordinate} = {value:?}")]
     Pose {
         /// Which shape (`"A"`, `"B"`).
         shape: &'static str,

@@ -17,7 +17,7 @@ pub enum NcpError {
     /// An input held NaN or an infinity (given so, or overflowed where a caller assembled it from finite
     /// but extreme values).
     #[error(
-        "{what}[{index}] is {value}: the problem's data must be finite (given so, or overflowed while it was assembled from extreme values)"
+        "{what}[{index}] is {value:?}: the problem's data must be finite (given so, or overflowed while it was assembled from extreme values)"
     )]
     NonFinite {
         /// Which input (`"M"`, `"q"`, `"z0"`, `"F(z0)"`).
@@ -33,7 +33,7 @@ pub enum NcpError {
     )]
     Sigma(f64),
     /// A setting was out of its range.
-    #[error("setting `{name}` = {value} is out of range: {expected}")]
+    #[error("setting `{name}` = {value:?} is out of range: {expected}")]
     Setting {
         /// The field name.
         name: &'static str,

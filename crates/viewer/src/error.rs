@@ -17,8 +17,12 @@ pub enum ViewerError {
     /// The server stopped with an I/O error.
     #[error("the server stopped: {0}")]
     Serve(#[source] std::io::Error),
+    /// The world's thread died (a bug below the viewer): the clients were told, and the server stopped
+    /// rather than serve a world that no longer moves.
+    #[error("the simulated world stopped on an internal error (a bug; please report it): {0}")]
+    WorldDied(String),
     /// A setting or a message's value out of range.
-    #[error("{name} = {value} is out of range: {expected}")]
+    #[error("{name} = {value:?} is out of range: {expected}")]
     Setting {
         /// The setting.
         name: &'static str,

@@ -97,7 +97,19 @@ pub enum ClientMessage {
 impl ClientMessage {
     /// Parse one text message.
     pub fn parse(text: &str) -> Result<Self, crate::ViewerError> {
-        serde_json::from_str(text).map_err(|e| crate::ViewerError::Message(e.to_string()))
+        let message: Self =
+            serde_json::from_str(text).map_err(|e| crate::ViewerError::Message(e.to_string()))?;
+        // serde's internally tagged unit variants ignore other fields; a message that carries any is
+        // refused like every other message with a field it does not have.
+        if matches!(message, ClientMessage::Release | ClientMessage::Reset)
+            && let Ok(serde_json::Value::Object(fields)) = serde_json::from_str(text)
+            && let Some(extra) = fields.keys().find(|k| k.as_str() != "type")
+        {
+            return Err(crate::ViewerError::Message(format!(
+                "unknown field `{extra}`: this message takes only `type`"
+            )));
+        }
+        Ok(message)
     }
 }
 

@@ -160,9 +160,26 @@ impl Viewer {
         let stop = Arc::new(AtomicBool::new(false));
         let world = self.world;
         let stop_world = stop.clone();
+        // A panic in the world's thread (a bug) is told to every client as an error message and stops
+        // the server with an error, rather than leaving it serving a world that no longer moves.
+        let (died_tx, died_rx) = tokio::sync::oneshot::channel::<String>();
         let simulation = std::thread::Builder::new()
             .name("viewer-world".into())
-            .spawn(move || simulate(world, input_rx, frame_tx, &stop_world))
+            .spawn(move || {
+                let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                    simulate(world, input_rx, &frame_tx, &stop_world)
+                }));
+                if let Err(payload) = outcome {
+                    let what = payload
+                        .downcast_ref::<&str>()
+                        .map(|s| s.to_string())
+                        .or_else(|| payload.downcast_ref::<String>().cloned())
+                        .unwrap_or_else(|| "a panic without a message".into());
+                    let message = ViewerError::WorldDied(what.clone()).to_string();
+                    let _ = frame_tx.send(json(&ServerMessage::Error { message }).into());
+                    let _ = died_tx.send(what);
+                }
+            })
             .map_err(ViewerError::Serve)?;
         let app = Router::new()
             .route("/", get(index))
@@ -180,15 +197,25 @@ impl Viewer {
             inner: self.listener,
             timeout: self.idle_timeout,
         };
+        let died = Arc::new(std::sync::Mutex::new(None::<String>));
+        let died_seen = died.clone();
         let served = axum::serve(listener, app)
             .with_graceful_shutdown(async move {
-                shutdown.await;
+                tokio::select! {
+                    () = shutdown => {}
+                    Ok(what) = died_rx => {
+                        *died_seen.lock().unwrap_or_else(|p| p.into_inner()) = Some(what);
+                    }
+                }
                 // Stopping the world drops the frame channel, which ends every client's connection.
                 stop_server.store(true, Ordering::Relaxed);
             })
             .await;
         stop.store(true, Ordering::Relaxed);
         let _ = simulation.join();
+        if let Some(what) = died.lock().unwrap_or_else(|p| p.into_inner()).take() {
+            return Err(ViewerError::WorldDied(what));
+        }
         served.map_err(ViewerError::Serve)
     }
 }
@@ -197,7 +224,7 @@ impl Viewer {
 fn simulate(
     mut world: World,
     inputs: mpsc::Receiver<Input>,
-    frames: watch::Sender<Arc<str>>,
+    frames: &watch::Sender<Arc<str>>,
     stop: &AtomicBool,
 ) {
     let mut next = Instant::now();
@@ -273,8 +300,14 @@ async fn style() -> Response {
     ([(header::CONTENT_TYPE, "text/css; charset=utf-8")], STYLE).into_response()
 }
 
+/// The largest message a client may send (its messages are a few hundred bytes); a longer one closes the
+/// connection with code 1009 (message too big) and the reason.
+pub const MAX_CLIENT_MESSAGE: usize = 64 << 10;
+
 async fn upgrade(ws: WebSocketUpgrade, State(state): State<AppState>) -> Response {
-    ws.on_upgrade(move |socket| client(socket, state))
+    ws.max_message_size(MAX_CLIENT_MESSAGE)
+        .max_frame_size(MAX_CLIENT_MESSAGE)
+        .on_upgrade(move |socket| client(socket, state))
 }
 
 /// One client: the hello, then every new frame out and every message in, until either side closes.
@@ -317,7 +350,28 @@ async fn client(socket: WebSocket, state: AppState) {
                 }
             }
             message = stream.next() => match message {
-                None | Some(Err(_)) | Some(Ok(Message::Close(_))) => break,
+                None | Some(Ok(Message::Close(_))) => break,
+                Some(Err(e)) => {
+                    // Say why before closing: a message over the limit (1009), or a broken frame (1002).
+                    let reason = e.to_string();
+                    let code = if reason.contains("too long") || reason.contains("limit") {
+                        1009
+                    } else {
+                        1002
+                    };
+                    let text = if code == 1009 {
+                        format!("message over the {MAX_CLIENT_MESSAGE}-byte limit")
+                    } else {
+                        reason.chars().take(100).collect()
+                    };
+                    let _ = sink
+                        .send(Message::Close(Some(axum::extract::ws::CloseFrame {
+                            code,
+                            reason: text.into(),
+                        })))
+                        .await;
+                    break;
+                }
                 Some(Ok(Message::Text(text))) => match ClientMessage::parse(text.as_str()) {
                     Ok(message) => match enqueue(&state.inputs, message, &reply_tx, &waiting) {
                         Ok(()) => {}
