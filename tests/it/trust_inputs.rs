@@ -286,3 +286,20 @@ fn full_ddp_past_its_memory_limit_is_refused_with_the_estimate_and_ilqr_runs() {
     .unwrap();
     ilqr.solve(&mut dynamics, &cost, &x0, &controls).unwrap();
 }
+
+/// Issue 27: a task's `control_limits` with three entries said `invalid length 3` without the field.
+#[test]
+fn a_malformed_task_field_is_named() {
+    let text = include_str!("../../scenes/pushing.toml").replacen(
+        "control_weight = 0.05",
+        "control_weight = 0.05\ncontrol_limits = [-1.0, 0.0, 1.0]",
+        1,
+    );
+    let err = library::ProblemFile::from_toml_str(&text)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("control_limits") && err.contains("push"),
+        "{err}"
+    );
+}

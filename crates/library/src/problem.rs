@@ -378,14 +378,18 @@ impl ProblemFile {
                         })?;
                 let mut out = BTreeMap::new();
                 for (name, value) in tasks {
-                    let spec: TaskSpec =
-                        value
-                            .try_into()
-                            .map_err(|e: toml::de::Error| LibraryError::Task {
+                    // Deserialised through the path tracker, so that an error names its field
+                    // (`control_limits: invalid length 3, expected an array of length 2`).
+                    let spec: TaskSpec = serde_path_to_error::deserialize(value).map_err(
+                        |e: serde_path_to_error::Error<toml::de::Error>| {
+                            let path = e.path().to_string();
+                            LibraryError::Task {
                                 task: name.clone(),
-                                field: String::new(),
-                                problem: e.message().to_string(),
-                            })?;
+                                field: if path == "." { String::new() } else { path },
+                                problem: e.into_inner().message().to_string(),
+                            }
+                        },
+                    )?;
                     out.insert(name, spec);
                 }
                 out
