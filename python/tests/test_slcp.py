@@ -41,8 +41,11 @@ def test_a_step_and_its_derivatives_equal_the_command_lines(xtask_step, model):
         assert x_next.dtype == np.float64 and x_next.shape == (6,)
         assert fx.shape == (6, 6) and fu.shape == (6, 2)
         np.testing.assert_allclose(x_next, ref["x_next"], rtol=0, atol=1e-12)
-        np.testing.assert_allclose(fx, np.array(ref["fx"]), rtol=0, atol=1e-12)
-        np.testing.assert_allclose(fu, np.array(ref["fu"]), rtol=0, atol=1e-12)
+        # The extension and the command line are separate builds whose steps agree to the last bit or
+        # two (1e-16); the tip pressed 0.076 into the ellipse makes the smoothed Newton system ill
+        # conditioned enough (about 1e4) to carry that to 5e-12 in the derivatives.
+        np.testing.assert_allclose(fx, np.array(ref["fx"]), rtol=1e-10, atol=1e-11)
+        np.testing.assert_allclose(fu, np.array(ref["fu"]), rtol=1e-10, atol=1e-11)
 
 
 def test_the_hessian_equals_the_command_lines_and_is_symmetric(xtask_step):

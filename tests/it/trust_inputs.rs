@@ -303,3 +303,16 @@ fn a_malformed_task_field_is_named() {
         "{err}"
     );
 }
+
+/// Issue 27: a scene with a 47 MB TOML array took 2.6 GB to parse. A scene text past
+/// `MAX_SCENE_TEXT` is refused by its size, before parsing.
+#[test]
+fn an_oversized_scene_text_is_refused_before_parsing() {
+    let numbers = vec!["0.0"; 400_000].join(", ");
+    let text = format!("{PENDULUM}\nextra = [{numbers}]\n");
+    assert!(text.len() > dynamics::MAX_SCENE_TEXT);
+    let Err(DynamicsError::Parse(message)) = Scene::from_toml_str(&text) else {
+        panic!("accepted")
+    };
+    assert!(message.contains("MAX_SCENE_TEXT"), "{message}");
+}

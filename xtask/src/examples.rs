@@ -215,6 +215,8 @@ pub(crate) fn stamp() -> String {
         "seeds": 3,
         "seconds": SECONDS,
         "kicks": [KICK_STD, KICK_EVERY],
+        // The step itself (how penetration is recovered, issue 27): new physics, new numbers.
+        "step": dynamics::StepSettings::default(),
     });
     format!("{:08x}", crc32fast::hash(inputs.to_string().as_bytes()))
 }

@@ -23,7 +23,9 @@ pub enum Problem {
 /// Which backward pass.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum MethodArg {
-    /// Full second-order DDP (the dynamics' Hessians of V_x . f).
+    /// Full second-order DDP (the dynamics' Hessians of V_x . f). Its second derivatives are kept per
+    /// knot: a problem that would need more than 8 GiB of them over the horizon (a scene of tens of free
+    /// bodies) is refused with the estimate before anything is allocated; use ilqr there.
     Full,
     /// Gauss-Newton iLQR.
     Ilqr,

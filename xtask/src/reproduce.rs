@@ -54,6 +54,8 @@ pub(crate) fn stamp() -> String {
         "format": library::VERSION,
         "seeds": crate::seeds::SEEDS,
         "seconds": SECONDS,
+        // The step itself (how penetration is recovered, issue 27): new physics, new numbers.
+        "step": dynamics::StepSettings::default(),
     });
     format!("{:08x}", crc32fast::hash(inputs.to_string().as_bytes()))
 }

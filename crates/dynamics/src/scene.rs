@@ -205,6 +205,9 @@ pub const MAX_GRAVITY: f64 = 1e6;
 /// The largest friction coefficient of a contact pair (physical ones are below 2): past it the friction
 /// rows dwarf the normal ones and the step's problem loses the normal rows to rounding.
 pub const MAX_FRICTION: f64 = 100.0;
+/// The longest scene file text (1 MiB): parsing TOML takes some fifty times its size in memory, so a
+/// 47 MB array would ask for gigabytes before any field is checked.
+pub const MAX_SCENE_TEXT: usize = 1 << 20;
 /// The largest joint drag coefficient.
 pub const MAX_DAMPING: f64 = 1e6;
 /// The admissible densities (mass per unit area).
@@ -640,6 +643,13 @@ impl Scene {
     /// A scene file may also hold `[task.NAME]` tables: they belong to the crates above (the `library`
     /// crate's `ProblemFile` reads them) and are left out here, unchecked.
     pub fn from_toml_str(text: &str) -> Result<Self, DynamicsError> {
+        if text.len() > MAX_SCENE_TEXT {
+            return Err(DynamicsError::Parse(format!(
+                "{} bytes: a scene file is at most {MAX_SCENE_TEXT} bytes (MAX_SCENE_TEXT; a scene at every \
+                 other limit takes well under a hundredth of it)",
+                text.len()
+            )));
+        }
         let mut table: toml::Table = text
             .parse()
             .map_err(|e: toml::de::Error| DynamicsError::Parse(e.to_string()))?;

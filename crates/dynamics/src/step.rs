@@ -504,23 +504,8 @@ impl Model {
         }
         // Y = M^-1 J_P^T (n x p), by Cholesky of M.
         let mut l = M.to_vec();
-        for j in 0..n {
-            let mut diag = l[j * n + j];
-            for k in 0..j {
-                diag -= l[j * n + k] * l[j * n + k];
-            }
-            if !(diag.value() > 0.0) {
-                return vec![zero; n];
-            }
-            let diag = diag.square_root();
-            l[j * n + j] = diag;
-            for i in j + 1..n {
-                let mut e = l[i * n + j];
-                for k in 0..j {
-                    e -= l[i * n + k] * l[j * n + k];
-                }
-                l[i * n + j] = e / diag;
-            }
+        if !cholesky_in_place(&mut l, n) {
+            return vec![zero; n];
         }
         let mut y = vec![zero; n * p];
         for a in 0..p {
@@ -614,25 +599,10 @@ impl Model {
         let n = scene.n_dof();
         // Cholesky in place (lower), then W = L^-1 D^1/2 column by column.
         let mut l: Vec<f64> = M.iter().map(Ring::value).collect();
-        for j in 0..n {
-            let mut diag = l[j * n + j];
-            for k in 0..j {
-                diag -= l[j * n + k] * l[j * n + k];
-            }
-            if diag.is_nan() || diag <= 0.0 {
-                return Err(DynamicsError::Unsupported(
-                    "the mass matrix is not positive definite at this state",
-                ));
-            }
-            let diag = diag.sqrt();
-            l[j * n + j] = diag;
-            for i in j + 1..n {
-                let mut e = l[i * n + j];
-                for k in 0..j {
-                    e -= l[i * n + k] * l[j * n + k];
-                }
-                l[i * n + j] = e / diag;
-            }
+        if !cholesky_in_place(&mut l, n) {
+            return Err(DynamicsError::Unsupported(
+                "the mass matrix is not positive definite at this state",
+            ));
         }
         let mut w = vec![0.0; n * n];
         for (c, coordinate) in scene.coordinates.iter().enumerate() {
@@ -818,6 +788,30 @@ impl Model {
         });
         Ok(problem)
     }
+}
+
+/// The lower Cholesky factor of the row-major `n x n` matrix `l`, in place (the upper triangle is left as
+/// it was); `false` if a pivot is not positive (or NaN).
+fn cholesky_in_place<T: Ring>(l: &mut [T], n: usize) -> bool {
+    for j in 0..n {
+        let mut diag = l[j * n + j];
+        for k in 0..j {
+            diag -= l[j * n + k] * l[j * n + k];
+        }
+        if !(diag.value() > 0.0) {
+            return false;
+        }
+        let diag = diag.square_root();
+        l[j * n + j] = diag;
+        for i in j + 1..n {
+            let mut e = l[i * n + j];
+            for k in 0..j {
+                e -= l[i * n + k] * l[j * n + k];
+            }
+            l[i * n + j] = e / diag;
+        }
+    }
+    true
 }
 
 pub(crate) fn check(what: &'static str, v: &[f64], len: usize) -> Result<(), DynamicsError> {

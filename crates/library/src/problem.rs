@@ -406,10 +406,22 @@ impl ProblemFile {
 
     /// Read and parse a scene file.
     pub fn load(path: &std::path::Path) -> Result<Self, LibraryError> {
-        let text = std::fs::read_to_string(path).map_err(|source| LibraryError::Io {
+        let io = |source| LibraryError::Io {
             path: path.display().to_string(),
             source,
-        })?;
+        };
+        // Refused by size before it is read: a scene file is small (dynamics::MAX_SCENE_TEXT).
+        let size = std::fs::metadata(path).map_err(io)?.len();
+        if size > dynamics::MAX_SCENE_TEXT as u64 {
+            return Err(LibraryError::Dynamics(dynamics::DynamicsError::Parse(
+                format!(
+                    "{}: {size} bytes, over the {} of a scene file (dynamics::MAX_SCENE_TEXT)",
+                    path.display(),
+                    dynamics::MAX_SCENE_TEXT
+                ),
+            )));
+        }
+        let text = std::fs::read_to_string(path).map_err(io)?;
         Self::from_toml_str(&text)
     }
 
