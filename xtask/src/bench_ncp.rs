@@ -261,7 +261,7 @@ pub fn section() -> anyhow::Result<String> {
         ));
     }
     out.push_str("\nAt a step's sizes faer's per-call overhead dominates the arithmetic, so the hand-written kernel is the default (`LinearSolver::Hand`); the faer row of the table above shows what the choice is worth in a whole solve.\n");
-    out.push_str("\nLemke's method at sizes up to its limit (`LemkeSettings::max_size`, 500 rows), on planted positive definite LCPs (`instances::planted_lcp`, seed 7), one solve each: the basis is factored from the original data every 32 pivots and the pivots in between kept in product form (O(n^2) each), so a solve costs O(n^3); before issue 27 it refactored at every pivot, O(n^4), and 400 rows took about a minute. Error: max |z - z_planted| relative to the data's scale.\n\n| rows | pivots | time (ms) | error |\n|---:|---:|---:|---:|\n");
+    out.push_str("\nLemke's method at sizes up to its limit (`LemkeSettings::max_size`, 500 rows), on planted positive definite LCPs (`instances::planted_lcp`, seed 7), one solve each: the basis is factored from the original data every 32 pivots and the pivots in between kept in product form (O(n^2) each), and a degenerate pivot's tie is broken on the tied rows of the inverse alone (one transposed solve each); before issue 27 it refactored at every pivot, O(n^4), and 400 rows took about a minute. Error: max |z - z_planted| relative to the data's scale.\n\n| rows | pivots | time (ms) | error |\n|---:|---:|---:|---:|\n");
     for n in [50, 100, 200, 400, 500] {
         let (p, planted) =
             ncp::instances::planted_lcp(ncp::instances::MatrixKind::PositiveDefinite, n, 7);

@@ -223,11 +223,10 @@ fn lemke_lcp(m: &[f64], q: &[f64], max_pivots: usize, covering: &[f64]) -> Attem
     let mut col = vec![0.0; n];
     let mut x = vec![0.0; n];
     let mut a = vec![0.0; n];
-    // The basis is factored from the original data every `REFACTOR` pivots (or after a small pivot, or
-    // before a tie is broken); the pivots in between are kept in product form, one eta column each
+    // The basis is factored from the original data every `REFACTOR` pivots (or after a small pivot); the
+    // pivots in between are kept in product form, one eta column each
     // (O(n) to apply), so that some n pivots cost O(n^3) in all rather than a factorisation each, O(n^4).
     let mut etas: Vec<(usize, Vec<f64>)> = Vec::new();
-    let mut binv = vec![0.0; n * n];
     let mut since_refactor = usize::MAX;
     let mut entering = z0;
     let mut pivots = 0;
@@ -289,30 +288,30 @@ fn lemke_lcp(m: &[f64], q: &[f64], max_pivots: usize, covering: &[f64]) -> Attem
             .copied()
             .filter(|&i| near(ratio(i)))
             .collect();
-        if ties.len() > 1 && since_refactor > 0 {
-            // The tie rule reads the inverse's rows: take them fresh from the original data, not from
-            // the updates, and look again.
-            since_refactor = REFACTOR;
-            continue;
-        }
         if ties.len() > 1 {
+            // The lexicographic rule reads the tied rows of B^-1: each by one transposed solve through
+            // the pivots kept in product form and the factors (O(n^2) a row), never all of B^-1. (Column
+            // by column would cost a solve per column, and degenerate slacks tie for some n columns.)
+            let rows: Vec<Vec<f64>> = ties
+                .iter()
+                .map(|&i| {
+                    let mut y = vec![0.0; n];
+                    y[i] = 1.0;
+                    basis_row(&mut lu, &etas, &mut y);
+                    y
+                })
+                .collect();
+            let mut alive: Vec<usize> = (0..ties.len()).collect();
             for k in 0..n {
-                col.fill(0.0);
-                col[k] = 1.0;
-                lu.solve(&mut col);
-                for i in 0..n {
-                    binv[i * n + k] = col[i];
-                }
-            }
-            for k in 0..n {
-                let key = |i: usize| binv[i * n + k] / (sign * a[i]);
-                let least = ties.iter().map(|&i| key(i)).fold(f64::INFINITY, f64::min);
-                let scale = ties.iter().map(|&i| key(i).abs()).fold(0.0f64, f64::max);
-                ties.retain(|&i| key(i) - least <= 1e-11 * scale.max(1e-300));
-                if ties.len() == 1 {
+                let key = |t: usize| rows[t][k] / (sign * a[ties[t]]);
+                let least = alive.iter().map(|&t| key(t)).fold(f64::INFINITY, f64::min);
+                let scale = alive.iter().map(|&t| key(t).abs()).fold(0.0f64, f64::max);
+                alive.retain(|&t| key(t) - least <= 1e-11 * scale.max(1e-300));
+                if alive.len() <= 1 {
                     break;
                 }
             }
+            ties = alive.iter().map(|&t| ties[t]).collect();
         }
         // Rounding can leave no row within the tolerance of the minimum (a NaN ratio, a tie rule that
         // drops every row): a breakdown of this attempt, never a panic.
@@ -373,6 +372,22 @@ fn solve_basis(lu: &mut DenseLu, etas: &[(usize, Vec<f64>)], v: &mut [f64]) {
             }
         }
     }
+}
+
+/// Row `i` of `B^-1` in place of `y = e_i`, with `B` the factored basis followed by the pivots `etas`:
+/// `e_i^T E_k ... E_1 B_0^-1`, the etas' transposes applied last to first, then `B_0^-T`.
+fn basis_row(lu: &mut DenseLu, etas: &[(usize, Vec<f64>)], y: &mut [f64]) {
+    for (row, a) in etas.iter().rev() {
+        let others: f64 = y
+            .iter()
+            .zip(a)
+            .enumerate()
+            .filter(|(j, _)| j != row)
+            .map(|(_, (yj, aj))| yj * aj)
+            .sum();
+        y[*row] = (y[*row] - others) / a[*row];
+    }
+    lu.solve_transposed(y);
 }
 
 /// How one run of Lemke's method ended.
