@@ -43,20 +43,29 @@ pub(crate) fn both(
     f: impl Fn(&DrawingArea<BitMapBackend, Shift>) -> anyhow::Result<()>,
     g: impl Fn(&DrawingArea<SVGBackend, Shift>) -> anyhow::Result<()>,
 ) -> anyhow::Result<()> {
+    // Each picture whole or not at all: the PNG drawn into a temporary file beside it and renamed, the SVG
+    // drawn into memory and written atomically (a failed draw never leaves half a figure).
     let png = dir.join(format!("{name}.png"));
-    let svg = dir.join(format!("{name}.svg"));
-    {
-        let root = BitMapBackend::new(&png, size).into_drawing_area();
+    let partial = dir.join(format!(".{name}.{}.partial.png", std::process::id()));
+    let drawn = (|| {
+        let root = BitMapBackend::new(&partial, size).into_drawing_area();
         root.fill(&WHITE).map_err(err)?;
         f(&root)?;
-        root.present().map_err(err)?;
+        root.present().map_err(err)
+    })()
+    .and_then(|()| std::fs::rename(&partial, &png).map_err(anyhow::Error::from));
+    if drawn.is_err() {
+        let _ = std::fs::remove_file(&partial);
     }
+    drawn?;
+    let mut text = String::new();
     {
-        let root = SVGBackend::new(&svg, size).into_drawing_area();
+        let root = SVGBackend::with_string(&mut text, size).into_drawing_area();
         root.fill(&WHITE).map_err(err)?;
         g(&root)?;
         root.present().map_err(err)?;
     }
+    crate::write_file(dir.join(format!("{name}.svg")), text)?;
     Ok(())
 }
 
@@ -620,6 +629,13 @@ mod tests {
                 );
             }
         }
+        // Drawn whole or not at all: no temporary file is left beside the figures.
+        let left: Vec<_> = std::fs::read_dir(&dir)
+            .unwrap()
+            .filter_map(|e| e.ok())
+            .filter(|e| e.file_name().to_string_lossy().starts_with('.'))
+            .collect();
+        assert!(left.is_empty(), "{left:?}");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }
