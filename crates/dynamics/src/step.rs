@@ -125,7 +125,7 @@ impl StepSettings {
             });
         }
         if let Some(depth) = self.recovery
-            && !(depth >= 0.0)
+            && (depth.is_nan() || depth < 0.0)
         {
             return Err(DynamicsError::Setting {
                 name: "recovery",
@@ -798,7 +798,8 @@ fn cholesky_in_place<T: Ring>(l: &mut [T], n: usize) -> bool {
         for k in 0..j {
             diag -= l[j * n + k] * l[j * n + k];
         }
-        if !(diag.value() > 0.0) {
+        let pivot = diag.value();
+        if pivot.is_nan() || pivot <= 0.0 {
             return false;
         }
         let diag = diag.square_root();
