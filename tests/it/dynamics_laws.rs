@@ -30,7 +30,9 @@ fn physical_step(sim: &mut Simulator, x: &[f64], u: &[f64]) -> Option<dynamics::
     match sim.step(x, u) {
         Ok(step) => Some(step),
         Err(DynamicsError::Ncp(
-            ncp::NcpError::NoSolution { .. } | ncp::NcpError::Infeasible { .. },
+            ncp::NcpError::NoSolution { .. }
+            | ncp::NcpError::Infeasible { .. }
+            | ncp::NcpError::InfeasibleRow { .. },
         )) => None,
         Err(e) => panic!("step at {x:?}: {e}"),
     }

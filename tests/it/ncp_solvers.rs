@@ -171,7 +171,14 @@ fn lemke_handles_degenerate_singular_and_badly_scaled_problems() {
 #[test]
 fn lemke_reports_an_infeasible_lcp_as_an_error() {
     // w_1 = z_2 - 1 >= 0 and w_2 = -z_1 - 1 >= 0 cannot both hold for z >= 0; M is PSD (skew).
+    // Row 2 has no positive entry and q_2 < 0: it proves infeasibility before any pivot.
     let p = LinearMcp::from_rows(0, &[vec![0.0, 1.0], vec![-1.0, 0.0]], &[-1.0, -1.0]).unwrap();
+    assert!(matches!(
+        lemke(&p, &LemkeSettings::default()),
+        Err(NcpError::InfeasibleRow { row: 1, .. })
+    ));
+    // Infeasible with every row holding a positive entry: the ray of Lemke's method proves it.
+    let p = LinearMcp::from_rows(0, &[vec![1.0, -1.0], vec![-1.0, 1.0]], &[-1.0, -1.0]).unwrap();
     assert!(matches!(
         lemke(&p, &LemkeSettings::default()),
         Err(NcpError::Infeasible { .. })
@@ -548,7 +555,7 @@ fn lemke_never_panics_on_subnormal_rows_and_names_a_row_that_proves_infeasibilit
     let p = LinearMcp::from_rows(0, &[vec![0.0, 0.0], vec![0.0, 1.0]], &[-5e-324, -0.5]).unwrap();
     assert!(matches!(
         lemke(&p, &LemkeSettings::default()),
-        Err(NcpError::Infeasible { .. })
+        Err(NcpError::InfeasibleRow { row: 0, .. })
     ));
     // Subnormal but feasible: the row scale stays finite and the answer is exact.
     let p =

@@ -147,7 +147,7 @@ impl ErmSolver {
                 // each row's expected residual is at most sigma^2 (E[min(0, w + sigma xi)^2] <= sigma^2 / 2
                 // where lambda = 0, E[min(lambda, sigma xi)^2] <= sigma^2 where w = 0), so a minimum above
                 // their sum confirms it, and the minimiser is no answer to report as converged.
-                Err(NcpError::Infeasible { .. }) => {
+                Err(NcpError::Infeasible { .. } | NcpError::InfeasibleRow { .. }) => {
                     let bound: f64 = sigma.iter().map(|s| s * s).sum();
                     if f > bound {
                         return Err(NcpError::NoSolution {

@@ -58,6 +58,17 @@ pub enum NcpError {
         /// Pivots performed.
         pivots: usize,
     },
+    /// A row proves the LCP infeasible on its own, before any pivot: `q_i < 0` and no positive entry in
+    /// row `i` of `M`, so `w_i = q_i + (M z)_i < 0` for every `z >= 0`.
+    #[error(
+        "row {row} of the LCP has q = {q:?} < 0 and no positive entry in M: w_{row} < 0 for every z >= 0, so the LCP has no solution"
+    )]
+    InfeasibleRow {
+        /// The row (of the complementarity rows, after the equality rows are eliminated).
+        row: usize,
+        /// Its `q`.
+        q: f64,
+    },
     /// Expected residual minimisation on an LCP without a solution: Lemke's method ended on a ray, and the
     /// smallest expected residual found is above what any solution of the LCP would give (each row's
     /// `sigma^2`), so the minimiser is no smoothed solution of anything.

@@ -72,8 +72,11 @@ pub fn lemke(problem: &LinearMcp, settings: &LemkeSettings) -> Result<Solution, 
     // end on a ray that does not exist. Before saying "infeasible", retry with other covering vectors (the
     // row scales, then ones, then seeded random multiples of them).
     let c = lcp.q().len();
-    if infeasible_row(lcp.m_row_major(), lcp.q()).is_some() {
-        return Err(NcpError::Infeasible { pivots: 0 });
+    if let Some(row) = infeasible_row(lcp.m_row_major(), lcp.q()) {
+        return Err(NcpError::InfeasibleRow {
+            row,
+            q: lcp.q()[row],
+        });
     }
     // Judged row by row in the equilibrated problem (each row divided by its largest entry), so that a
     // row scaled by 1e-8 is held to the same standard as one scaled by 1e8.
