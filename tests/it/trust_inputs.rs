@@ -13,6 +13,18 @@ fn problems(text: &str) -> Vec<(String, String)> {
     }
 }
 
+/// A scene of `count` free ellipses in a row, under gravity, actuated or not, and no contact.
+fn free_bodies(count: usize, semi_axes: [f64; 2], actuated: bool) -> String {
+    let mut text = String::from("gravity = [0.0, -1.0]\n");
+    for i in 0..count {
+        text.push_str(&format!(
+            "[[body]]\nname = \"b{i}\"\nsemi_axes = [{}, {}]\nparent = \"world\"\nanchor = [{i}.0, 0.0]\ncentre = [0.0, 0.0]\njoint = {{ type = \"free\", actuated = {actuated} }}\n",
+            semi_axes[0], semi_axes[1]
+        ));
+    }
+    text
+}
+
 #[test]
 fn magnitudes_past_the_scene_limits_are_refused_by_field() {
     // friction = 1e200 was accepted as finite and made Lemke's method panic in every command.
@@ -75,12 +87,7 @@ fn a_malformed_item_is_named_by_its_index() {
 
 #[test]
 fn a_scene_past_the_body_limit_is_refused_with_the_limit() {
-    let mut text = String::from("gravity = [0.0, -1.0]\n");
-    for i in 0..=dynamics::MAX_BODIES {
-        text.push_str(&format!(
-            "[[body]]\nname = \"b{i}\"\nsemi_axes = [0.1, 0.1]\nparent = \"world\"\nanchor = [{i}.0, 0.0]\ncentre = [0.0, 0.0]\njoint = {{ type = \"free\" }}\n"
-        ));
-    }
+    let text = free_bodies(dynamics::MAX_BODIES + 1, [0.1, 0.1], false);
     let found = problems(&text);
     assert!(
         found
@@ -253,13 +260,7 @@ fn a_converged_step_keeps_its_joint_limits_at_any_input_scale() {
 /// alternative; Gauss-Newton (iLQR) runs the same problem.
 #[test]
 fn full_ddp_past_its_memory_limit_is_refused_with_the_estimate_and_ilqr_runs() {
-    let mut text = String::from("gravity = [0.0, -1.0]\n");
-    for i in 0..30 {
-        text.push_str(&format!(
-            "[[body]]\nname = \"b{i}\"\nsemi_axes = [0.1, 0.05]\nparent = \"world\"\nanchor = [{i}.0, 0.0]\ncentre = [0.0, 0.0]\njoint = {{ type = \"free\", actuated = true }}\n"
-        ));
-    }
-    let scene = Scene::from_toml_str(&text).unwrap();
+    let scene = Scene::from_toml_str(&free_bodies(30, [0.1, 0.05], true)).unwrap();
     let (n, nu) = (scene.n_state(), scene.n_controls);
     let model = dynamics::Model::new(scene, dynamics::StepSettings::default()).unwrap();
     let per_knot = model.second_order_bytes();

@@ -454,7 +454,7 @@ impl Model {
         self.check_drag(M)?;
         self.with_drag(M);
         let distance = d.iter().map(Ring::value).collect();
-        let correction = self.position_correction(M, jacobian, d);
+        let correction = self.position_correction(|e| M[e], jacobian, d);
         self.recovered_all(d);
         Ok((distance, correction))
     }
@@ -468,7 +468,12 @@ impl Model {
     /// `dq = M^-1 J_P^T mu`, `(J_P M^-1 J_P^T + eps I) mu = -(d_P + recovery)`, with `eps` a `1e-9` part of
     /// the largest diagonal entry: constraints that cannot all be met (a body pressed between two walls
     /// closer than its width) get a bounded least-squares compromise rather than a singular solve.
-    pub fn position_correction<T: Ring>(&self, M: &[T], jacobian: &[T], d: &[T]) -> Vec<T> {
+    pub fn position_correction<T: Ring>(
+        &self,
+        M: impl Fn(usize) -> T,
+        jacobian: &[T],
+        d: &[T],
+    ) -> Vec<T> {
         let n = self.scene.n_dof();
         let zero = T::from(0.0);
         let depth = match self.settings.recovery {
@@ -502,31 +507,14 @@ impl Model {
             }
             rhs[a] = -(d[k] + depth);
         }
-        // Y = M^-1 J_P^T (n x p), by Cholesky of M.
-        let mut l = M.to_vec();
+        // Y = M^-1 J_P^T (n x p, column a at y[a n..]), by Cholesky of M.
+        let mut l: Vec<T> = (0..n * n).map(M).collect();
         if !cholesky_in_place(&mut l, n) {
             return vec![zero; n];
         }
-        let mut y = vec![zero; n * p];
-        for a in 0..p {
-            let mut col: Vec<T> = (0..n).map(|j| jp[a * n + j]).collect();
-            for i in 0..n {
-                let mut e = col[i];
-                for k in 0..i {
-                    e -= l[i * n + k] * col[k];
-                }
-                col[i] = e / l[i * n + i];
-            }
-            for i in (0..n).rev() {
-                let mut e = col[i];
-                for k in i + 1..n {
-                    e -= l[k * n + i] * col[k];
-                }
-                col[i] = e / l[i * n + i];
-            }
-            for i in 0..n {
-                y[i * p + a] = col[i];
-            }
+        let mut y = jp.clone();
+        for col in y.chunks_exact_mut(n) {
+            cholesky_solve(&l, n, col);
         }
         // A = J_P Y + eps I, solved by Gaussian elimination without pivoting (A is positive definite).
         let mut a = vec![zero; p * p];
@@ -534,7 +522,7 @@ impl Model {
             for c in 0..p {
                 let mut e = zero;
                 for j in 0..n {
-                    e += jp[r * n + j] * y[j * p + c];
+                    e += jp[r * n + j] * y[c * n + j];
                 }
                 a[r * p + c] = e;
             }
@@ -554,19 +542,18 @@ impl Model {
                 rhs[r] -= f * v;
             }
         }
-        let mut mu = vec![zero; p];
         for r in (0..p).rev() {
-            let mut e = rhs[r];
             for k in r + 1..p {
-                e -= a[r * p + k] * mu[k];
+                let v = a[r * p + k] * rhs[k];
+                rhs[r] -= v;
             }
-            mu[r] = e / a[r * p + r];
+            rhs[r] = rhs[r] / a[r * p + r];
         }
         (0..n)
             .map(|i| {
                 let mut e = zero;
                 for c in 0..p {
-                    e += y[i * p + c] * mu[c];
+                    e += y[c * n + i] * rhs[c];
                 }
                 e
             })
@@ -682,12 +669,14 @@ impl Model {
         if matches!(self.settings.model, Complementarity::Normal { .. }) {
             return 0.0;
         }
-        let n = self.scene.n_dof();
-        let mut w = vec![0.0; z.len()];
-        ncp::Mcp::evaluate(problem, z, &mut w, None);
-        w[n..]
-            .iter()
-            .fold(0.0f64, |v, wk| v.max(-self.settings.h * wk))
+        // Only the complementarity rows of `M z + q`, read in place.
+        let (n, dim) = (self.scene.n_dof(), z.len());
+        let (a, q) = (problem.m_row_major(), problem.q());
+        (n..dim).fold(0.0f64, |v, k| {
+            let row = &a[k * dim..(k + 1) * dim];
+            let wk = q[k] + row.iter().zip(z).map(|(x, y)| x * y).sum::<f64>();
+            v.max(-self.settings.h * wk)
+        })
     }
 
     /// One step from `x` under the controls `u`, with `data`'s applied forces, started from its warm
@@ -761,11 +750,10 @@ impl Model {
         if info.status == ncp::Status::Converged && self.violation(&problem, &z) > STEP_TOLERANCE {
             info.status = ncp::Status::Violated;
         }
-        let dim = n + m;
-        let mass: Vec<f64> = (0..n * n)
-            .map(|e| problem.m_row_major()[(e / n) * dim + e % n])
-            .collect();
-        let correction = self.position_correction(&mass, &cons.jacobian, &cons.d);
+        // M is the problem's leading block (implicit drag included), read in place.
+        let (dim, a) = (n + m, problem.m_row_major());
+        let correction =
+            self.position_correction(|e| a[(e / n) * dim + e % n], &cons.jacobian, &cons.d);
         let mut x_next = vec![0.0; 2 * n];
         for i in 0..n {
             x_next[i] = x[i] + correction[i] + h * z[i];
@@ -787,6 +775,24 @@ impl Model {
             info,
         });
         Ok(problem)
+    }
+}
+
+/// Solve `L L^T x = b` in place of `b`, with `L` the lower factor [`cholesky_in_place`] left in `l`.
+fn cholesky_solve<T: Ring>(l: &[T], n: usize, b: &mut [T]) {
+    for i in 0..n {
+        let mut e = b[i];
+        for k in 0..i {
+            e -= l[i * n + k] * b[k];
+        }
+        b[i] = e / l[i * n + i];
+    }
+    for i in (0..n).rev() {
+        let mut e = b[i];
+        for k in i + 1..n {
+            e -= l[k * n + i] * b[k];
+        }
+        b[i] = e / l[i * n + i];
     }
 }
 
