@@ -7,7 +7,10 @@
 //! generally non-convex, bound-constrained minimisation in `c` variables, solved by a projected Newton method
 //! (Bertsekas, "Projected Newton methods for optimization problems with simple constraints", 1982) on the
 //! exact Hessian of eq. (15), with a Levenberg–Marquardt shift that makes the reduced Hessian positive
-//! definite and adapts to the step's success, and an Armijo search along the projection arc.
+//! definite and adapts to the step's success, and an Armijo search along the projection arc. Where that
+//! does not converge (rows whose scales differ by decades, as a light needle's beside a disc's), a primal
+//! active-set Newton method takes over from where it stopped, changing the active set one variable at a
+//! time.
 
 use crate::dense::{DenseLu, LinearSolver};
 use crate::error::{NcpError, check_finite, check_len};
@@ -127,14 +130,14 @@ impl ErmSolver {
         }
         let reduced = problem.reduce()?;
         let start: Vec<f64> = z0[nf..].to_vec();
-        let (mut lambda, f, mut info) = self.minimise(&reduced, sigma, &start);
+        let (mut lambda, f, mut info) = self.descend(&reduced, sigma, &start);
         // The objective is not convex, so a warm start can sit in a local minimum. The global minimiser
         // tends to the hard solution as sigma -> 0, so a second descent from Lemke's exact solution finds
         // its basin; the lower objective wins.
         if self.settings.hard_start {
             match crate::lemke::lemke(&reduced.lcp(), &crate::lemke::LemkeSettings::default()) {
                 Ok(hard) => {
-                    let (l2, f2, i2) = self.minimise(&reduced, sigma, &hard.z);
+                    let (l2, f2, i2) = self.descend(&reduced, sigma, &hard.z);
                     let better = (i2.status == Status::Converged, -f2)
                         > (info.status == Status::Converged, -f);
                     info.iterations += i2.iterations;
@@ -163,6 +166,31 @@ impl ErmSolver {
         let mut w = vec![0.0; n];
         problem.evaluate(&z, &mut w, None);
         Ok(Solution { z, w, info })
+    }
+
+    /// [`ErmSolver::minimise`] from `start`, and where it does not converge [`ErmSolver::minimise_faces`]
+    /// from where it stopped; the counts are summed.
+    fn descend(&self, reduced: &Reduced, sigma: &[f64], start: &[f64]) -> (Vec<f64>, f64, Info) {
+        let (lambda, f, info) = self.minimise(reduced, sigma, start);
+        if info.status == Status::Converged {
+            return (lambda, f, info);
+        }
+        let (l2, f2, mut i2) = self.minimise_faces(reduced, sigma, &lambda);
+        i2.iterations += info.iterations;
+        i2.evaluations += info.evaluations;
+        if i2.status == Status::Converged || f2 <= f {
+            (l2, f2, i2)
+        } else {
+            (
+                lambda,
+                f,
+                Info {
+                    iterations: i2.iterations,
+                    evaluations: i2.evaluations,
+                    ..info
+                },
+            )
+        }
     }
 
     /// Projected Newton from `start`; returns the minimiser, its objective and how it went.
@@ -199,7 +227,19 @@ impl ErmSolver {
             }
             iterations += 1;
             // Bertsekas' active set: variables at (or within eps of) the bound that the gradient pushes out.
-            let eps = residual.min(1e-3 * scale);
+            // eps is measured in lambda's own units (the data can put lambda at 1e-3 and the gradient at
+            // 1e-2): the longest move of the projected diagonal-Newton step, which vanishes at a minimiser
+            // and, away from one, stays in proportion to lambda rather than to the gradient.
+            let diagonal_step = (0..c).fold(0.0f64, |m, i| {
+                let curvature = cur.h[i * c + i];
+                let step = if curvature > 0.0 {
+                    cur.g[i] / curvature
+                } else {
+                    cur.g[i].signum() * f64::INFINITY
+                };
+                m.max((lambda[i] - (lambda[i] - step).max(0.0)).abs())
+            });
+            let eps = diagonal_step.min(1e-3 * scale);
             let free: Vec<bool> = (0..c)
                 .map(|i| !(lambda[i] <= eps && cur.g[i] > 0.0))
                 .collect();
@@ -361,6 +401,174 @@ impl ErmSolver {
             },
         )
     }
+}
+
+impl ErmSolver {
+    /// The fallback of [`ErmSolver::minimise`]: a primal active-set Newton method. The variables held at
+    /// the bound stay there while Newton (with the same Levenberg–Marquardt shift) minimises over the
+    /// others, its steps cut where a free variable reaches the bound (which then joins the held ones); a
+    /// held variable whose gradient points inwards is released once the free ones are nearly optimal. The
+    /// projected method moves the whole active set every iteration, and on badly scaled rows (a light
+    /// needle's, whose `A` entries reach 1e4 against 1 for a disc's) it can alternate between two active
+    /// sets with steps of 1e-3 for hundreds of iterations; here the set changes one variable at a time.
+    fn minimise_faces(
+        &self,
+        reduced: &Reduced,
+        sigma: &[f64],
+        start: &[f64],
+    ) -> (Vec<f64>, f64, Info) {
+        let s = self.settings;
+        let mut lambda: Vec<f64> = start.iter().map(|v| v.max(0.0)).collect();
+        let c = lambda.len();
+        let mut cur = evaluate(reduced, sigma, &lambda, true);
+        let mut held: Vec<bool> = (0..c).map(|i| lambda[i] == 0.0 && cur.g[i] > 0.0).collect();
+        let mut lu = DenseLu::new(c, LinearSolver::Hand);
+        let (mut mu, mut evaluations, mut iterations) = (0.0f64, 1, 0);
+        let (mut best_f, mut stalled) = (cur.f, 0);
+        let status = loop {
+            let residual = projected_gradient_norm(&lambda, &cur.g);
+            let scale = 1.0 + inf_norm(&lambda).max(inf_norm(&cur.w));
+            if residual <= s.tol * scale {
+                break Status::Converged;
+            }
+            if iterations == s.max_iter {
+                break Status::MaxIterations;
+            }
+            iterations += 1;
+            // Release the held variable pushed inwards hardest once the free ones are nearly optimal.
+            let face = (0..c)
+                .filter(|&i| !held[i])
+                .fold(0.0f64, |m, i| m.max(cur.g[i].abs()));
+            let inwards = (0..c)
+                .filter(|&i| held[i] && cur.g[i] < 0.0)
+                .min_by(|&i, &j| cur.g[i].total_cmp(&cur.g[j]));
+            if let Some(i) = inwards.filter(|&i| face <= -0.5 * cur.g[i]) {
+                held[i] = false;
+            }
+            let free: Vec<bool> = held.iter().map(|h| !h).collect();
+            let Some(d) = newton_direction(&cur, &free, &mut mu, &mut lu) else {
+                break Status::SingularJacobian;
+            };
+            // The longest step that keeps every free variable feasible, and the first it stops.
+            let (mut reach, mut blocking) = (1.0f64, None);
+            for i in (0..c).filter(|&i| free[i] && d[i] < 0.0) {
+                let t = lambda[i] / -d[i];
+                if t < reach {
+                    (reach, blocking) = (t, Some(i));
+                }
+            }
+            let mut t = reach;
+            let mut trial = vec![0.0; c];
+            let accepted = loop {
+                for i in 0..c {
+                    trial[i] = (lambda[i] + t * d[i]).max(0.0);
+                }
+                if let Some(b) = blocking.filter(|_| t == reach) {
+                    trial[b] = 0.0;
+                }
+                let e = evaluate(reduced, sigma, &trial, false);
+                evaluations += 1;
+                let decrease: f64 = (0..c).map(|i| cur.g[i] * (trial[i] - lambda[i])).sum();
+                if e.f.is_finite() && e.f <= cur.f + s.armijo * decrease {
+                    break Some(t);
+                }
+                t *= 0.5;
+                if t < 1e-12 {
+                    break None;
+                }
+            };
+            let diag_max = (0..c)
+                .fold(0.0f64, |m, i| m.max(cur.h[i * c + i].abs()))
+                .max(f64::MIN_POSITIVE);
+            let Some(t) = accepted else {
+                if mu > 1e12 * diag_max {
+                    break Status::LineSearchFailed;
+                }
+                mu = (mu * 10.0).max(1e-6 * diag_max);
+                continue;
+            };
+            if let Some(b) = blocking.filter(|_| t == reach) {
+                held[b] = true;
+            }
+            let moved = (0..c).fold(0.0f64, |m, i| m.max((trial[i] - lambda[i]).abs()));
+            lambda.copy_from_slice(&trial);
+            cur = evaluate(reduced, sigma, &lambda, true);
+            evaluations += 1;
+            mu = if t >= reach.min(1.0) {
+                mu / 10.0
+            } else {
+                mu * 4.0
+            };
+            if cur.f < best_f - 16.0 * f64::EPSILON * best_f.abs() {
+                best_f = cur.f;
+                stalled = 0;
+            } else {
+                stalled += 1;
+                if stalled >= 5 && moved <= 1e-8 * (1.0 + inf_norm(&lambda)) {
+                    break Status::Converged;
+                }
+            }
+            if moved <= 4.0 * f64::EPSILON * (1.0 + inf_norm(&lambda)) && reach >= 1.0 {
+                break Status::Converged;
+            }
+        };
+        let residual = projected_gradient_norm(&lambda, &cur.g);
+        (
+            lambda,
+            cur.f,
+            Info {
+                status,
+                iterations,
+                residual,
+                evaluations,
+            },
+        )
+    }
+}
+
+/// `max_i |g_i|` over the variables off the bound, `max_i max(-g_i, 0)` over those on it.
+fn projected_gradient_norm(lambda: &[f64], g: &[f64]) -> f64 {
+    lambda.iter().zip(g).fold(0.0f64, |m, (&l, &g)| {
+        m.max(if l > 0.0 { g.abs() } else { (-g).max(0.0) })
+    })
+}
+
+/// The Newton direction over the `free` variables (zero on the others) with the Levenberg–Marquardt
+/// shift `mu` raised until the free block is positive definite; `None` when no shift makes it so.
+fn newton_direction(cur: &Eval, free: &[bool], mu: &mut f64, lu: &mut DenseLu) -> Option<Vec<f64>> {
+    let c = free.len();
+    let diag_max = (0..c)
+        .fold(0.0f64, |m, i| m.max(cur.h[i * c + i].abs()))
+        .max(f64::MIN_POSITIVE);
+    let mut d = vec![0.0; c];
+    for _ in 0..60 {
+        let mut m = vec![0.0; c * c];
+        for i in 0..c {
+            for j in 0..c {
+                m[i * c + j] = if free[i] && free[j] {
+                    cur.h[i * c + j]
+                } else if i == j {
+                    1.0
+                } else {
+                    0.0
+                };
+            }
+            if free[i] {
+                m[i * c + i] += *mu;
+            }
+        }
+        if is_positive_definite(&m, c) && lu.factor(&m).is_ok() {
+            for i in 0..c {
+                d[i] = if free[i] { -cur.g[i] } else { 0.0 };
+            }
+            lu.solve(&mut d);
+            if d.iter().all(|v| v.is_finite()) {
+                return Some(d);
+            }
+        }
+        *mu = (*mu * 10.0).max(1e-10 * diag_max);
+    }
+    None
 }
 
 /// Objective, gradient and (when asked) Hessian of the reduced ERM objective at `lambda`.
