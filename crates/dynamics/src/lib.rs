@@ -51,7 +51,8 @@ pub use scene::{
 };
 pub use simulator::Simulator;
 pub use step::{
-    Complementarity, Drag, Model, STEP_TOLERANCE, StateCovariance, Step, StepData, StepSettings,
+    CORRECTION_TRUST, Complementarity, Drag, Model, STEP_TOLERANCE, StateCovariance, Step,
+    StepData, StepSettings,
 };
 
 /// The README's examples, compiled and run as doctests so that they cannot go stale.
