@@ -340,6 +340,12 @@ pub fn run_simulate(args: &SimulateArgs) -> anyhow::Result<()> {
     let zero = vec![0.0; scene.n_controls];
     let control = |k: usize| controls.as_ref().map_or(&zero, |c| &c[k]);
     let h = sim.settings().h;
+    if let Some(limit) = scene.rocking_limit().filter(|&l| h > l) {
+        eprintln!(
+            "warning: h = {h} is past the scene's rocking limit, {limit:.4} s (Scene::rocking_limit): a \
+             free body lying flat on a plane cannot rest there; a smaller --h can"
+        );
+    }
     let (n, rows) = (scene.n_state(), scene.n_constraints());
     let mut out = std::io::BufWriter::new(std::io::stdout().lock());
     // Held for --format json only.
