@@ -439,3 +439,53 @@ fn a_task_library_needs_exactly_one_periodic_coordinate() {
     let p = library::Progress::of_task(&file.task(None).unwrap()).unwrap();
     assert_eq!(p, library::Progress::finger(&file.scene).unwrap());
 }
+
+/// Issue 28: a task whose initial state puts bodies inside each other, or a joint past its limit, is
+/// refused, the deepest named with its depth; resting exactly in contact is not.
+#[test]
+fn a_task_starting_with_bodies_inside_each_other_is_refused_with_the_pair_named() {
+    let pushing = include_str!("../../scenes/pushing.toml");
+    // The block (semi-axis 0.2 upright) resting on the ground is fine.
+    assert!(library::ProblemFile::from_toml_str(pushing).is_ok());
+    let sunk = pushing.replacen("\"block.y\" = 0.2", "\"block.y\" = 0.15", 1);
+    let err = library::ProblemFile::from_toml_str(&sunk)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("x0") && err.contains("ground and block overlap") && err.contains("5.000e-2"),
+        "{err}"
+    );
+    let bent = pushing.replacen("\"link1.angle\" = -0.5", "\"link1.angle\" = 0.7", 1);
+    let err = library::ProblemFile::from_toml_str(&bent)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("link1.angle above its upper limit") && err.contains("2.000e-1"),
+        "{err}"
+    );
+    // Rounding is not an overlap.
+    let touching = pushing.replacen("\"block.y\" = 0.2", "\"block.y\" = 0.1999999999", 1);
+    assert!(library::ProblemFile::from_toml_str(&touching).is_ok());
+}
+
+/// Issue 28: `Scene::overlaps` names every broken constraint, deepest first, and refuses a bad `q`.
+#[test]
+fn overlaps_are_named_deepest_first() {
+    let scene = dynamics::Scene::from_toml_str(include_str!("../../scenes/pushing.toml")).unwrap();
+    let names = scene.coordinate_names();
+    let mut q = vec![0.0; scene.n_dof()];
+    q[names.iter().position(|n| n == "block.y").unwrap()] = 0.1;
+    q[names.iter().position(|n| n == "link1.angle").unwrap()] = 0.6;
+    let overlaps = scene.overlaps(&q, 1e-6).unwrap();
+    assert!(overlaps.len() >= 2, "{overlaps:?}");
+    assert!(overlaps.windows(2).all(|w| w[0].depth >= w[1].depth));
+    assert!(overlaps.iter().any(|o| o.what.contains("ground and block")));
+    assert!(
+        overlaps
+            .iter()
+            .any(|o| o.what.contains("link1.angle above"))
+    );
+    assert!(scene.overlaps(&q[1..], 1e-6).is_err());
+    q[0] = f64::NAN;
+    assert!(scene.overlaps(&q, 1e-6).is_err());
+}

@@ -250,9 +250,14 @@ pub const MAX_HELD_STEPS: usize = 1_000_000;
 pub struct SimulateArgs {
     #[command(flatten)]
     sim: SimArgs,
-    /// Initial state (comma-separated); default SCENE.md's x0 for the finger.
+    /// Initial state (comma-separated). Without it: the x0 of --task, or of the scene file's only task
+    /// (SCENE.md's for the built-in finger), with that task's model and time step unless given; with no
+    /// single task, rest at q = 0, refused if bodies overlap there.
     #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
     x0: Option<Vec<f64>>,
+    /// The task whose initial state (and model and time step, unless given) to start from.
+    #[arg(long)]
+    task: Option<String>,
     /// Controls: a JSON file holding an array of control vectors, one per step, or the file `optimize
     /// --out` writes (its solution's controls).
     #[arg(long)]
@@ -316,12 +321,53 @@ fn status_name(s: ncp::Status) -> String {
 }
 
 pub fn run_simulate(args: &SimulateArgs) -> anyhow::Result<()> {
-    let mut sim = args.sim.simulator()?;
-    let scene = sim.scene().clone();
-    let x0 = match &args.x0 {
-        Some(x) => x.clone(),
-        None if scene.n_state() == 6 => dynamics::FLICKING_FINGER_X0.to_vec(),
-        None => vec![0.0; scene.n_state()],
+    let file = args.sim.problem_file()?;
+    let scene = file.scene.clone();
+    // The task to start from: the one named, or without --x0 the file's only one.
+    let task = match (&args.task, &args.x0) {
+        (Some(name), _) => Some(file.task(Some(name))?),
+        (None, None) if file.tasks.len() == 1 => Some(file.task(None)?),
+        (None, _) => None,
+    };
+    let mut sim = args.sim.simulator_of(scene.clone(), task.as_ref())?;
+    let x0 = match (&args.x0, &task) {
+        (Some(x), _) => {
+            let overlap = (x.len() == scene.n_state())
+                .then(|| {
+                    scene
+                        .overlaps(&x[..scene.n_dof()], library::START_TOLERANCE)
+                        .ok()
+                })
+                .flatten()
+                .and_then(|overlaps| overlaps.into_iter().next());
+            if let Some(o) = overlap {
+                eprintln!(
+                    "warning: --x0 starts with {} by {:.3e}; the first steps push them apart",
+                    o.what, o.depth
+                );
+            }
+            x.clone()
+        }
+        (None, Some(task)) => {
+            eprintln!("starting from task {}'s x0", task.name);
+            task.x0.clone()
+        }
+        (None, None) => {
+            let rest = vec![0.0; scene.n_state()];
+            if let Some(o) = scene
+                .overlaps(&rest[..scene.n_dof()], library::START_TOLERANCE)?
+                .first()
+            {
+                anyhow::bail!(
+                    "no --x0 and no single task to start from, and rest at q = 0 starts with {} by {:.3e}: \
+                     give --x0 or --task",
+                    o.what,
+                    o.depth
+                );
+            }
+            eprintln!("starting from rest at q = 0 (no --x0, and the file has no single task)");
+            rest
+        }
     };
     let controls = match &args.controls {
         Some(path) => Some(read_controls(path)?),

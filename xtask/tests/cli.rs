@@ -270,3 +270,50 @@ fn optimize_explains_its_status_and_strict_fails_when_it_did_not_converge() {
     );
     assert!(String::from_utf8_lossy(&out.stdout).contains("status: converged"));
 }
+
+/// Issue 28: `simulate` without `--x0` starts from the scene file's task (it took the finger's x0 for
+/// any scene of six states), and with no task from rest, refused where bodies overlap there.
+#[test]
+fn simulate_without_x0_starts_from_the_files_task_or_a_checked_rest() {
+    let pushing = concat!(env!("CARGO_MANIFEST_DIR"), "/../scenes/pushing.toml");
+    let out = xtask()
+        .args([
+            "simulate", "--scene", pushing, "--steps", "1", "--format", "jsonl",
+        ])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(stderr.contains("task push's x0"), "{stderr}");
+    let first: serde_json::Value = serde_json::from_str(
+        String::from_utf8(out.stdout)
+            .unwrap()
+            .lines()
+            .next()
+            .unwrap(),
+    )
+    .unwrap();
+    let x: Vec<f64> = serde_json::from_value(first["x"].clone()).unwrap();
+    // link1.angle, link2.angle, block.x, block.y, block.angle.
+    assert_eq!(&x[..5], &[-0.5, -0.9, 0.0, 0.2, 0.0]);
+
+    // The same scene without its task: at rest at q = 0 the block sits half in the ground.
+    let text = std::fs::read_to_string(pushing).unwrap();
+    let scene_only = &text[..text.find("[task.").unwrap()];
+    let dir = std::env::temp_dir().join(format!("xtask-rest-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("pushing_scene.toml");
+    std::fs::write(&path, scene_only).unwrap();
+    let out = xtask()
+        .args(["simulate", "--steps", "1", "--scene"])
+        .arg(&path)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        stderr.contains("ground and block overlap") && stderr.contains("--x0"),
+        "{stderr}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -46,8 +46,8 @@ pub use kinematics::{Kinematics, Ring, Scalar};
 pub use scene::{
     Body, BodySpec, ContactPair, ContactSpec, Coordinate, CoordinateKind, DENSITY_RANGE,
     FLICKING_FINGER_X0, Fixed, FixedSpec, JointKind, JointSpec, MAX_BODIES, MAX_CONTACTS,
-    MAX_DAMPING, MAX_FRICTION, MAX_GRAVITY, MAX_LENGTH, MAX_SCENE_TEXT, Plane, PlaneSpec, Scene,
-    SceneSpec, Side,
+    MAX_DAMPING, MAX_FRICTION, MAX_GRAVITY, MAX_LENGTH, MAX_SCENE_TEXT, Overlap, Plane, PlaneSpec,
+    Scene, SceneSpec, Side,
 };
 pub use simulator::Simulator;
 pub use step::{

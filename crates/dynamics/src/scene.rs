@@ -288,6 +288,15 @@ pub struct ContactPair {
     pub friction: f64,
 }
 
+/// A constraint a state breaks ([`Scene::overlaps`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Overlap {
+    /// Which, by name: `contact[1]: ground and block overlap`, `finger.angle above its upper limit`.
+    pub what: String,
+    /// By how much (positive): the pair's penetration depth, or how far past the limit.
+    pub depth: f64,
+}
+
 /// A checked, immutable scene. One generalised coordinate per body (its joint angle).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Scene {
@@ -781,6 +790,58 @@ impl Scene {
             limit = Some(limit.map_or(h, |l| l.min(h)));
         }
         limit
+    }
+
+    /// The constraints `q` breaks by more than `tolerance`, deepest first: contact pairs whose sides
+    /// overlap (named by the scene file's `contact[i]` and its two sides) and coordinates past a limit
+    /// (named by [`Scene::coordinate_names`]). A task or a simulation that starts there starts with its
+    /// bodies being pushed apart, which no one asked for; `Err` when `q` has the wrong length or is not
+    /// finite.
+    pub fn overlaps(&self, q: &[f64], tolerance: f64) -> Result<Vec<Overlap>, DynamicsError> {
+        if q.len() != self.n_dof() {
+            return Err(DynamicsError::Input {
+                what: "q",
+                problem: format!(
+                    "{} entries, the scene has {} coordinates",
+                    q.len(),
+                    self.n_dof()
+                ),
+            });
+        }
+        if let Some(i) = q.iter().position(|v| !v.is_finite()) {
+            return Err(DynamicsError::Input {
+                what: "q",
+                problem: format!("q[{i}] = {} is not finite", q[i]),
+            });
+        }
+        let kin = crate::Kinematics::new(self, q);
+        let cons = crate::Constraints::new(self, &kin, q)?;
+        let names = self.coordinate_names();
+        let mut out: Vec<Overlap> = Vec::new();
+        for (row, &d) in self.rows.iter().zip(&cons.d) {
+            if d >= -tolerance {
+                continue;
+            }
+            let what = match *row {
+                ConstraintRow::LowerLimit { joint } => {
+                    format!("{} below its lower limit", names[joint])
+                }
+                ConstraintRow::UpperLimit { joint } => {
+                    format!("{} above its upper limit", names[joint])
+                }
+                ConstraintRow::FrictionEdge {
+                    pair,
+                    positive: true,
+                } => {
+                    let c = &self.spec.contacts[pair];
+                    format!("contact[{pair}]: {} and {} overlap", c.a, c.b)
+                }
+                ConstraintRow::FrictionEdge { .. } => continue,
+            };
+            out.push(Overlap { what, depth: -d });
+        }
+        out.sort_by(|a, b| b.depth.total_cmp(&a.depth));
+        Ok(out)
     }
 
     /// The angle coordinates that turn `body`: its own joint's and every ancestor's (a body's absolute

@@ -26,7 +26,7 @@ pub use evaluate::{
 };
 pub use file::{Library, MAGIC, VERSION, write_atomically};
 pub use policy::Policy;
-pub use problem::{ProblemFile, Task, TaskCost, TaskSpec, Term, TermSpec};
+pub use problem::{ProblemFile, START_TOLERANCE, Task, TaskCost, TaskSpec, Term, TermSpec};
 pub use task::{CONTROL_WEIGHT, FingerDynamics, StepData, TaskError, finger_cost};
 
 /// `Err` unless `v` has `len` finite entries.

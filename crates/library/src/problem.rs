@@ -178,6 +178,10 @@ impl Cost for TaskCost {
     }
 }
 
+/// How far a task's initial state may break a constraint (bodies overlapping, a joint past its limit):
+/// rounding in a hand-written start, no more.
+pub const START_TOLERANCE: f64 = 1e-6;
+
 /// A checked task on a scene.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Task {
@@ -282,6 +286,24 @@ impl Task {
         }
         for (c, &v) in &spec.v0 {
             x0[n + index("v0", c)?] = finite("v0", v)?;
+        }
+        // A start with bodies inside each other (or a joint past its limit) would begin by pushing them
+        // apart, which the task does not ask for: refused, the deepest named.
+        let overlaps = scene.overlaps(&x0[..n], START_TOLERANCE)?;
+        if let Some(o) = overlaps.first() {
+            return Err(bad(
+                "x0",
+                format!(
+                    "the initial state starts with {} by {:.3e} (more than START_TOLERANCE = {START_TOLERANCE:e}{}); \
+                     move them apart",
+                    o.what,
+                    o.depth,
+                    match overlaps.len() {
+                        1 => String::new(),
+                        k => format!(", and {} more", k - 1),
+                    }
+                ),
+            ));
         }
         let terms = |field: &str, specs: &[TermSpec]| -> Result<Vec<Term>, LibraryError> {
             specs
