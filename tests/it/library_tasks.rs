@@ -489,3 +489,32 @@ fn overlaps_are_named_deepest_first() {
     q[0] = f64::NAN;
     assert!(scene.overlaps(&q, 1e-6).is_err());
 }
+
+/// Issue 28: the default recipe fitted to any budget the settings accept is a recipe they accept, and the
+/// finger's budget of 400 keeps the recipe it was chosen for.
+#[test]
+fn the_default_recipe_fits_every_budget() {
+    let scene = Scene::flicking_finger();
+    let base = library::LibrarySettings::default();
+    assert_eq!(base.exploration.fitted(400), base.exploration);
+    assert_eq!(base.exploration.fitted(4000), base.exploration);
+    for trajectories in (1..=420).chain([1000, 1_000_000]) {
+        let settings = library::LibrarySettings {
+            trajectories,
+            exploration: base.exploration.fitted(trajectories),
+            ..base.clone()
+        };
+        settings
+            .validate(&scene)
+            .unwrap_or_else(|e| panic!("{trajectories} trajectories: {e}"));
+    }
+    let library::Exploration::Branches {
+        trunk,
+        settle,
+        length,
+    } = base.exploration.fitted(20)
+    else {
+        panic!("the default recipe branches")
+    };
+    assert_eq!((trunk, settle, length), (5, 1, 15));
+}

@@ -126,7 +126,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         base = base.for_task(task);
     }
     let model = crate::step::contact_model(args.model, args.sigma, task.as_ref())?;
-    let exploration = match base.exploration {
+    // The default recipe's shape fitted to the budget; flags given override it.
+    let exploration = match base.exploration.fitted(args.trajectories) {
         library::Exploration::Branches {
             trunk,
             settle,
@@ -145,6 +146,19 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             kicks
         }
     };
+    // Growth branches where the policy stops moving forward along the task's periodic coordinate: a task
+    // that rewards no such motion (a target task) has none by default.
+    let rewards_forward = match &task {
+        Some(t) => library::Progress::of_task(t)?.forward.is_some(),
+        None => true,
+    };
+    if !rewards_forward && args.growth.is_none() {
+        eprintln!(
+            "growth: 0 rounds (task {} rewards no forward motion, and growth branches where the policy \
+             stops moving forward)",
+            task.as_ref().map_or("", |t| t.name.as_str())
+        );
+    }
     let settings = LibrarySettings {
         model,
         h: args.h.unwrap_or(base.h),
@@ -154,7 +168,9 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         keep: args.keep.unwrap_or(base.keep),
         horizon: args.horizon.unwrap_or(base.horizon),
         neighbours: args.neighbours.unwrap_or(base.neighbours),
-        growth: args.growth.unwrap_or(base.growth),
+        growth: args
+            .growth
+            .unwrap_or(if rewards_forward { base.growth } else { 0 }),
         warm_passes: args.warm_passes,
         tolerance: args.tolerance,
         exploration,

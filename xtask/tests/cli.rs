@@ -317,3 +317,40 @@ fn simulate_without_x0_starts_from_the_files_task_or_a_checked_rest() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// Issue 28: `train`'s defaults give a library for a target task (they stopped on `growth = 12 is out of
+/// range`) and for a small budget (`--trajectories 20` stopped on `trunk = 100 is out of range`).
+#[test]
+fn train_defaults_fit_target_tasks_and_small_budgets() {
+    let dir = std::env::temp_dir().join(format!("xtask-train-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let two_fingers = concat!(env!("CARGO_MANIFEST_DIR"), "/../scenes/two_fingers.toml");
+    let out = xtask()
+        .args([
+            "train",
+            "--scene",
+            two_fingers,
+            "--task",
+            "turn",
+            "--trajectories",
+            "6",
+        ])
+        .arg("--out")
+        .arg(dir.join("turn.lib"))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(stderr.contains("growth: 0 rounds"), "{stderr}");
+    let out = xtask()
+        .args(["train", "--trajectories", "6", "--growth", "0", "--out"])
+        .arg(dir.join("finger.lib"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -116,6 +116,31 @@ pub enum Exploration {
     },
 }
 
+impl Exploration {
+    /// The branched recipe's defaults shaped for a budget of `trajectories`: at or above the 400 they were
+    /// chosen for, unchanged; below it, a trunk of a quarter of the budget (at least 1), settling over a
+    /// quarter of the trunk (less than it), and branches no longer than the budget the trunk leaves (at
+    /// least 1). `train --trajectories 20` stopped on `trunk = 100 is out of range`; now any budget the
+    /// settings accept has a recipe. The paper's kicked chain has no shape to fit.
+    pub fn fitted(self, trajectories: usize) -> Self {
+        match self {
+            Exploration::Branches {
+                trunk,
+                settle,
+                length,
+            } if trunk > trajectories / 4 => {
+                let trunk = (trajectories / 4).max(1).min(trunk);
+                Exploration::Branches {
+                    trunk,
+                    settle: settle.min(trunk / 4),
+                    length: length.min(trajectories.saturating_sub(trunk).max(1)),
+                }
+            }
+            other => other,
+        }
+    }
+}
+
 /// A growth round's closed loop counts as stalled when the free angle advances less than this (rad) ...
 pub const STALL_ADVANCE: f64 = 0.3;
 /// ... over this many seconds.
