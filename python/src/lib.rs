@@ -553,7 +553,7 @@ impl Library {
         if let Some(t) = &chosen {
             base = base.for_task(t);
         }
-        let exploration = match base.exploration {
+        let exploration = match base.exploration.fitted(trajectories) {
             Exploration::Branches {
                 trunk: t,
                 settle: s,

@@ -168,6 +168,12 @@ def test_a_task_library_of_a_scene_file(root):
     assert target["last"] < 0.1
 
 
+def test_a_target_task_library_with_the_defaults_and_a_small_budget(root):
+    # Issue 28: the defaults stopped a target task on growth = 12 and a small budget on trunk = 100.
+    lib = slcp.Library.train(root / "scenes" / "two_fingers.toml", task="turn", trajectories=6)
+    assert lib.task == "turn"
+
+
 def test_long_work_releases_the_gil():
     # A library build on one thread; the main thread counts while it runs. Holding the GIL for the
     # build would let the counter advance only in the interpreter's switch interval slices, never while

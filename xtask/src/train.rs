@@ -168,9 +168,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         keep: args.keep.unwrap_or(base.keep),
         horizon: args.horizon.unwrap_or(base.horizon),
         neighbours: args.neighbours.unwrap_or(base.neighbours),
-        growth: args
-            .growth
-            .unwrap_or(if rewards_forward { base.growth } else { 0 }),
+        growth: args.growth.unwrap_or(base.growth),
         warm_passes: args.warm_passes,
         tolerance: args.tolerance,
         exploration,

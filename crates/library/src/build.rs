@@ -199,7 +199,11 @@ impl LibrarySettings {
     /// This recipe on `task`'s contact model, time step, horizon and initial state (growth's closed
     /// loops, if any, at the task's time step alone).
     pub fn for_task(self, task: &Task) -> Self {
+        // Growth branches where the policy stops moving forward along the periodic coordinate: a task
+        // that rewards no such motion (a target task) has no growth rounds.
+        let forward = Progress::of_task(task).map_or(true, |p| p.forward.is_some());
         LibrarySettings {
+            growth: if forward { self.growth } else { 0 },
             model: task.model,
             h: task.h,
             horizon: task.horizon,
