@@ -518,3 +518,85 @@ fn the_default_recipe_fits_every_budget() {
     };
     assert_eq!((trunk, settle, length), (5, 1, 15));
 }
+
+/// Issue 28: the kick measures follow the direction the task rewards. A wheel turned by its own motor,
+/// whose task rewards turning it backwards (a positive linear weight on its angle): the policy turns it
+/// backwards, and the kicks it recovers from are counted (they counted only forward turning, so a
+/// mirrored finger spinning the other way recovered from none).
+#[test]
+fn kick_measures_count_progress_the_way_the_task_rewards() {
+    let text = r#"
+gravity = [0.0, -4.0]
+
+[[body]]
+name = "wheel"
+semi_axes = [0.5, 0.3]
+parent = "world"
+anchor = [0.0, 0.0]
+centre = [0.0, 0.0]
+joint = { damping = 0.5, actuated = true }
+
+[[body]]
+name = "post"
+semi_axes = [0.2, 0.2]
+parent = "world"
+anchor = [2.0, 0.0]
+centre = [0.0, 0.0]
+joint = { limits = [-0.1, 0.1] }
+
+[[contact]]
+a = "wheel"
+b = "post"
+friction = 0.5
+
+[task.back]
+h = 0.05
+horizon = 30
+model = "logistic"
+sigma = 0.1
+control_weight = 0.05
+control_limits = [-2.0, 2.0]
+periods = { "wheel.angle" = 3.141592653589793 }
+running = [{ coordinate = "wheel.angle", linear = 1.0 }]
+final = [{ coordinate = "wheel.angle", linear = 1.0 }]
+"#;
+    let file = ProblemFile::from_toml_str(text).unwrap();
+    let task = file.task(Some("back")).unwrap();
+    assert_eq!(
+        library::Progress::of_task(&task).unwrap().forward,
+        Some(-1.0)
+    );
+    let settings = library::LibrarySettings {
+        trajectories: 8,
+        growth: 0,
+        ..library::LibrarySettings::default().for_task(&task)
+    };
+    let settings = library::LibrarySettings {
+        exploration: settings.exploration.fitted(8),
+        ..settings
+    };
+    let lib = library::Library::build_task(&file, Some("back"), &settings, |_, _| {}).unwrap();
+    let policy = lib.policy().unwrap();
+    let e = library::evaluate(
+        &lib,
+        &policy,
+        &library::EvaluationSettings {
+            model: task.model,
+            h: task.h,
+            seconds: 20.0,
+            kick_every: 2.0,
+            kick_std: 1.0,
+            x0: task.x0.clone(),
+            ..library::EvaluationSettings::default()
+        },
+    )
+    .unwrap();
+    assert!(
+        e.final_spin_rate < -0.5,
+        "turns backwards: {}",
+        e.final_spin_rate
+    );
+    assert!(e.kicks >= 8, "{} kicks", e.kicks);
+    assert_eq!(e.recovered, e.kicks, "{e:?}");
+    assert!(e.resumed >= e.kicks - 1, "{e:?}");
+}

@@ -62,10 +62,11 @@ pub struct Evaluation {
     pub contact_fraction: f64,
     /// Kicks applied.
     pub kicks: usize,
-    /// Kicks after which the spin rate over the second half of the next interval was positive.
+    /// Kicks after which the progress coordinate moved the way the task rewards (forward for the finger)
+    /// over the second half of the next interval.
     pub recovered: usize,
-    /// Kicks after which the ellipse turned a further quarter turn forward before the next kick (the
-    /// stricter measure).
+    /// Kicks after which the progress coordinate turned a further quarter turn the way the task rewards
+    /// before the next kick (the stricter measure).
     pub resumed: usize,
     /// Mean time from a kick to that quarter turn, over the kicks that resumed, s; `None` when none did.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -298,7 +299,11 @@ pub fn evaluate_in(
     let n = scene.n_dof();
     // The library's periodic coordinate (its task's, or the finger's free joint, which the world must
     // share).
-    let free = library.progress()?.coordinate;
+    let progress = library.progress()?;
+    let free = progress.coordinate;
+    // The direction the task rewards (the finger's forward spin is +1; a task with a negative linear
+    // weight rewards the other way): the kick measures count progress that way.
+    let forward = progress.forward.unwrap_or(1.0);
     let world_free = match library.task() {
         Some(_) => free,
         None => crate::free_joint(scene)?,
@@ -401,7 +406,7 @@ pub fn evaluate_in(
             let rate = (x[free] - interval_start) / (settings.h * (kick_steps / 2) as f64);
             after_sum += rate * (kick_steps / 2) as f64 * settings.h;
             after_time += (kick_steps / 2) as f64 * settings.h;
-            if rate > 0.0 {
+            if forward * rate > 0.0 {
                 recovered += 1;
             }
         }
@@ -414,7 +419,7 @@ pub fn evaluate_in(
         contacts.observe(s.normal_impulse());
         x = s.x_next;
         if let Some((at, angle)) = since_kick
-            && x[free] - angle >= std::f64::consts::FRAC_PI_2
+            && forward * (x[free] - angle) >= std::f64::consts::FRAC_PI_2
         {
             resumed += 1;
             resume_steps += k + 1 - at;
