@@ -83,9 +83,95 @@ pub struct Args {
     /// No per-pass lines.
     #[arg(long)]
     quiet: bool,
-    /// Exit with status 1 unless the optimiser converged (CostConverged or StepConverged).
+    /// Exit with status 1 unless the optimiser converged (CostConverged or StepConverged) and, with a
+    /// task, its trajectory felt a contact.
     #[arg(long)]
     strict: bool,
+    /// With a task: when the solve at the task's noise scale never feels a contact, do not continue in
+    /// the noise scale (doubling sigma until the contact is felt, then halving it back, each solve
+    /// warm-started from the last); just say so.
+    #[arg(long)]
+    no_continuation: bool,
+}
+
+/// Doublings of the noise scale tried at most when no contact is felt (up to 64 times the task's).
+const CONTINUATION_DOUBLINGS: usize = 6;
+
+/// Whether the rollout of `controls` from `x0` feels the contact the task needs: the total normal impulse
+/// of the pairs between a body the controls move and a body they do not move but the task's cost weighs
+/// (the finger and the ellipse, the pusher and the block; not the block resting on the ground, nor the
+/// finger on it), against 1e-6 times the impulse the scene's weight delivers over the horizon. A task
+/// whose cost weighs only driven bodies needs no contact: always felt.
+fn contact_felt(
+    sim: &mut dynamics::Simulator,
+    task: &library::Task,
+    x0: &[f64],
+    controls: &[Vec<f64>],
+) -> anyhow::Result<bool> {
+    let scene = sim.scene().clone();
+    let n = scene.n_dof();
+    let weighed: Vec<usize> = task
+        .cost
+        .running
+        .iter()
+        .chain(&task.cost.final_terms)
+        .map(|t| t.index % n)
+        .collect();
+    let is_driven =
+        |i: usize| (0..n).any(|j| scene.coordinates[j].actuator.is_some() && scene.moves(j, i));
+    let is_weighed = |i: usize| !is_driven(i) && weighed.iter().any(|&j| scene.moves(j, i));
+    if !(0..scene.bodies.len()).any(is_weighed) {
+        return Ok(true);
+    }
+    let g = scene.gravity[0].hypot(scene.gravity[1]);
+    let weight: f64 = scene.bodies.iter().map(|b| b.mass).sum::<f64>() * g;
+    let scale = (weight * sim.settings().h * controls.len() as f64).max(1.0);
+    let body = |side: dynamics::Side| match side {
+        dynamics::Side::Body(i) => Some(i),
+        _ => None,
+    };
+    let pairs: Vec<bool> = scene
+        .contacts
+        .iter()
+        .map(|c| match (body(c.a), body(c.b)) {
+            (Some(a), Some(b)) => {
+                (is_driven(a) && is_weighed(b)) || (is_driven(b) && is_weighed(a))
+            }
+            _ => false,
+        })
+        .collect();
+    let mut x = x0.to_vec();
+    let mut total = 0.0;
+    for u in controls {
+        let s = sim.step(&x, u)?;
+        total += s
+            .impulses
+            .iter()
+            .zip(&pairs)
+            .filter(|(_, d)| **d)
+            .map(|(i, _)| i.normal.abs())
+            .sum::<f64>();
+        x = s.x_next;
+    }
+    Ok(total > 1e-6 * scale)
+}
+
+/// `model` with noise scale `sigma` (the smoothed models), `None` for the hard one.
+fn with_sigma(model: dynamics::Complementarity, sigma: f64) -> Option<dynamics::Complementarity> {
+    use dynamics::Complementarity as C;
+    match model {
+        C::Logistic { .. } => Some(C::Logistic { sigma }),
+        C::Normal { .. } => Some(C::Normal { sigma }),
+        C::Hard => None,
+    }
+}
+
+fn sigma_of(model: dynamics::Complementarity) -> Option<f64> {
+    match model {
+        dynamics::Complementarity::Logistic { sigma }
+        | dynamics::Complementarity::Normal { sigma } => Some(sigma),
+        dynamics::Complementarity::Hard => None,
+    }
 }
 
 /// What a status means, for the summary line.
@@ -170,6 +256,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let horizon = args.horizon.unwrap_or(75);
     // What a task's terms say of the solution (the finger's built-in report otherwise).
     let mut summary = None;
+    // With a task: what the contact check said, when it found none felt at first.
+    let mut felt_note: Option<String> = None;
     let (solution, problem) = match args.problem {
         Problem::Finger if args.task.is_some() => {
             let file = args.sim.problem_file()?;
@@ -185,13 +273,46 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                 sim.settings().model
             );
             let ddp = Ddp::new(settings(args, m, Some(&task)))?;
-            let sol = ddp.solve_observed(
+            let base = *sim.settings();
+            let mut probe = dynamics::Simulator::new(file.scene.clone(), base)?;
+            let mut sol = ddp.solve_observed(
                 &mut FingerDynamics::new(sim),
                 &task.cost,
                 &x0,
                 &vec![vec![0.0; m]; horizon],
                 observe,
             )?;
+            let felt = contact_felt(&mut probe, &task, &x0, &sol.controls)?;
+            let mut note = None;
+            if !felt {
+                println!(
+                    "no contact felt: the solve at the task's {:?} never touches (the contact's gradient \
+                     is zero out of reach)",
+                    base.model
+                );
+                match (sigma_of(base.model), args.no_continuation) {
+                    (None, _) => {
+                        note = Some(
+                            "no contact felt, and the hard model has no action at a distance to continue \
+                             from (--model logistic can feel it)"
+                                .to_string(),
+                        );
+                    }
+                    (Some(_), true) => {
+                        note = Some("no contact felt (--no-continuation)".to_string());
+                    }
+                    (Some(sigma), false) => {
+                        let (solved, said) =
+                            continuation(&ddp, &file.scene, &base, &task, &x0, sol, sigma)?;
+                        sol = solved;
+                        note = Some(said);
+                    }
+                }
+            }
+            if let Some(note) = &note {
+                println!("{note}");
+            }
+            felt_note = note;
             summary = Some(task_summary(&file.scene, &task, &sol.states));
             (sol, "task")
         }
@@ -246,6 +367,9 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         seconds * 1e3
     );
     println!("status: {}", meaning(solution.status));
+    let never_felt = felt_note
+        .as_deref()
+        .is_some_and(|n| !n.starts_with("continued"));
     let gain = solution
         .gains
         .iter()
@@ -278,7 +402,90 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     if args.strict && !solution.status.converged() {
         anyhow::bail!("--strict: {}", meaning(solution.status));
     }
+    if args.strict && never_felt {
+        anyhow::bail!("--strict: {}", felt_note.unwrap_or_default());
+    }
     Ok(())
+}
+
+/// Continuation in the noise scale from a solve at `sigma` that felt no contact: double sigma (each
+/// solve warm-started from the last) until a solve's trajectory feels a contact, then halve it back to
+/// `sigma`, each stage logged. Returns the solution at `sigma` and a line saying what happened.
+fn continuation(
+    ddp: &Ddp,
+    scene: &dynamics::Scene,
+    base: &dynamics::StepSettings,
+    task: &library::Task,
+    x0: &[f64],
+    start: Solution,
+    sigma: f64,
+) -> anyhow::Result<(Solution, String)> {
+    let simulator = |s: f64| -> anyhow::Result<dynamics::Simulator> {
+        let model = with_sigma(base.model, s).expect("a smoothed model");
+        Ok(dynamics::Simulator::new(
+            scene.clone(),
+            dynamics::StepSettings { model, ..*base },
+        )?)
+    };
+    let untouched = start.cost;
+    let mut sol = start;
+    let mut felt_at = None;
+    let mut s = sigma;
+    for _ in 0..CONTINUATION_DOUBLINGS {
+        s *= 2.0;
+        let sim = simulator(s)?;
+        let mut probe = simulator(s)?;
+        sol = ddp.solve(&mut FingerDynamics::new(sim), &task.cost, x0, &sol.controls)?;
+        // Felt, and used: the cost improved on the untouched one by a percent of its size.
+        let felt = contact_felt(&mut probe, task, x0, &sol.controls)?
+            && untouched - sol.cost > 0.01 * (1.0 + untouched.abs());
+        println!(
+            "continuation: sigma {s:.4}: {:?} after {} passes, cost {:.6}, contact {}",
+            sol.status,
+            sol.iterations.len(),
+            sol.cost,
+            if felt { "felt" } else { "not felt" }
+        );
+        if felt {
+            felt_at = Some(s);
+            break;
+        }
+    }
+    let Some(top) = felt_at else {
+        return Ok((
+            sol,
+            format!(
+                "no contact felt even at sigma {s:.4} ({}x the task's): nothing the controls do reaches \
+                 a contact within the horizon",
+                1 << CONTINUATION_DOUBLINGS
+            ),
+        ));
+    };
+    while s > sigma * 1.000_001 {
+        s = (s / 2.0).max(sigma);
+        let sim = simulator(s)?;
+        sol = ddp.solve(&mut FingerDynamics::new(sim), &task.cost, x0, &sol.controls)?;
+        println!(
+            "continuation: sigma {s:.4}: {:?} after {} passes, cost {:.6}",
+            sol.status,
+            sol.iterations.len(),
+            sol.cost
+        );
+    }
+    let mut probe = simulator(sigma)?;
+    let kept = contact_felt(&mut probe, task, x0, &sol.controls)?;
+    Ok((
+        sol,
+        if kept {
+            format!(
+                "continued in the noise scale: contact felt at sigma {top:.4}, solved back down to {sigma}"
+            )
+        } else {
+            format!(
+                "no contact felt: found at sigma {top:.4}, and lost again on the way back down to {sigma}"
+            )
+        },
+    ))
 }
 
 /// Each state entry a task's terms weigh, from the first state to the last (with the target of a

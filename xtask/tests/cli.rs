@@ -354,3 +354,72 @@ fn train_defaults_fit_target_tasks_and_small_budgets() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// Issue 28: a contact out of reach at the task's noise scale (a pusher 0.45 behind the block, sigma
+/// 0.05) "converged" after one pass with nothing moved. `optimize` now says no contact was felt and
+/// continues in the noise scale (doubling it until the contact is felt and used, then halving it back,
+/// each stage logged), and the block moves; `--no-continuation` only says so, and `--strict` fails then.
+#[test]
+fn optimize_says_when_no_contact_is_felt_and_continues_in_the_noise_scale() {
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../scenes/pushing.toml"
+    ))
+    .unwrap()
+    .replacen(
+        "\"block.y\" = 0.2 }",
+        "\"block.y\" = 0.2, \"block.x\" = 0.45 }",
+        1,
+    )
+    .replace("target = 0.6 }", "target = 1.05 }");
+    let dir = std::env::temp_dir().join(format!("xtask-reach-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("far.toml");
+    std::fs::write(&path, text).unwrap();
+    let out = xtask()
+        .args([
+            "optimize", "--task", "push", "--quiet", "--strict", "--scene",
+        ])
+        .arg(&path)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.contains("no contact felt"), "{stdout}");
+    assert!(stdout.contains("continuation: sigma 0.1000"), "{stdout}");
+    assert!(stdout.contains("continued in the noise scale"), "{stdout}");
+    let moved: f64 = stdout
+        .split("block.x 0.4500 -> ")
+        .nth(1)
+        .and_then(|rest| rest.split_whitespace().next())
+        .and_then(|v| v.parse().ok())
+        .expect("the summary names block.x");
+    assert!(moved > 0.9, "block.x ends at {moved}: {stdout}");
+
+    let out = xtask()
+        .args([
+            "optimize",
+            "--task",
+            "push",
+            "--quiet",
+            "--no-continuation",
+            "--strict",
+            "--scene",
+        ])
+        .arg(&path)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stdout.contains("no contact felt (--no-continuation)"),
+        "{stdout}"
+    );
+    assert!(stderr.contains("--strict: no contact felt"), "{stderr}");
+    std::fs::remove_dir_all(&dir).ok();
+}
