@@ -600,3 +600,47 @@ final = [{ coordinate = "wheel.angle", linear = 1.0 }]
     assert_eq!(e.recovered, e.kicks, "{e:?}");
     assert!(e.resumed >= e.kicks - 1, "{e:?}");
 }
+
+/// Issue 28: a library whose task starts with its contact out of reach (a pusher 0.45 behind its block,
+/// sigma 0.05) is built from the continuation's solve, not from one that never touches: its trunk
+/// pushes the block.
+#[test]
+fn a_library_whose_contact_starts_out_of_reach_still_pushes() {
+    let text = include_str!("../../scenes/pushing.toml")
+        .replacen(
+            "\"block.y\" = 0.2 }",
+            "\"block.y\" = 0.2, \"block.x\" = 0.45 }",
+            1,
+        )
+        .replace("target = 0.6 }", "target = 1.05 }");
+    let file = ProblemFile::from_toml_str(&text).unwrap();
+    let task = file.task(Some("push")).unwrap();
+    let block = file
+        .scene
+        .coordinate_names()
+        .iter()
+        .position(|c| c == "block.x")
+        .unwrap();
+    let base = library::LibrarySettings {
+        trajectories: 4,
+        growth: 0,
+        ..library::LibrarySettings::default().for_task(&task)
+    };
+    let settings = library::LibrarySettings {
+        exploration: base.exploration.fitted(4),
+        ..base
+    };
+    let lib = library::Library::build_task(&file, Some("push"), &settings, |_, _| {}).unwrap();
+    // The first trajectory's cost: 14.4 untouched (the block 0.6 from its target over the horizon).
+    assert!(
+        lib.entries[0].cost < 5.0,
+        "first trajectory's cost {}",
+        lib.entries[0].cost
+    );
+    let farthest = lib
+        .entries
+        .iter()
+        .map(|e| e.x[block])
+        .fold(f64::NEG_INFINITY, f64::max);
+    assert!(farthest > 0.6, "the block reached only {farthest}");
+}

@@ -94,86 +94,6 @@ pub struct Args {
     no_continuation: bool,
 }
 
-/// Doublings of the noise scale tried at most when no contact is felt (up to 64 times the task's).
-const CONTINUATION_DOUBLINGS: usize = 6;
-
-/// Whether the rollout of `controls` from `x0` feels the contact the task needs: the total normal impulse
-/// of the pairs between a body the controls move and a body they do not move but the task's cost weighs
-/// (the finger and the ellipse, the pusher and the block; not the block resting on the ground, nor the
-/// finger on it), against 1e-6 times the impulse the scene's weight delivers over the horizon. A task
-/// whose cost weighs only driven bodies needs no contact: always felt.
-fn contact_felt(
-    sim: &mut dynamics::Simulator,
-    task: &library::Task,
-    x0: &[f64],
-    controls: &[Vec<f64>],
-) -> anyhow::Result<bool> {
-    let scene = sim.scene().clone();
-    let n = scene.n_dof();
-    let weighed: Vec<usize> = task
-        .cost
-        .running
-        .iter()
-        .chain(&task.cost.final_terms)
-        .map(|t| t.index % n)
-        .collect();
-    let is_driven =
-        |i: usize| (0..n).any(|j| scene.coordinates[j].actuator.is_some() && scene.moves(j, i));
-    let is_weighed = |i: usize| !is_driven(i) && weighed.iter().any(|&j| scene.moves(j, i));
-    if !(0..scene.bodies.len()).any(is_weighed) {
-        return Ok(true);
-    }
-    let g = scene.gravity[0].hypot(scene.gravity[1]);
-    let weight: f64 = scene.bodies.iter().map(|b| b.mass).sum::<f64>() * g;
-    let scale = (weight * sim.settings().h * controls.len() as f64).max(1.0);
-    let body = |side: dynamics::Side| match side {
-        dynamics::Side::Body(i) => Some(i),
-        _ => None,
-    };
-    let pairs: Vec<bool> = scene
-        .contacts
-        .iter()
-        .map(|c| match (body(c.a), body(c.b)) {
-            (Some(a), Some(b)) => {
-                (is_driven(a) && is_weighed(b)) || (is_driven(b) && is_weighed(a))
-            }
-            _ => false,
-        })
-        .collect();
-    let mut x = x0.to_vec();
-    let mut total = 0.0;
-    for u in controls {
-        let s = sim.step(&x, u)?;
-        total += s
-            .impulses
-            .iter()
-            .zip(&pairs)
-            .filter(|(_, d)| **d)
-            .map(|(i, _)| i.normal.abs())
-            .sum::<f64>();
-        x = s.x_next;
-    }
-    Ok(total > 1e-6 * scale)
-}
-
-/// `model` with noise scale `sigma` (the smoothed models), `None` for the hard one.
-fn with_sigma(model: dynamics::Complementarity, sigma: f64) -> Option<dynamics::Complementarity> {
-    use dynamics::Complementarity as C;
-    match model {
-        C::Logistic { .. } => Some(C::Logistic { sigma }),
-        C::Normal { .. } => Some(C::Normal { sigma }),
-        C::Hard => None,
-    }
-}
-
-fn sigma_of(model: dynamics::Complementarity) -> Option<f64> {
-    match model {
-        dynamics::Complementarity::Logistic { sigma }
-        | dynamics::Complementarity::Normal { sigma } => Some(sigma),
-        dynamics::Complementarity::Hard => None,
-    }
-}
-
 /// What a status means, for the summary line.
 fn meaning(status: ddp::Status) -> &'static str {
     match status {
@@ -282,7 +202,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                 &vec![vec![0.0; m]; horizon],
                 observe,
             )?;
-            let felt = contact_felt(&mut probe, &task, &x0, &sol.controls)?;
+            let felt = library::contact_felt(&mut probe, &task.cost, &x0, &sol.controls)?;
             let mut note = None;
             if !felt {
                 println!(
@@ -290,7 +210,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                      is zero out of reach)",
                     base.model
                 );
-                match (sigma_of(base.model), args.no_continuation) {
+                match (library::noise_scale(base.model), args.no_continuation) {
                     (None, _) => {
                         note = Some(
                             "no contact felt, and the hard model has no action at a distance to continue \
@@ -302,10 +222,44 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                         note = Some("no contact felt (--no-continuation)".to_string());
                     }
                     (Some(sigma), false) => {
-                        let (solved, said) =
-                            continuation(&ddp, &file.scene, &base, &task, &x0, sol, sigma)?;
-                        sol = solved;
-                        note = Some(said);
+                        let c = library::continue_in_noise(
+                            &ddp,
+                            &file.scene,
+                            &base,
+                            &task.cost,
+                            &x0,
+                            sol,
+                            |s, stage, felt| {
+                                println!(
+                                    "continuation: sigma {s:.4}: {:?} after {} passes, cost {:.6}{}",
+                                    stage.status,
+                                    stage.iterations.len(),
+                                    stage.cost,
+                                    match felt {
+                                        Some(true) => ", contact felt",
+                                        Some(false) => ", contact not felt",
+                                        None => "",
+                                    }
+                                );
+                            },
+                        )?;
+                        note = Some(match (c.felt_at, c.kept) {
+                            (Some(top), true) => format!(
+                                "continued in the noise scale: contact felt at sigma {top:.4}, solved back \
+                                 down to {sigma}"
+                            ),
+                            (Some(top), false) => format!(
+                                "no contact felt: found at sigma {top:.4}, and lost again on the way back \
+                                 down to {sigma}"
+                            ),
+                            (None, _) => format!(
+                                "no contact felt even at sigma {:.4} ({}x the task's): nothing the controls \
+                                 do reaches a contact within the horizon",
+                                sigma * (1 << library::CONTINUATION_DOUBLINGS) as f64,
+                                1 << library::CONTINUATION_DOUBLINGS
+                            ),
+                        });
+                        sol = c.solution;
                     }
                 }
             }
@@ -406,86 +360,6 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         anyhow::bail!("--strict: {}", felt_note.unwrap_or_default());
     }
     Ok(())
-}
-
-/// Continuation in the noise scale from a solve at `sigma` that felt no contact: double sigma (each
-/// solve warm-started from the last) until a solve's trajectory feels a contact, then halve it back to
-/// `sigma`, each stage logged. Returns the solution at `sigma` and a line saying what happened.
-fn continuation(
-    ddp: &Ddp,
-    scene: &dynamics::Scene,
-    base: &dynamics::StepSettings,
-    task: &library::Task,
-    x0: &[f64],
-    start: Solution,
-    sigma: f64,
-) -> anyhow::Result<(Solution, String)> {
-    let simulator = |s: f64| -> anyhow::Result<dynamics::Simulator> {
-        let model = with_sigma(base.model, s).expect("a smoothed model");
-        Ok(dynamics::Simulator::new(
-            scene.clone(),
-            dynamics::StepSettings { model, ..*base },
-        )?)
-    };
-    let untouched = start.cost;
-    let mut sol = start;
-    let mut felt_at = None;
-    let mut s = sigma;
-    for _ in 0..CONTINUATION_DOUBLINGS {
-        s *= 2.0;
-        let sim = simulator(s)?;
-        let mut probe = simulator(s)?;
-        sol = ddp.solve(&mut FingerDynamics::new(sim), &task.cost, x0, &sol.controls)?;
-        // Felt, and used: the cost improved on the untouched one by a percent of its size.
-        let felt = contact_felt(&mut probe, task, x0, &sol.controls)?
-            && untouched - sol.cost > 0.01 * (1.0 + untouched.abs());
-        println!(
-            "continuation: sigma {s:.4}: {:?} after {} passes, cost {:.6}, contact {}",
-            sol.status,
-            sol.iterations.len(),
-            sol.cost,
-            if felt { "felt" } else { "not felt" }
-        );
-        if felt {
-            felt_at = Some(s);
-            break;
-        }
-    }
-    let Some(top) = felt_at else {
-        return Ok((
-            sol,
-            format!(
-                "no contact felt even at sigma {s:.4} ({}x the task's): nothing the controls do reaches \
-                 a contact within the horizon",
-                1 << CONTINUATION_DOUBLINGS
-            ),
-        ));
-    };
-    while s > sigma * 1.000_001 {
-        s = (s / 2.0).max(sigma);
-        let sim = simulator(s)?;
-        sol = ddp.solve(&mut FingerDynamics::new(sim), &task.cost, x0, &sol.controls)?;
-        println!(
-            "continuation: sigma {s:.4}: {:?} after {} passes, cost {:.6}",
-            sol.status,
-            sol.iterations.len(),
-            sol.cost
-        );
-    }
-    let mut probe = simulator(sigma)?;
-    let kept = contact_felt(&mut probe, task, x0, &sol.controls)?;
-    Ok((
-        sol,
-        if kept {
-            format!(
-                "continued in the noise scale: contact felt at sigma {top:.4}, solved back down to {sigma}"
-            )
-        } else {
-            format!(
-                "no contact felt: found at sigma {top:.4}, and lost again on the way back down to {sigma}"
-            )
-        },
-    ))
 }
 
 /// Each state entry a task's terms weigh, from the first state to the last (with the target of a

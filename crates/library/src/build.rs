@@ -716,7 +716,10 @@ impl<'a> Build<'a> {
             } else {
                 s.warm_passes
             };
-            let sol = self.solve(dynamics, &x1, &controls, passes, k)?;
+            let mut sol = self.solve(dynamics, &x1, &controls, passes, k)?;
+            if first && k == 0 {
+                sol = self.reach(&x1, sol, passes)?;
+            }
             let p = self.progress;
             let values = local_values(&sol, &self.cost, s.keep, p.coordinate, p.period);
             for (t, value) in values.into_iter().enumerate() {
@@ -746,6 +749,58 @@ impl<'a> Build<'a> {
 
     /// One trajectory from `x1`, warm-started from `controls`; a perturbed state the warm start cannot
     /// even roll out from starts from zero controls instead.
+    /// The first solve of a build, checked for the contact its task needs ([`crate::contact_felt`]); where
+    /// none is felt and the model is smoothed, continued in the noise scale
+    /// ([`crate::continue_in_noise`]) and replaced by the result if that feels it. The finger's built-in
+    /// task, and every task whose first solve touches, is left as it was.
+    fn reach(
+        &self,
+        x1: &[f64],
+        sol: ddp::Solution,
+        passes: usize,
+    ) -> Result<ddp::Solution, LibraryError> {
+        let Objective::Task(cost) = &self.cost else {
+            return Ok(sol);
+        };
+        let settings = *self.settings.simulator(self.scene)?.settings();
+        if crate::noise_scale(settings.model).is_none() {
+            return Ok(sol);
+        }
+        let mut probe = self.settings.simulator(self.scene)?;
+        if crate::contact_felt(&mut probe, cost, x1, &sol.controls)? {
+            return Ok(sol);
+        }
+        tracing::info!("the first solve felt no contact: continuing in the noise scale");
+        let ddp = Ddp::new(DdpSettings {
+            max_iterations: passes,
+            tol_cost: self.settings.tolerance,
+            control_limits: self.control_limits.clone(),
+            ..DdpSettings::default()
+        })
+        .map_err(|source| LibraryError::Optimiser {
+            trajectory: 0,
+            source,
+        })?;
+        let c = crate::continue_in_noise(
+            &ddp,
+            self.scene,
+            &settings,
+            cost,
+            x1,
+            sol.clone(),
+            |s, stage, felt| {
+                tracing::info!(
+                    sigma = s,
+                    passes = stage.iterations.len(),
+                    cost = stage.cost,
+                    ?felt,
+                    "continuation"
+                );
+            },
+        )?;
+        Ok(if c.kept { c.solution } else { sol })
+    }
+
     fn solve(
         &self,
         dynamics: &mut FingerDynamics,

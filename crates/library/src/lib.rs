@@ -11,6 +11,7 @@ mod evaluate;
 mod file;
 mod policy;
 mod problem;
+mod reach;
 mod task;
 
 pub use anneal::{AnnealStep, anneal};
@@ -27,6 +28,9 @@ pub use evaluate::{
 pub use file::{Library, MAGIC, VERSION, write_atomically};
 pub use policy::Policy;
 pub use problem::{ProblemFile, START_TOLERANCE, Task, TaskCost, TaskSpec, Term, TermSpec};
+pub use reach::{
+    CONTINUATION_DOUBLINGS, Continuation, contact_felt, continue_in_noise, noise_scale,
+};
 pub use task::{CONTROL_WEIGHT, FingerDynamics, StepData, TaskError, finger_cost};
 
 /// `Err` unless `v` has `len` finite entries.
