@@ -566,15 +566,7 @@ final = [{ coordinate = "wheel.angle", linear = 1.0 }]
         library::Progress::of_task(&task).unwrap().forward,
         Some(-1.0)
     );
-    let settings = library::LibrarySettings {
-        trajectories: 8,
-        growth: 0,
-        ..library::LibrarySettings::default().for_task(&task)
-    };
-    let settings = library::LibrarySettings {
-        exploration: settings.exploration.fitted(8),
-        ..settings
-    };
+    let settings = default_recipe(&task, 8);
     let lib = library::Library::build_task(&file, Some("back"), &settings, |_, _| {}).unwrap();
     let policy = lib.policy().unwrap();
     let e = library::evaluate(
@@ -621,15 +613,7 @@ fn a_library_whose_contact_starts_out_of_reach_still_pushes() {
         .iter()
         .position(|c| c == "block.x")
         .unwrap();
-    let base = library::LibrarySettings {
-        trajectories: 4,
-        growth: 0,
-        ..library::LibrarySettings::default().for_task(&task)
-    };
-    let settings = library::LibrarySettings {
-        exploration: base.exploration.fitted(4),
-        ..base
-    };
+    let settings = default_recipe(&task, 4);
     let lib = library::Library::build_task(&file, Some("push"), &settings, |_, _| {}).unwrap();
     // The first trajectory's cost: 14.4 untouched (the block 0.6 from its target over the horizon).
     assert!(
@@ -643,4 +627,15 @@ fn a_library_whose_contact_starts_out_of_reach_still_pushes() {
         .map(|e| e.x[block])
         .fold(f64::NEG_INFINITY, f64::max);
     assert!(farthest > 0.6, "the block reached only {farthest}");
+}
+
+/// The default recipe on `task`, fitted to `trajectories`, without growth.
+fn default_recipe(task: &library::Task, trajectories: usize) -> library::LibrarySettings {
+    let base = library::LibrarySettings::default().for_task(task);
+    library::LibrarySettings {
+        trajectories,
+        growth: 0,
+        exploration: base.exploration.fitted(trajectories),
+        ..base
+    }
 }

@@ -248,39 +248,9 @@ impl ErmSolver {
                 .max(f64::MIN_POSITIVE);
             // Newton direction on the free set with a Levenberg–Marquardt shift until it is a descent
             // direction of a positive definite model.
-            let mut d = vec![0.0; c];
-            let mut solved = false;
-            for _ in 0..60 {
-                let mut m = vec![0.0; c * c];
-                for i in 0..c {
-                    for j in 0..c {
-                        m[i * c + j] = if free[i] && free[j] {
-                            cur.h[i * c + j]
-                        } else if i == j {
-                            1.0
-                        } else {
-                            0.0
-                        };
-                    }
-                    if free[i] {
-                        m[i * c + i] += mu;
-                    }
-                }
-                if is_positive_definite(&m, c) && lu.factor(&m).is_ok() {
-                    for i in 0..c {
-                        d[i] = if free[i] { -cur.g[i] } else { 0.0 };
-                    }
-                    lu.solve(&mut d);
-                    solved = d.iter().all(|v| v.is_finite());
-                    if solved {
-                        break;
-                    }
-                }
-                mu = (mu * 10.0).max(1e-10 * diag_max);
-            }
-            if !solved {
+            let Some(d) = newton_direction(&cur, &free, &mut mu, &mut lu) else {
                 break Status::SingularJacobian;
-            }
+            };
             // Search along the projection arc lambda(t) = max(lambda + t d, 0); the active variables (within
             // eps of the bound, pushed outwards) go to the bound at full step, so that they land on it
             // instead of creeping towards it.
