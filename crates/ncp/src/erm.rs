@@ -207,16 +207,7 @@ impl ErmSolver {
         // Stall detection: the best objective so far and the accepted steps since it last fell measurably.
         let (mut best_f, mut stalled, mut blind) = (cur.f, 0, 0);
         let status = loop {
-            let pg: Vec<f64> = (0..c)
-                .map(|i| {
-                    if lambda[i] > 0.0 {
-                        cur.g[i]
-                    } else {
-                        cur.g[i].min(0.0)
-                    }
-                })
-                .collect();
-            let residual = inf_norm(&pg);
+            let residual = projected_gradient_norm(&lambda, &cur.g);
             let scale = 1.0 + inf_norm(&lambda).max(inf_norm(&cur.w));
             tracing::trace!(iter = iterations, residual, mu, "ncp.erm");
             if residual <= s.tol * scale {
@@ -303,26 +294,23 @@ impl ErmSolver {
                 evaluations += 1;
                 continue;
             }
-            let mut t = 1.0;
-            let accepted = loop {
-                for i in 0..c {
-                    trial[i] = if free[i] {
+            let accepted = armijo_search(
+                reduced,
+                sigma,
+                &cur,
+                &lambda,
+                s.armijo,
+                1.0,
+                &mut trial,
+                &mut evaluations,
+                |t, i| {
+                    if free[i] {
                         (lambda[i] + t * d[i]).max(0.0)
                     } else {
                         lambda[i] * (1.0 - t)
-                    };
-                }
-                let e = evaluate(reduced, sigma, &trial, false);
-                evaluations += 1;
-                let decrease: f64 = (0..c).map(|i| cur.g[i] * (trial[i] - lambda[i])).sum();
-                if e.f.is_finite() && e.f <= cur.f + s.armijo * decrease {
-                    break Some(t);
-                }
-                t *= 0.5;
-                if t < 1e-12 {
-                    break None;
-                }
-            };
+                    }
+                },
+            );
             let Some(t) = accepted else {
                 // The step was too long for the model: trust it less, or stop at the rounding floor.
                 if mu > 1e12 * diag_max {
@@ -350,16 +338,7 @@ impl ErmSolver {
                 break Status::Converged;
             }
         };
-        let pg_norm = (0..c).fold(0.0f64, |m, i| {
-            m.max(
-                if lambda[i] > 0.0 {
-                    cur.g[i]
-                } else {
-                    cur.g[i].min(0.0)
-                }
-                .abs(),
-            )
-        });
+        let pg_norm = projected_gradient_norm(&lambda, &cur.g);
         (
             lambda,
             cur.f,
@@ -427,26 +406,24 @@ impl ErmSolver {
                     (reach, blocking) = (t, Some(i));
                 }
             }
-            let mut t = reach;
             let mut trial = vec![0.0; c];
-            let accepted = loop {
-                for i in 0..c {
-                    trial[i] = (lambda[i] + t * d[i]).max(0.0);
-                }
-                if let Some(b) = blocking.filter(|_| t == reach) {
-                    trial[b] = 0.0;
-                }
-                let e = evaluate(reduced, sigma, &trial, false);
-                evaluations += 1;
-                let decrease: f64 = (0..c).map(|i| cur.g[i] * (trial[i] - lambda[i])).sum();
-                if e.f.is_finite() && e.f <= cur.f + s.armijo * decrease {
-                    break Some(t);
-                }
-                t *= 0.5;
-                if t < 1e-12 {
-                    break None;
-                }
-            };
+            let accepted = armijo_search(
+                reduced,
+                sigma,
+                &cur,
+                &lambda,
+                s.armijo,
+                reach,
+                &mut trial,
+                &mut evaluations,
+                |t, i| {
+                    if blocking == Some(i) && t == reach {
+                        0.0
+                    } else {
+                        (lambda[i] + t * d[i]).max(0.0)
+                    }
+                },
+            );
             let diag_max = (0..c)
                 .fold(0.0f64, |m, i| m.max(cur.h[i * c + i].abs()))
                 .max(f64::MIN_POSITIVE);
@@ -493,6 +470,40 @@ impl ErmSolver {
                 evaluations,
             },
         )
+    }
+}
+
+/// Backtracking from step `t0`, halving down to 1e-12: the first `t` whose trial point (entry `i` is
+/// `point(t, i)`, left in `trial`) meets Armijo's condition against `cur` at `lambda`; `None` if none does.
+#[allow(clippy::too_many_arguments)]
+fn armijo_search(
+    reduced: &Reduced,
+    sigma: &[f64],
+    cur: &Eval,
+    lambda: &[f64],
+    armijo: f64,
+    t0: f64,
+    trial: &mut [f64],
+    evaluations: &mut usize,
+    point: impl Fn(f64, usize) -> f64,
+) -> Option<f64> {
+    let mut t = t0;
+    loop {
+        for (i, v) in trial.iter_mut().enumerate() {
+            *v = point(t, i);
+        }
+        let e = evaluate(reduced, sigma, trial, false);
+        *evaluations += 1;
+        let decrease: f64 = (0..trial.len())
+            .map(|i| cur.g[i] * (trial[i] - lambda[i]))
+            .sum();
+        if e.f.is_finite() && e.f <= cur.f + armijo * decrease {
+            return Some(t);
+        }
+        t *= 0.5;
+        if t < 1e-12 {
+            return None;
+        }
     }
 }
 
