@@ -18,6 +18,6 @@ pub use error::ViewerError;
 pub use mpc::{MAX_MPC_HORIZON, MAX_MPC_PASSES, MpcSettings, OnlineMpc, WARMUP_PER_STEP};
 pub use server::{
     CLIENT_INPUT_CAPACITY, DEFAULT_IDLE_TIMEOUT, INPUT_CAPACITY, MAX_CLIENT_MESSAGE,
-    REPLY_CAPACITY, Viewer, ViewerConfig,
+    MAX_READ_MESSAGE, REPLY_CAPACITY, Viewer, ViewerConfig,
 };
 pub use world::{SPRING_DAMPING, SPRING_MAX_FORCE, SPRING_STIFFNESS, World, WorldSettings};

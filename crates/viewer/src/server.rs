@@ -304,10 +304,41 @@ async fn style() -> Response {
 /// connection with code 1009 (message too big) and the reason.
 pub const MAX_CLIENT_MESSAGE: usize = 64 << 10;
 
+/// The largest message the server reads whole before closing. A message over [`MAX_CLIENT_MESSAGE`] and up to
+/// this size is read and the connection closed with the full closing handshake, so the close frame always
+/// arrives; a longer one is refused from its frame header and the connection dropped once the close frame is
+/// sent (a peer still sending then may see a reset instead of the frame).
+pub const MAX_READ_MESSAGE: usize = 1 << 20;
+
+/// How long a closing connection waits for the client's answering close frame.
+const CLOSING_WAIT: Duration = Duration::from_secs(2);
+
 async fn upgrade(ws: WebSocketUpgrade, State(state): State<AppState>) -> Response {
-    ws.max_message_size(MAX_CLIENT_MESSAGE)
-        .max_frame_size(MAX_CLIENT_MESSAGE)
+    ws.max_message_size(MAX_READ_MESSAGE)
+        .max_frame_size(MAX_READ_MESSAGE)
         .on_upgrade(move |socket| client(socket, state))
+}
+
+/// The close frame for a message over [`MAX_CLIENT_MESSAGE`].
+fn too_big() -> Message {
+    Message::Close(Some(axum::extract::ws::CloseFrame {
+        code: 1009,
+        reason: format!("message over the {MAX_CLIENT_MESSAGE}-byte limit").into(),
+    }))
+}
+
+/// The closing handshake's second half: discard what the client still sends until its close frame, the end
+/// of the stream, an error or [`CLOSING_WAIT`]. Dropping a socket with unread input makes the kernel reset
+/// the connection, which can discard the close frame just sent before the client reads it.
+async fn drain(stream: &mut futures_util::stream::SplitStream<WebSocket>) {
+    let _ = tokio::time::timeout(CLOSING_WAIT, async {
+        while let Some(Ok(message)) = stream.next().await {
+            if matches!(message, Message::Close(_)) {
+                break;
+            }
+        }
+    })
+    .await;
 }
 
 /// One client: the hello, then every new frame out and every message in, until either side closes.
@@ -359,17 +390,27 @@ async fn client(socket: WebSocket, state: AppState) {
                     } else {
                         1002
                     };
-                    let text = if code == 1009 {
-                        format!("message over the {MAX_CLIENT_MESSAGE}-byte limit")
+                    let close = if code == 1009 {
+                        too_big()
                     } else {
-                        reason.chars().take(100).collect()
-                    };
-                    let _ = sink
-                        .send(Message::Close(Some(axum::extract::ws::CloseFrame {
+                        Message::Close(Some(axum::extract::ws::CloseFrame {
                             code,
-                            reason: text.into(),
-                        })))
-                        .await;
+                            reason: reason.chars().take(100).collect::<String>().into(),
+                        }))
+                    };
+                    let _ = sink.send(close).await;
+                    break;
+                }
+                Some(Ok(Message::Text(text) )) if text.len() > MAX_CLIENT_MESSAGE => {
+                    if sink.send(too_big()).await.is_ok() {
+                        drain(&mut stream).await;
+                    }
+                    break;
+                }
+                Some(Ok(Message::Binary(data))) if data.len() > MAX_CLIENT_MESSAGE => {
+                    if sink.send(too_big()).await.is_ok() {
+                        drain(&mut stream).await;
+                    }
                     break;
                 }
                 Some(Ok(Message::Text(text))) => match ClientMessage::parse(text.as_str()) {
