@@ -553,7 +553,8 @@ impl Library {
         if let Some(t) = &chosen {
             base = base.for_task(t);
         }
-        let exploration = match base.exploration.fitted(trajectories) {
+        let fitted = base.clone().fitted(trajectories);
+        let exploration = match fitted.exploration {
             Exploration::Branches {
                 trunk: t,
                 settle: s,
@@ -579,7 +580,7 @@ impl Library {
             seed,
             chains,
             horizon: horizon.unwrap_or(base.horizon),
-            growth: growth.unwrap_or(base.growth),
+            growth: growth.unwrap_or(fitted.growth),
             exploration,
             ..base
         };

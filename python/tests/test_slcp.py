@@ -166,6 +166,12 @@ def test_a_task_library_of_a_scene_file(root):
     [target, _] = e["task"]["targets"]
     assert target["entry"] == "block.x"
     assert target["last"] < 0.1
+    # Issue 28: the run is judged by the task's own criterion, its worst last-quarter distance from the
+    # target against the tolerance (default 0.06: a tenth of the way from 0 to 0.6).
+    success = e["success"]
+    assert "block.x -> 0.6 within 0.06" in success["criterion"]
+    assert success["distance"] == target["final_worst"]
+    assert success["passed"] == (success["distance"] <= 0.06)
 
 
 def test_a_target_task_library_with_the_defaults_and_a_small_budget(root):

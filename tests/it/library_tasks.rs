@@ -345,18 +345,8 @@ fn a_library_is_built_for_a_task_of_a_scene_file_and_keeps_it() {
         .unwrap();
     let progress = library::Progress::of_task(&task).unwrap();
     assert_eq!(progress.coordinate, ellipse);
-    assert_eq!(progress.period, std::f64::consts::PI);
+    assert_eq!(progress.period, Some(std::f64::consts::PI));
     assert_eq!(progress.forward, None);
-    // Growth needs a direction of progress: refused, by name, before any work.
-    let growing = library::LibrarySettings {
-        growth: 2,
-        ..small_settings(&task, 3)
-    };
-    let err = library::Library::build_task(&file, Some("turn"), &growing, |_, _| {}).unwrap_err();
-    assert!(
-        matches!(err, LibraryError::Setting { name: "growth", .. }),
-        "{err}"
-    );
     let settings = small_settings(&task, 3);
     let lib = library::Library::build_task(&file, Some("turn"), &settings, |_, _| {}).unwrap();
     assert_eq!(lib.entries.len(), 3);
@@ -414,26 +404,50 @@ fn a_library_is_built_for_a_task_of_a_scene_file_and_keeps_it() {
     assert!(e.task.running_cost_per_second >= 0.0);
 }
 
+/// Issue 28, item 4: a library compares states modulo at most one periodic coordinate; a task without
+/// one (a spin rewarded on an angle declared without a period) gets a policy that compares states as they
+/// are, and a task with two is refused by name.
 #[test]
-fn a_task_library_needs_exactly_one_periodic_coordinate() {
-    for periods in [
-        "periods = {}",
-        r#"periods = { "ellipse.angle" = 3.14, "link1.angle" = 6.28 }"#,
-    ] {
-        let file = finger_with(&format!(
-            "[task.t]\nh = 0.05\nhorizon = 10\nmodel = \"hard\"\ncontrol_weight = 0.05\n{periods}\nrunning = [{{ coordinate = \"ellipse.angle\", linear = -1.0 }}]\n"
-        ))
+fn a_task_library_takes_no_periodic_coordinate_or_one() {
+    let two = finger_with(
+        "[task.t]\nh = 0.05\nhorizon = 10\nmodel = \"hard\"\ncontrol_weight = 0.05\nperiods = { \"ellipse.angle\" = 3.14, \"link1.angle\" = 6.28 }\nrunning = [{ coordinate = \"ellipse.angle\", linear = -1.0 }]\n",
+    )
+    .unwrap();
+    let task = two.task(None).unwrap();
+    let err = library::Progress::of_task(&task).unwrap_err();
+    assert!(
+        matches!(&err, LibraryError::Task { field, .. } if field == "periods"),
+        "{err}"
+    );
+    let err =
+        library::Library::build_task(&two, None, &small_settings(&task, 2), |_, _| {}).unwrap_err();
+    assert!(matches!(err, LibraryError::Task { .. }), "{err}");
+    // No period: progress along the rewarded coordinate, which the policy does not wrap.
+    let none = finger_with(
+        "[task.t]\nh = 0.05\nhorizon = 10\nmodel = \"hard\"\ncontrol_weight = 0.05\nrunning = [{ coordinate = \"ellipse.angle\", linear = -1.0 }]\n",
+    )
+    .unwrap();
+    let task = none.task(None).unwrap();
+    let p = library::Progress::of_task(&task).unwrap();
+    let ellipse = none
+        .scene
+        .coordinate_names()
+        .iter()
+        .position(|c| c == "ellipse.angle")
         .unwrap();
-        let task = file.task(None).unwrap();
-        let err = library::Progress::of_task(&task).unwrap_err();
-        assert!(
-            matches!(&err, LibraryError::Task { field, .. } if field == "periods"),
-            "{err}"
-        );
-        let err = library::Library::build_task(&file, None, &small_settings(&task, 2), |_, _| {})
-            .unwrap_err();
-        assert!(matches!(err, LibraryError::Task { .. }), "{err}");
-    }
+    assert_eq!(
+        (p.coordinate, p.period, p.forward),
+        (ellipse, None, Some(1.0))
+    );
+    let lib =
+        library::Library::build_task(&none, None, &small_settings(&task, 3), |_, _| {}).unwrap();
+    let policy = lib.policy().unwrap();
+    // A state a whole turn of the ellipse on is not the same state to this policy: the nearest stored
+    // state is reached with no periods in between.
+    let mut x = lib.entries[0].x.clone();
+    x[ellipse] += std::f64::consts::PI;
+    let (_, turns) = policy.nearest(&x).unwrap();
+    assert_eq!(turns, 0.0);
     // The paper's task on the finger spins forward: growth has its direction.
     let file = ProblemFile::from_toml_str(FINGER).unwrap();
     let p = library::Progress::of_task(&file.task(None).unwrap()).unwrap();
@@ -638,4 +652,186 @@ fn default_recipe(task: &library::Task, trajectories: usize) -> library::Library
         exploration: base.exploration.fitted(trajectories),
         ..base
     }
+}
+
+/// A wheel on a driven hinge (no contact needed) with a target task: turn it to 1.0 and hold it there,
+/// `success` being the task's `[task.hold.success]` table (or none).
+fn wheel_to_target(success: &str) -> Result<ProblemFile, LibraryError> {
+    ProblemFile::from_toml_str(&format!(
+        r#"
+gravity = [0.0, -4.0]
+
+[[body]]
+name = "wheel"
+semi_axes = [0.5, 0.3]
+parent = "world"
+anchor = [0.0, 0.0]
+centre = [0.0, 0.0]
+joint = {{ damping = 0.5, actuated = true }}
+
+[task.hold]
+h = 0.05
+horizon = 30
+model = "logistic"
+sigma = 0.1
+control_weight = 0.05
+control_limits = [-2.0, 2.0]
+running = [{{ coordinate = "wheel.angle", quadratic = 4.0, target = 1.0 }}]
+final = [
+    {{ coordinate = "wheel.angle", quadratic = 20.0, target = 1.0 }},
+    {{ coordinate = "wheel.angle", velocity = true, quadratic = 2.0 }},
+]
+{success}
+"#
+    ))
+}
+
+/// Issue 28, item 2: a task says what success is. Without a table the defaults come from the terms: a
+/// progress task must advance a tenth of its period per second, a target task hold every position target
+/// within 0.05 (or a tenth of the way from the start); a table overrides them, and a bad one is refused
+/// with its field named.
+#[test]
+fn a_task_says_what_success_is_with_defaults_from_its_terms() {
+    let spin = ProblemFile::from_toml_str(FINGER)
+        .unwrap()
+        .task(None)
+        .unwrap();
+    let s = &spin.success;
+    assert_eq!(s.rates, vec![(2, 1.0)]);
+    assert!((s.min_rate - std::f64::consts::PI / 10.0).abs() < 1e-15);
+    assert!(s.targets.is_empty() && !s.holds());
+    let turn = ProblemFile::from_toml_str(include_str!("../../scenes/two_fingers.toml"))
+        .unwrap()
+        .task(Some("turn"))
+        .unwrap();
+    let s = &turn.success;
+    assert!(s.holds() && s.rates.is_empty());
+    // The ellipse's angle to 0.5 (its velocity's target is not a position target).
+    assert_eq!(s.targets.len(), 1, "{:?}", s.targets);
+    assert_eq!((s.targets[0].1, s.tolerance), (0.5, 0.05));
+    assert_eq!(s.settle, library::DEFAULT_SETTLE);
+    // From 0 to 1.0: a tenth of the way is 0.1, more than 0.05.
+    let hold = wheel_to_target("").unwrap().task(None).unwrap();
+    assert_eq!(hold.success.tolerance, 0.1);
+    let mut x = hold.x0.clone();
+    x[0] = 1.07;
+    assert!((hold.success.distance(&x) - 0.07).abs() < 1e-12);
+    // A table.
+    let table = wheel_to_target(
+        "[task.hold.success]\ntolerance = 0.02\nsettle = 3.0\ntargets = [\"wheel.angle\"]\n",
+    )
+    .unwrap()
+    .task(None)
+    .unwrap();
+    assert_eq!((table.success.tolerance, table.success.settle), (0.02, 3.0));
+    // Bad tables, each refused by its field.
+    for (table, field) in [
+        ("tolerance = 0.0", "success.tolerance"),
+        ("tolerance = -1.0", "success.tolerance"),
+        ("settle = nan", "success.settle"),
+        ("min_rate = -0.5", "success.min_rate"),
+        ("targets = [\"wheel.nothing\"]", "success.targets"),
+        ("speed = 1.0", "success"),
+    ] {
+        let err = wheel_to_target(&format!("[task.hold.success]\n{table}\n")).unwrap_err();
+        assert!(
+            matches!(&err, LibraryError::Task { field: f, .. } if f.starts_with(field)),
+            "{table}: {err}"
+        );
+    }
+}
+
+/// Issue 28, items 2 and 4: `evaluate` judges a run by its task's criterion (a target task: the worst
+/// last-quarter distance; after kicks, back within tolerance), and growth adds branches where a target
+/// task's policy is not back within tolerance in time after a kick, and none where it is.
+#[test]
+fn a_target_task_is_judged_and_grown_by_its_own_criterion() {
+    let file = wheel_to_target("").unwrap();
+    let task = file.task(None).unwrap();
+    let settings = default_recipe(&task, 16);
+    let lib = library::Library::build_task(&file, None, &settings, |_, _| {}).unwrap();
+    let policy = lib.policy().unwrap();
+    let run = |kick_every: f64| {
+        library::evaluate(
+            &lib,
+            &policy,
+            &library::EvaluationSettings {
+                model: task.model,
+                h: task.h,
+                seconds: 20.0,
+                kick_every,
+                kick_std: 1.0,
+                x0: task.x0.clone(),
+                ..library::EvaluationSettings::default()
+            },
+        )
+        .unwrap()
+    };
+    let calm = run(0.0);
+    let worst = calm.task.targets[0].final_worst;
+    assert_eq!(calm.success.distance, Some(worst));
+    assert!(calm.success.rate.is_none());
+    assert_eq!(calm.success.passed, worst <= task.success.tolerance);
+    assert!(calm.success.passed, "{:?}", calm.success);
+    let kicked = run(4.0);
+    assert!(kicked.kicks >= 3, "{kicked:?}");
+    assert_eq!(kicked.success.distance, Some(kicked.task.targets[0].last));
+    // A driven wheel is back at its target well within an interval after each kick.
+    assert_eq!(kicked.recovered, kicked.kicks, "{kicked:?}");
+    assert!(kicked.resumed >= kicked.kicks - 1, "{kicked:?}");
+    // Growth: with a tolerance no closed loop meets, every judged interval fails and grows a branch;
+    // with one every closed loop meets, none does.
+    let grown = |success: &str| {
+        let file = wheel_to_target(success).unwrap();
+        let task = file.task(None).unwrap();
+        let settings = library::LibrarySettings {
+            growth: 1,
+            ..default_recipe(&task, 16)
+        };
+        let lib = library::Library::build_task(&file, None, &settings, |_, _| {}).unwrap();
+        lib.entries.len() / settings.keep - settings.trajectories
+    };
+    assert_eq!(grown("[task.hold.success]\ntolerance = 100.0\n"), 0);
+    let strict = grown("[task.hold.success]\ntolerance = 1e-12\n");
+    assert!(strict >= 5, "{strict} trajectories grown");
+}
+
+/// Issue 28, bad input: a task that cannot have a library is refused before any work, the reason named:
+/// a scene with nothing to control, a cost that rewards nothing.
+#[test]
+fn a_task_that_cannot_have_a_library_is_refused_with_the_reason() {
+    let nothing = finger_with(
+        "[task.t]\nh = 0.05\nhorizon = 10\nmodel = \"hard\"\ncontrol_weight = 0.05\nperiods = { \"ellipse.angle\" = 3.14 }\nrunning = [{ coordinate = \"ellipse.angle\", linear = 0.0 }]\n",
+    )
+    .unwrap();
+    let task = nothing.task(None).unwrap();
+    let err = library::Library::build_task(&nothing, None, &small_settings(&task, 2), |_, _| {})
+        .unwrap_err();
+    assert!(err.to_string().contains("rewards nothing"), "{err}");
+    let uncontrolled = ProblemFile::from_toml_str(
+        r#"
+gravity = [0.0, -4.0]
+
+[[body]]
+name = "wheel"
+semi_axes = [0.5, 0.3]
+parent = "world"
+anchor = [0.0, 0.0]
+centre = [0.0, 0.0]
+joint = { damping = 0.5 }
+
+[task.t]
+h = 0.05
+horizon = 10
+model = "hard"
+control_weight = 0.05
+running = [{ coordinate = "wheel.angle", quadratic = 1.0, target = 1.0 }]
+"#,
+    )
+    .unwrap();
+    let task = uncontrolled.task(None).unwrap();
+    let err =
+        library::Library::build_task(&uncontrolled, None, &small_settings(&task, 2), |_, _| {})
+            .unwrap_err();
+    assert!(err.to_string().contains("nothing to control"), "{err}");
 }

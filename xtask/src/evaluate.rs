@@ -48,7 +48,7 @@ pub fn worlds(library: &Library) -> Vec<(String, Model, f64)> {
         Model::Normal(s) => format!("normal {s}"),
     };
     let mut out = Vec::new();
-    for step in [h, 0.03] {
+    for step in [h, library::WORLD_TIME_STEP] {
         for m in [own, Model::Hard] {
             if !out.iter().any(|(_, mm, hh)| *mm == m && *hh == step) {
                 out.push((name(m), m, step));
@@ -210,6 +210,37 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             or_none(targets)
         );
     }
+    // The task's own success criterion, per world and in sum.
+    let criterion = rows
+        .first()
+        .map_or(String::new(), |r| r.evaluation.success.criterion.clone());
+    let _ = writeln!(
+        out,
+        "\nsuccess: {criterion}{}\n| world | h | succeeded | last-quarter rate | distance to targets |\n|---|---:|---|---:|---:|",
+        if args.kick_every > 0.0 {
+            " (with kicks: the targets' distance at the end)"
+        } else {
+            ""
+        }
+    );
+    for row in &rows {
+        let v = &row.evaluation.success;
+        let _ = writeln!(
+            out,
+            "| {} | {} | {} | {} | {} |",
+            row.world,
+            row.h,
+            if v.passed { "yes" } else { "no" },
+            v.rate.map_or("-".into(), |r| format!("{r:.3}")),
+            v.distance.map_or("-".into(), |d| format!("{d:.3}")),
+        );
+    }
+    let passed = rows.iter().filter(|r| r.evaluation.success.passed).count();
+    let _ = writeln!(
+        out,
+        "{passed} of {} worlds succeed by the task's criterion",
+        rows.len()
+    );
     if !emit(&mut out) {
         return Ok(());
     }

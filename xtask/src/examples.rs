@@ -9,8 +9,8 @@ use crate::figures::{both, err, register_font};
 use anyhow::Context;
 use ddp::{Ddp, DdpSettings};
 use library::{
-    Evaluation, EvaluationSettings, Exploration, FingerDynamics, Library, LibrarySettings, Model,
-    ProblemFile, Task, evaluate,
+    Evaluation, EvaluationSettings, FingerDynamics, Library, LibrarySettings, Model, ProblemFile,
+    Task, evaluate,
 };
 use plotters::prelude::*;
 use serde::Serialize;
@@ -21,15 +21,18 @@ use std::time::Instant;
 /// Options of `cargo xtask examples`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// A scene file to run instead of the three examples (with --task when it has several tasks); its
-    /// library recipe is the flags below. The documentation is then left alone.
+    /// A scene file to run instead of the zoo (with --task when it has several tasks). The documentation
+    /// is then left alone.
     #[arg(long)]
     scene: Option<PathBuf>,
     /// The task of --scene.
     #[arg(long, requires = "scene")]
     task: Option<String>,
+    /// Run only the zoo's examples whose name contains this.
+    #[arg(long, conflicts_with = "scene")]
+    only: Option<String>,
     /// Library seeds per example (1 to this).
-    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u64).range(1..=32))]
+    #[arg(long, default_value_t = SEEDS, value_parser = clap::value_parser!(u64).range(1..=32))]
     seeds: u64,
     /// Simulated seconds per closed-loop run.
     #[arg(long, default_value_t = SECONDS)]
@@ -37,31 +40,17 @@ pub struct Args {
     /// Output folder (tables as JSON, pictures, libraries).
     #[arg(long, default_value = "results/examples")]
     out: PathBuf,
-    /// The documentation folder whose results.md section "examples" and figures a run of the three
-    /// examples with the default seeds and seconds rewrites.
+    /// The documentation folder whose results.md section "examples" and figures a run of the whole zoo
+    /// with the default seeds and seconds rewrites.
     #[arg(long, default_value = "docs")]
     docs: PathBuf,
     /// Leave the documentation alone.
     #[arg(long)]
     no_docs: bool,
-    /// With --scene: trajectories of the library (before growth).
-    #[arg(long, default_value_t = 120)]
-    trajectories: usize,
-    /// With --scene: the unperturbed chain's trajectories.
-    #[arg(long, default_value_t = 40)]
-    trunk: usize,
-    /// With --scene: trunk trajectories branches do not start from.
-    #[arg(long, default_value_t = 5)]
-    settle: usize,
-    /// With --scene: trajectories per branch.
-    #[arg(long, default_value_t = 10)]
-    length: usize,
-    /// With --scene: growth rounds (only for a task that rewards progress along its periodic
-    /// coordinate).
-    #[arg(long, default_value_t = 0)]
-    growth: usize,
 }
 
+/// Library seeds per example of the documented results.
+const SEEDS: u64 = 4;
 /// Simulated seconds per closed-loop run of the documented results.
 const SECONDS: f64 = 40.0;
 /// Standard deviation of each velocity's kick in the kicked runs.
@@ -69,73 +58,8 @@ const KICK_STD: f64 = 1.0;
 /// Seconds between kicks in the kicked runs.
 const KICK_EVERY: f64 = 10.0;
 
-/// What counts as success for an example.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-enum Success {
-    /// The rewarded coordinate advances at least this fast (its unit per second) over the run's last
-    /// quarter.
-    Rate(f64),
-    /// Every position target is within this distance over the run's last quarter (the worst of it).
-    Hold(f64),
-}
-
-impl Success {
-    fn describe(self) -> String {
-        match self {
-            Success::Rate(r) => format!(
-                "still spinning at the end: at least {r} rad/s forward over the run's last quarter"
-            ),
-            Success::Hold(d) => format!(
-                "at the target and held there: within {d} of every position target throughout the run's last quarter"
-            ),
-        }
-    }
-
-    /// The same measure after kicks: a progress task's last-quarter rate, a target task's distance at
-    /// the end of the run (ten seconds after the last kick), and whether it meets the same threshold.
-    fn judge_kicked(self, e: &Evaluation) -> (f64, bool) {
-        match self {
-            Success::Rate(_) => self.judge(e),
-            Success::Hold(max) => {
-                let worst = e
-                    .task
-                    .targets
-                    .iter()
-                    .filter(|t| !t.entry.ends_with("velocity"))
-                    .map(|t| t.last)
-                    .fold(f64::NAN, f64::max);
-                (worst, worst <= max)
-            }
-        }
-    }
-
-    /// The measure and whether it passes.
-    fn judge(self, e: &Evaluation) -> (f64, bool) {
-        match self {
-            Success::Rate(min) => {
-                let rate = e
-                    .task
-                    .rates
-                    .iter()
-                    .map(|r| -r.weight.signum() * r.final_rate)
-                    .fold(f64::NAN, f64::min);
-                (rate, rate >= min)
-            }
-            Success::Hold(max) => {
-                let worst = e
-                    .task
-                    .targets
-                    .iter()
-                    .filter(|t| !t.entry.ends_with("velocity"))
-                    .map(|t| t.final_worst)
-                    .fold(f64::NAN, f64::max);
-                (worst, worst <= max)
-            }
-        }
-    }
-}
-
-/// One example: a scene file of this repository, its task, its library recipe and its success measure.
+/// One example: a scene file of this repository and its task. Its library is `train`'s defaults for the
+/// task, and its success the task's own criterion ([`library::Success`]).
 #[derive(Debug, Clone, Serialize)]
 struct Example {
     name: String,
@@ -144,44 +68,45 @@ struct Example {
     text: String,
     task: String,
     what: String,
-    trajectories: usize,
-    trunk: usize,
-    settle: usize,
-    length: usize,
-    growth: usize,
-    success: Success,
 }
 
-/// The three examples of issue 15.
+/// The zoo: every scene file's task under scenes/.
 fn examples() -> Vec<Example> {
-    let ex = |name: &str,
-              file: &str,
-              text: &str,
-              task: &str,
-              what: &str,
-              recipe: [usize; 5],
-              success| Example {
+    let ex = |name: &str, file: &str, text: &str, task: &str, what: &str| Example {
         name: name.into(),
         file: file.into(),
         text: text.into(),
         task: task.into(),
         what: what.into(),
-        trajectories: recipe[0],
-        trunk: recipe[1],
-        settle: recipe[2],
-        length: recipe[3],
-        growth: recipe[4],
-        success,
     };
     vec![
+        ex(
+            "finger",
+            "scenes/finger.toml",
+            include_str!("../../scenes/finger.toml"),
+            "spin",
+            "the paper's task: a two-link finger spins an anchored ellipse by flicking it",
+        ),
+        ex(
+            "mirrored_finger",
+            "scenes/mirrored_finger.toml",
+            include_str!("../../scenes/mirrored_finger.toml"),
+            "spin_back",
+            "a task with a negative direction: the finger mirrored left to right spins the ellipse clockwise (its cost +theta3)",
+        ),
+        ex(
+            "mirrored_turn",
+            "scenes/mirrored_finger.toml",
+            include_str!("../../scenes/mirrored_finger.toml"),
+            "turn",
+            "a target task for one finger, which can only push: the mirrored finger turns the ellipse to -1.0 rad and holds it there",
+        ),
         ex(
             "three_link",
             "scenes/three_link_finger.toml",
             include_str!("../../scenes/three_link_finger.toml"),
             "spin",
             "a three-link finger spins the ellipse (the paper's task; 4 joints, 3 controls, 2 contact pairs)",
-            [200, 60, 15, 10, 12],
-            Success::Rate(0.5),
         ),
         ex(
             "two_fingers",
@@ -189,8 +114,6 @@ fn examples() -> Vec<Example> {
             include_str!("../../scenes/two_fingers.toml"),
             "turn",
             "two two-link fingers mounted either side of the ellipse turn it to 0.5 rad and hold it there (the Control Suite's finger-turn task with two fingers; 5 joints, 4 controls, 2 contact pairs)",
-            [300, 60, 10, 20, 0],
-            Success::Hold(0.05),
         ),
         ex(
             "pushing",
@@ -198,21 +121,33 @@ fn examples() -> Vec<Example> {
             include_str!("../../scenes/pushing.toml"),
             "push",
             "a two-link finger pushes a free block resting on the ground 0.6 to the right, in the vertical plane (free body, ground contact with friction)",
-            [80, 30, 5, 10, 0],
-            Success::Hold(0.05),
+        ),
+        ex(
+            "slider_push",
+            "scenes/slider_push.toml",
+            include_str!("../../scenes/slider_push.toml"),
+            "push",
+            "a contact out of reach: a slider starting 0.45 behind a block pushes it 0.5 along the ground (no periodic coordinate)",
+        ),
+        ex(
+            "roll_block",
+            "scenes/roll_block.toml",
+            include_str!("../../scenes/roll_block.toml"),
+            "roll",
+            "a block reoriented on the ground: a two-link finger turns a block lying on the ground a half turn over",
         ),
     ]
 }
 
-/// A fingerprint of what the documented examples depend on: the recipes, the success measures, the
-/// scene files, the seeds and seconds, the library defaults they start from.
+/// A fingerprint of what the documented examples depend on: the zoo, its scene files, the library
+/// defaults (`train`'s), the seeds, seconds and kicks, the step.
 pub(crate) fn stamp() -> String {
     let inputs = serde_json::json!({
         "examples": examples(),
         "texts": examples().iter().map(|e| e.text.clone()).collect::<Vec<_>>(),
         "default": LibrarySettings::default(),
         "format": library::VERSION,
-        "seeds": 3,
+        "seeds": SEEDS,
         "seconds": SECONDS,
         "kicks": [KICK_STD, KICK_EVERY],
         // The step itself (how penetration is recovered, issue 27): new physics, new numbers.
@@ -256,6 +191,27 @@ fn from_rest(problem: &ProblemFile, task: &Task) -> anyhow::Result<FromRest> {
         &task.x0,
         &vec![vec![0.0; m]; task.horizon],
     )?;
+    // A solve that feels no contact is continued in the noise scale, as `optimize` and `train` do.
+    let mut probe = LibrarySettings::default()
+        .for_task(task)
+        .simulator(&problem.scene)?;
+    let felt = library::contact_felt(&mut probe, &task.cost, &task.x0, &sol.controls)?;
+    let settings = *probe.settings();
+    let sol = match (felt, library::noise_scale(settings.model)) {
+        (false, Some(_)) => {
+            let c = library::continue_in_noise(
+                &ddp,
+                &problem.scene,
+                &settings,
+                &task.cost,
+                &task.x0,
+                sol.clone(),
+                |_, _, _| {},
+            )?;
+            if c.kept { c.solution } else { sol }
+        }
+        _ => sol,
+    };
     let seconds = start.elapsed().as_secs_f64();
     let names = problem.scene.state_names();
     let last = sol.states.last().expect("N + 1 states");
@@ -287,6 +243,15 @@ fn from_rest(problem: &ProblemFile, task: &Task) -> anyhow::Result<FromRest> {
     })
 }
 
+/// One world's two closed loops from x0: without kicks and with them.
+#[derive(Debug, Serialize)]
+struct WorldRun {
+    world: String,
+    h: f64,
+    calm: Evaluation,
+    kicked: Evaluation,
+}
+
 /// One library's closed loops.
 #[derive(Debug, Serialize)]
 struct SeedRun {
@@ -294,12 +259,9 @@ struct SeedRun {
     controllers: usize,
     trajectories: usize,
     build_seconds: f64,
-    /// `(world, evaluation, success measure, passed)`.
-    worlds: Vec<(String, Evaluation, f64, bool)>,
-    /// Per world, the run with velocity kicks ([`KICK_STD`] every [`KICK_EVERY`] s): its measure
-    /// ([`Success::judge_kicked`]) and whether it meets the threshold.
-    kicked: Vec<(f64, bool)>,
-    /// The watched entries over time per world (for the pictures), not in the JSON.
+    worlds: Vec<WorldRun>,
+    /// The entries over time on the first two worlds (the task's time step; for the pictures), not in
+    /// the JSON.
     #[serde(skip)]
     traces: Vec<Vec<Vec<f64>>>,
 }
@@ -308,21 +270,29 @@ struct SeedRun {
 struct ExampleResult {
     example: Example,
     sizes: (usize, usize, usize, usize),
+    criterion: String,
     from_rest: FromRest,
     seeds: Vec<SeedRun>,
 }
 
-fn recipe(task: &Task, e: &Example, seed: u64) -> LibrarySettings {
-    LibrarySettings {
-        trajectories: e.trajectories,
-        exploration: Exploration::Branches {
-            trunk: e.trunk,
-            settle: e.settle,
-            length: e.length,
-        },
-        growth: e.growth,
-        seed,
-        ..LibrarySettings::default().for_task(task)
+impl ExampleResult {
+    /// `(succeeded, runs)` without kicks and with them.
+    fn tally(&self) -> ((usize, usize), (usize, usize)) {
+        let runs = self.seeds.iter().flat_map(|s| &s.worlds);
+        let count = |kicked: bool| {
+            let all: Vec<bool> = runs
+                .clone()
+                .map(|w| {
+                    if kicked {
+                        w.kicked.success.passed
+                    } else {
+                        w.calm.success.passed
+                    }
+                })
+                .collect();
+            (all.iter().filter(|p| **p).count(), all.len())
+        };
+        (count(false), count(true))
     }
 }
 
@@ -332,7 +302,7 @@ fn evaluated(
     lib: &Library,
     policy: &library::Policy,
     task: &Task,
-    model: Model,
+    (model, h): (Model, f64),
     seconds: f64,
     kick_every: f64,
 ) -> anyhow::Result<Evaluation> {
@@ -341,7 +311,7 @@ fn evaluated(
         policy,
         &EvaluationSettings {
             model,
-            h: task.h,
+            h,
             seconds,
             kick_every,
             kick_std: KICK_STD,
@@ -349,6 +319,22 @@ fn evaluated(
             ..EvaluationSettings::default()
         },
     )?)
+}
+
+/// A run's measure in words: its rate, its distance, and whether it passed.
+fn measure(e: &Evaluation) -> String {
+    let mut parts = Vec::new();
+    if let Some(r) = e.success.rate {
+        parts.push(format!("rate {r:.3}"));
+    }
+    if let Some(d) = e.success.distance {
+        parts.push(format!("off {d:.3}"));
+    }
+    format!(
+        "{} {}",
+        parts.join(", "),
+        if e.success.passed { "yes" } else { "**no**" }
+    )
 }
 
 fn run_example(
@@ -367,20 +353,9 @@ fn run_example(
         "  from rest: {} passes ({}), cost {:.3}, {:.2} s",
         rest.passes, rest.status, rest.cost, rest.seconds
     );
-    let worlds = [
-        (
-            match task.model {
-                Model::Logistic(s) => format!("logistic {s}"),
-                Model::Normal(s) => format!("normal {s}"),
-                Model::Hard => "hard (its own)".into(),
-            },
-            task.model,
-        ),
-        ("hard".to_string(), Model::Hard),
-    ];
     let seed_list: Vec<u64> = (1..=seeds).collect();
     let runs = crate::on_two_threads(&seed_list, |&seed| -> anyhow::Result<(SeedRun, Library)> {
-        let settings = recipe(&task, e, seed);
+        let settings = crate::train::defaults_for(&task, seed);
         let start = Instant::now();
         let lib = Library::build_task(&problem, Some(&e.task), &settings, |_, _| {})?;
         let build_seconds = start.elapsed().as_secs_f64();
@@ -390,29 +365,39 @@ fn run_example(
             trajectories: lib.entries.len() / settings.keep,
             build_seconds,
             worlds: Vec::new(),
-            kicked: Vec::new(),
             traces: Vec::new(),
         };
         let policy = lib.policy()?;
-        let steps = (seconds / task.h).round() as usize;
-        for &(ref name, model) in &worlds {
-            let evaluation = evaluated(&lib, &policy, &task, model, seconds, 0.0)?;
-            let (measure, passed) = e.success.judge(&evaluation);
-            run.worlds.push((name.clone(), evaluation, measure, passed));
-            let trace =
-                crate::figures::closed_loop(&lib, &policy, (model, task.h), &task.x0, steps)?;
-            run.traces.push(trace.states);
-            let kicked = evaluated(&lib, &policy, &task, model, seconds, KICK_EVERY)?;
-            run.kicked.push(e.success.judge_kicked(&kicked));
+        for (w, (name, model, h)) in crate::evaluate::worlds(&lib).into_iter().enumerate() {
+            let calm = evaluated(&lib, &policy, &task, (model, h), seconds, 0.0)?;
+            let kicked = evaluated(&lib, &policy, &task, (model, h), seconds, KICK_EVERY)?;
+            if w < 2 {
+                let steps = (seconds / h).round() as usize;
+                let trace =
+                    crate::figures::closed_loop(&lib, &policy, (model, h), &task.x0, steps)?;
+                run.traces.push(trace.states);
+            }
+            run.worlds.push(WorldRun {
+                world: name,
+                h,
+                calm,
+                kicked,
+            });
         }
         println!(
             "  seed {seed}: {} controllers in {build_seconds:.1} s; {}",
             run.controllers,
             run.worlds
                 .iter()
-                .map(|(w, _, m, p)| format!("{w} {m:.3} {}", if *p { "pass" } else { "FAIL" }))
+                .map(|w| format!(
+                    "{} h {}: {} / kicked {}",
+                    w.world,
+                    w.h,
+                    measure(&w.calm),
+                    measure(&w.kicked)
+                ))
                 .collect::<Vec<_>>()
-                .join(", ")
+                .join("; ")
         );
         Ok((run, lib))
     });
@@ -436,6 +421,7 @@ fn run_example(
                 scene.contacts.len(),
                 scene.rows().len(),
             ),
+            criterion: task.success.describe(&scene.coordinate_names()),
             from_rest: rest,
             seeds: seed_runs,
         },
@@ -475,7 +461,7 @@ fn pictures(
     task_pictures(
         &format!("examples_{}", e.name),
         &e.name,
-        matches!(e.success, Success::Hold(_)),
+        task.success.holds(),
         scene,
         task,
         &traces,
@@ -651,19 +637,43 @@ fn report(results: &[ExampleResult], seconds: f64) -> String {
     let mut t = String::new();
     let _ = writeln!(
         t,
-        "# Other scenes and tasks (`cargo xtask examples`)\n\nEach example's scene file and task, solved by full second-order DDP from rest (zero controls, the task's x0 and horizon, 300 passes at most), then a library per seed (the default recipe's branches, sized per example: trunk, settle, branch length, budget, growth rounds), and its policy run in closed loop from x0 for {seconds} s on the task's smoothed world and on hard contact, at the task's time step, without kicks. A run passes when it meets the example's success measure. Each library's policy also runs the same way with velocity kicks (normal, standard deviation {KICK_STD}, every {KICK_EVERY} s, the last {KICK_EVERY} s before the end), judged by the same threshold on its last-quarter rate or on its distance at the end."
+        "# Other scenes and tasks (`cargo xtask examples`)\n\nThe zoo: every task in scenes/, each solved by full second-order DDP from rest (zero controls, the task's x0 and horizon, 300 passes at most), then a library per seed with `train`'s defaults for the task (`cargo xtask train --scene FILE --task NAME --seed S`: the default recipe on the task's model, time step, horizon and start, growth on the policy's own failures), and its policy run in closed loop from x0 for {seconds} s on four worlds (the task's smoothed model and hard contact, at the task's time step and at 0.03 s), once without kicks and once with velocity kicks (normal, standard deviation {KICK_STD}, every {KICK_EVERY} s, none in the last {KICK_EVERY} s). A run succeeds by the task's own criterion (`[task.NAME.success]`, docs/tasks.md): a progress task's rewarded coordinate advancing at least its minimum rate over the last quarter; a target task's judged targets within tolerance throughout the last quarter (with kicks: at the end). Seeds are 1 to {}; every seed run is reported. Build times are single-thread, two libraries at a time on the 2-core machine.\n",
+        results.first().map_or(0, |r| r.seeds.len())
+    );
+    let _ = writeln!(
+        t,
+        "| task | controllers (mean) | build (mean, max) | succeed without kicks | with kicks |\n|---|---:|---:|---:|---:|"
+    );
+    let (mut all_ok, mut all_runs) = (0, 0);
+    for r in results {
+        let seeds = r.seeds.len().max(1) as f64;
+        let controllers = r.seeds.iter().map(|s| s.controllers).sum::<usize>() as f64 / seeds;
+        let build = r.seeds.iter().map(|s| s.build_seconds).sum::<f64>() / seeds;
+        let worst = r.seeds.iter().map(|s| s.build_seconds).fold(0.0, f64::max);
+        let ((calm, n), (kicked, k)) = r.tally();
+        all_ok += calm + kicked;
+        all_runs += n + k;
+        let _ = writeln!(
+            t,
+            "| [{}](#{}) (`{}`, `{}`) | {controllers:.0} | {build:.1} s, {worst:.1} s | {calm}/{n} | {kicked}/{k} |",
+            r.example.name,
+            r.example.name.replace('_', "-"),
+            r.example.file,
+            r.example.task
+        );
+    }
+    let _ = writeln!(
+        t,
+        "\nIn all, {all_ok} of {all_runs} runs succeed ({:.0}%).",
+        100.0 * all_ok as f64 / all_runs.max(1) as f64
     );
     for r in results {
         let e = &r.example;
         let (n, m, pairs, rows) = r.sizes;
         let _ = writeln!(
             t,
-            "\n## {} (`{}`, task `{}`)\n\n{}: {n} coordinates, {m} controls, {pairs} contact pairs, {rows} complementarity rows.\n\nSuccess: {}.\n",
-            e.name,
-            e.file,
-            e.task,
-            e.what,
-            e.success.describe()
+            "\n## {}\n\n`{}`, task `{}`: {}: {n} coordinates, {m} controls, {pairs} contact pairs, {rows} complementarity rows.\n\nSuccess: {}.\n",
+            e.name, e.file, e.task, e.what, r.criterion
         );
         let entries: Vec<String> = r
             .from_rest
@@ -685,66 +695,24 @@ fn report(results: &[ExampleResult], seconds: f64) -> String {
         );
         let _ = writeln!(
             t,
-            "Library recipe: {} trajectories (trunk {}, settle {}, branches of {}), {} growth rounds.\n",
-            e.trajectories, e.trunk, e.settle, e.length, e.growth
-        );
-        let measure = match e.success {
-            Success::Rate(_) => "last-quarter rate (rad/s)",
-            Success::Hold(_) => "last-quarter worst distance",
-        };
-        let kicked_measure = match e.success {
-            Success::Rate(_) => "last-quarter rate",
-            Success::Hold(_) => "distance at the end",
-        };
-        let _ = writeln!(
-            t,
-            "| seed | controllers | build | world | {measure} | pass | with kicks: {kicked_measure} (meets it) | running cost per second (whole / last quarter) | distance to targets at the end | unconverged steps |\n|---:|---:|---:|---|---:|---|---:|---:|---|---:|"
+            "| seed | controllers | build | world | h | without kicks | with kicks | kicks back |\n|---:|---:|---:|---|---:|---|---|---:|"
         );
         for s in &r.seeds {
-            for ((world, ev, value, passed), (kicked, kicked_passed)) in
-                s.worlds.iter().zip(&s.kicked)
-            {
-                let targets: Vec<String> = ev
-                    .task
-                    .targets
-                    .iter()
-                    .map(|d| format!("{} {:.3}", d.entry, d.last))
-                    .collect();
+            for w in &s.worlds {
                 let _ = writeln!(
                     t,
-                    "| {} | {} | {:.1} s | {world} | {value:.3} | {} | {kicked:.3} ({}) | {:.3} / {:.3} | {} | {} |",
+                    "| {} | {} | {:.1} s | {} | {} | {} | {} | {}/{} |",
                     s.seed,
                     s.controllers,
                     s.build_seconds,
-                    if *passed { "yes" } else { "no" },
-                    if *kicked_passed { "yes" } else { "no" },
-                    ev.task.running_cost_per_second,
-                    ev.task.final_running_cost_per_second,
-                    if targets.is_empty() {
-                        "-".into()
-                    } else {
-                        targets.join("; ")
-                    },
-                    ev.unconverged_steps
+                    w.world,
+                    w.h,
+                    measure(&w.calm),
+                    measure(&w.kicked),
+                    w.kicked.recovered,
+                    w.kicked.kicks
                 );
             }
-        }
-        for (w, world) in ["smoothed", "hard"].iter().enumerate() {
-            let values: Vec<f64> = r.seeds.iter().map(|s| s.worlds[w].2).collect();
-            let passed = r.seeds.iter().filter(|s| s.worlds[w].3).count();
-            let (lo, hi) = values
-                .iter()
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
-                    (a.min(*v), b.max(*v))
-                });
-            let mean = values.iter().sum::<f64>() / values.len() as f64;
-            let kicked_passed = r.seeds.iter().filter(|s| s.kicked[w].1).count();
-            let _ = writeln!(
-                t,
-                "\n{world}: {passed} of {} seeds pass; {measure} mean {mean:.3}, range {lo:.3} to {hi:.3}. With kicks, {kicked_passed} of {} meet the same threshold.",
-                r.seeds.len(),
-                r.seeds.len()
-            );
         }
         let _ = writeln!(
             t,
@@ -767,7 +735,6 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             let problem = ProblemFile::from_toml_str(&text)
                 .with_context(|| format!("scene {}", path.display()))?;
             let task = problem.task(args.task.as_deref())?;
-            let progress = library::Progress::of_task(&task)?;
             let name = path
                 .file_stem()
                 .map_or("scene".into(), |s| s.to_string_lossy().to_string());
@@ -777,19 +744,28 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                 text,
                 what: format!("task {}", task.name),
                 task: task.name.clone(),
-                trajectories: args.trajectories,
-                trunk: args.trunk,
-                settle: args.settle,
-                length: args.length,
-                growth: args.growth,
-                success: match progress.forward {
-                    Some(_) => Success::Rate(0.5),
-                    None => Success::Hold(0.1),
-                },
             }]
         }
-        None => examples(),
+        None => examples()
+            .into_iter()
+            .filter(|e| {
+                args.only
+                    .as_ref()
+                    .is_none_or(|o| e.name.contains(o.as_str()))
+            })
+            .collect(),
     };
+    if list.is_empty() {
+        anyhow::bail!(
+            "--only {} matches no example (they are {})",
+            args.only.as_deref().unwrap_or(""),
+            examples()
+                .iter()
+                .map(|e| e.name.clone())
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
     let start = Instant::now();
@@ -812,7 +788,10 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         args.out.join("examples.md").display(),
         start.elapsed().as_secs_f64()
     );
-    let documented = args.scene.is_none() && args.seeds == 3 && args.seconds == SECONDS;
+    let documented = args.scene.is_none()
+        && args.only.is_none()
+        && args.seeds == SEEDS
+        && args.seconds == SECONDS;
     if documented && !args.no_docs {
         crate::reproduce::write_section(
             &args.docs,
@@ -849,57 +828,29 @@ mod tests {
     }
 
     #[test]
-    fn the_success_measures_judge_what_they_say() {
-        let mut e = Evaluation {
-            spin_rate: 0.0,
-            final_spin_rate: 0.0,
-            contacts_per_half_turn: None,
-            contacts_per_second: 0.0,
-            contact_fraction: 0.0,
-            kicks: 0,
-            recovered: 0,
-            resumed: 0,
-            resume_time: None,
-            spin_after_kicks: None,
-            unconverged_steps: 0,
-            final_angle: 0.0,
-            task: Default::default(),
-        };
-        e.task.rates.push(library::CoordinateRate {
-            coordinate: "ellipse.angle".into(),
-            weight: -1.0,
-            rate: 1.0,
-            final_rate: 0.7,
-        });
-        assert_eq!(Success::Rate(0.5).judge(&e), (0.7, true));
-        assert!(!Success::Rate(1.0).judge(&e).1);
-        e.task.targets.push(library::TargetDistance {
-            entry: "block.x".into(),
-            target: 0.6,
-            final_only: false,
-            mean: 0.2,
-            final_mean: 0.02,
-            final_worst: 0.04,
-            last: 0.01,
-        });
-        e.task.targets.push(library::TargetDistance {
-            entry: "block.x velocity".into(),
-            target: 0.0,
-            final_only: true,
-            mean: 0.2,
-            final_mean: 0.2,
-            final_worst: 0.9,
-            last: 0.3,
-        });
-        // The velocity's distance is not a position target.
-        assert_eq!(Success::Hold(0.05).judge(&e), (0.04, true));
-        // After kicks, the distance at the end counts (the last kick's disturbance lies in the last
-        // quarter).
-        assert_eq!(Success::Hold(0.05).judge_kicked(&e), (0.01, true));
-        assert!(!Success::Hold(0.005).judge_kicked(&e).1);
-        assert!(!Success::Hold(0.03).judge(&e).1);
-        // No position target at all: NaN, which fails.
-        e.task.targets.clear();
-        assert!(!Success::Hold(0.05).judge(&e).1);
+    fn the_zoo_is_every_task_in_scenes() {
+        // Every scene file's every task is in the zoo, and every example's file and task exist.
+        let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../scenes");
+        let mut found = Vec::new();
+        for entry in std::fs::read_dir(dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.extension().is_some_and(|e| e == "toml") {
+                let file = ProblemFile::load(&path).unwrap();
+                for task in file.tasks.keys() {
+                    found.push(format!(
+                        "scenes/{}:{task}",
+                        path.file_name().unwrap().to_string_lossy()
+                    ));
+                }
+            }
+        }
+        found.sort();
+        let mut zoo: Vec<String> = examples()
+            .iter()
+            .map(|e| format!("{}:{}", e.file, e.task))
+            .collect();
+        zoo.sort();
+        assert_eq!(zoo, found);
+        assert!(zoo.len() >= 8);
     }
 }

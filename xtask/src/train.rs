@@ -48,7 +48,9 @@ pub struct Args {
     /// Nearest controllers the policy ranks by their value models (1: the nearest alone, eq. 20).
     #[arg(long)]
     neighbours: Option<usize>,
-    /// Rounds of growth on the policy's own stalls.
+    /// Rounds of growth on the policy's own failures (a stall for a task that rewards progress; not back
+    /// at its targets in time after a kick for a target task) [default: 12, one per 32 trajectories below
+    /// 384].
     #[arg(long)]
     growth: Option<usize>,
     /// The optimiser's stopping tolerance on the relative cost change.
@@ -127,7 +129,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     }
     let model = crate::step::contact_model(args.model, args.sigma, task.as_ref())?;
     // The default recipe's shape fitted to the budget; flags given override it.
-    let exploration = match base.exploration.fitted(args.trajectories) {
+    let fitted = base.clone().fitted(args.trajectories);
+    let exploration = match fitted.exploration {
         library::Exploration::Branches {
             trunk,
             settle,
@@ -146,19 +149,6 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             kicks
         }
     };
-    // Growth branches where the policy stops moving forward along the task's periodic coordinate: a task
-    // that rewards no such motion (a target task) has none by default.
-    let rewards_forward = match &task {
-        Some(t) => library::Progress::of_task(t)?.forward.is_some(),
-        None => true,
-    };
-    if !rewards_forward && args.growth.is_none() {
-        eprintln!(
-            "growth: 0 rounds (task {} rewards no forward motion, and growth branches where the policy \
-             stops moving forward)",
-            task.as_ref().map_or("", |t| t.name.as_str())
-        );
-    }
     let settings = LibrarySettings {
         model,
         h: args.h.unwrap_or(base.h),
@@ -168,7 +158,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         keep: args.keep.unwrap_or(base.keep),
         horizon: args.horizon.unwrap_or(base.horizon),
         neighbours: args.neighbours.unwrap_or(base.neighbours),
-        growth: args.growth.unwrap_or(base.growth),
+        growth: args.growth.unwrap_or(fitted.growth),
         warm_passes: args.warm_passes,
         tolerance: args.tolerance,
         exploration,
@@ -220,4 +210,15 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     library.save(&args.out)?;
     println!("wrote {}", args.out.display());
     Ok(())
+}
+
+/// `train`'s settings for `task` with no flag but `--seed`: the default recipe on the task's model, time
+/// step, horizon and start, shaped for the default budget (what `cargo xtask examples` builds).
+pub(crate) fn defaults_for(task: &library::Task, seed: u64) -> LibrarySettings {
+    let base = LibrarySettings::default().for_task(task);
+    let trajectories = base.trajectories;
+    LibrarySettings {
+        seed,
+        ..base.fitted(trajectories)
+    }
 }

@@ -341,7 +341,6 @@ fn train_defaults_fit_target_tasks_and_small_budgets() {
         .unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "{stderr}");
-    assert!(stderr.contains("growth: 0 rounds"), "{stderr}");
     let out = xtask()
         .args(["train", "--trajectories", "6", "--growth", "0", "--out"])
         .arg(dir.join("finger.lib"))

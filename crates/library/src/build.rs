@@ -141,6 +141,9 @@ impl Exploration {
     }
 }
 
+/// The second time step the policy is evaluated at and grown for, besides its own (the paper's 0.03 s).
+pub const WORLD_TIME_STEP: f64 = 0.03;
+
 /// A growth round's closed loop counts as stalled when the free angle advances less than this (rad) ...
 pub const STALL_ADVANCE: f64 = 0.3;
 /// ... over this many seconds.
@@ -196,23 +199,42 @@ impl LibrarySettings {
 }
 
 impl LibrarySettings {
-    /// This recipe on `task`'s contact model, time step, horizon and initial state (growth's closed
-    /// loops, if any, at the task's time step alone).
+    /// This recipe on `task`'s contact model, time step and initial state, with the longer of the task's
+    /// horizon and the recipe's. Growth's closed loops,
+    /// if any, run at the task's time step and at 0.03 s, the worlds `evaluate` runs the policy on (for a
+    /// task that rewards progress, growth branches where the policy stalls; for a target task, where it
+    /// is not back at its targets in time after a kick).
     pub fn for_task(self, task: &Task) -> Self {
-        // Growth branches where the policy stops moving forward along the periodic coordinate: a task
-        // that rewards no such motion (a target task) has no growth rounds.
-        let forward = Progress::of_task(task).map_or(true, |p| p.forward.is_some());
+        let growth_time_steps = if self.growth_time_steps.is_empty() {
+            Vec::new()
+        } else if task.h == WORLD_TIME_STEP {
+            vec![task.h]
+        } else {
+            vec![task.h, WORLD_TIME_STEP]
+        };
         LibrarySettings {
-            growth: if forward { self.growth } else { 0 },
             model: task.model,
             h: task.h,
-            horizon: task.horizon,
+            // The longer of the task's horizon and the recipe's: a receding-horizon library looks further
+            // ahead than a single solve needs (the finger's spin task, horizon 75, built at 75 settled on
+            // slow cycles of 0.31-0.35 rad/s on 5 of 16 world-seeds; at the recipe's 90, 0.97-1.25 rad/s,
+            // in half the build time).
+            horizon: task.horizon.max(self.horizon),
             x0: task.x0.clone(),
-            growth_time_steps: if self.growth_time_steps.is_empty() {
-                Vec::new()
-            } else {
-                vec![task.h]
-            },
+            growth_time_steps,
+            ..self
+        }
+    }
+
+    /// This recipe shaped for a budget of `trajectories`: the exploration [`Exploration::fitted`] to it,
+    /// and at most one growth round per 32 trajectories of budget (the default 12 rounds from 384 on), so
+    /// that growth, which adds up to [`GROWTH_BRANCHES`] branches a round, stays in proportion to the
+    /// library asked for.
+    pub fn fitted(self, trajectories: usize) -> Self {
+        LibrarySettings {
+            trajectories,
+            exploration: self.exploration.fitted(trajectories),
+            growth: self.growth.min(trajectories / 32),
             ..self
         }
     }
@@ -475,16 +497,19 @@ pub fn free_joint(scene: &Scene) -> Result<usize, LibraryError> {
         .ok_or_else(|| LibraryError::Invalid("the scene has no unactuated joint to spin".into()))
 }
 
-/// The periodic state entry a library's policy compares states modulo, and the direction its task
-/// rewards along it (what growth rounds call progress).
+/// The state entry a library's progress is measured along, its period when the policy compares states
+/// modulo it, and the direction its task rewards along it (what growth rounds call progress).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Progress {
-    /// The state entry.
+    /// The state entry: the task's periodic coordinate if it has one, else the coordinate its running
+    /// cost rewards, else the first judged target's (or 0).
     pub coordinate: usize,
-    /// Its period.
-    pub period: f64,
+    /// Its period, when it is periodic (the policy then compares states modulo it); `None`: the task has
+    /// no periodic coordinate and states compare as they are.
+    pub period: Option<f64>,
     /// `1` or `-1`: the direction the running cost rewards motion along it (growth branches where the
-    /// policy stops moving that way); `None` when it rewards none (no stall criterion, so no growth).
+    /// policy stops moving that way); `None` when it rewards none (a target task: growth branches where
+    /// the policy does not get back to its targets).
     pub forward: Option<f64>,
 }
 
@@ -494,13 +519,14 @@ impl Progress {
     pub fn finger(scene: &Scene) -> Result<Progress, LibraryError> {
         Ok(Progress {
             coordinate: free_joint(scene)?,
-            period: std::f64::consts::PI,
+            period: Some(std::f64::consts::PI),
             forward: Some(1.0),
         })
     }
 
-    /// A task's: its one periodic coordinate (the policy compares states modulo exactly one), forward
-    /// where its running terms' linear weights on that coordinate sum to a reward.
+    /// A task's: its periodic coordinate if it has one (the policy compares states modulo at most one),
+    /// forward where the running terms' linear weights on it (or on its velocity) sum to a reward; without
+    /// one, the first rewarded coordinate, or none.
     pub fn of_task(task: &Task) -> Result<Progress, LibraryError> {
         let periodic: Vec<(usize, f64)> = task
             .periods
@@ -508,28 +534,35 @@ impl Progress {
             .enumerate()
             .filter_map(|(i, p)| p.map(|p| (i, p)))
             .collect();
-        let &[(coordinate, period)] = periodic.as_slice() else {
-            return Err(LibraryError::Task {
+        let n = task.x0.len() / 2;
+        let rewarded = crate::Success::rewarded(&task.cost, n);
+        match periodic.as_slice() {
+            [] => Ok(match rewarded.first() {
+                Some(&(coordinate, direction)) => Progress {
+                    coordinate,
+                    period: None,
+                    forward: Some(direction),
+                },
+                None => Progress {
+                    coordinate: task.success.targets.first().map_or(0, |t| t.0),
+                    period: None,
+                    forward: None,
+                },
+            }),
+            &[(coordinate, period)] => Ok(Progress {
+                coordinate,
+                period: Some(period),
+                forward: rewarded.iter().find(|r| r.0 == coordinate).map(|r| r.1),
+            }),
+            _ => Err(LibraryError::Task {
                 task: task.name.clone(),
                 field: "periods".into(),
                 problem: format!(
-                    "a library's policy compares states modulo exactly one periodic coordinate; the task declares {}",
+                    "a library's policy compares states modulo at most one periodic coordinate; the task declares {}",
                     periodic.len()
                 ),
-            });
-        };
-        let weight: f64 = task
-            .cost
-            .running
-            .iter()
-            .filter(|t| t.index == coordinate)
-            .map(|t| t.linear)
-            .sum();
-        Ok(Progress {
-            coordinate,
-            period,
-            forward: (weight != 0.0).then(|| -weight.signum()),
-        })
+            }),
+        }
     }
 }
 
@@ -618,6 +651,7 @@ struct Build<'a> {
     settings: &'a LibrarySettings,
     cost: Objective,
     progress: Progress,
+    success: crate::Success,
     control_limits: Option<ddp::ControlLimits>,
     kick: Normal<f64>,
 }
@@ -643,6 +677,10 @@ impl<'a> Build<'a> {
         task: Option<&Task>,
         settings: &'a LibrarySettings,
     ) -> Result<Self, LibraryError> {
+        let success = match task {
+            Some(task) => task.success.clone(),
+            None => crate::Success::spin(free_joint(scene)?, std::f64::consts::PI),
+        };
         let (cost, progress, control_limits) = match task {
             None => {
                 let free = free_joint(scene)?;
@@ -658,14 +696,8 @@ impl<'a> Build<'a> {
                         scene.n_state()
                     )));
                 }
+                task.check_for_library(scene)?;
                 let progress = Progress::of_task(task)?;
-                if progress.forward.is_none() && settings.growth > 0 {
-                    return Err(LibraryError::Setting {
-                        name: "growth",
-                        value: settings.growth as f64,
-                        expected: "0 for a task that rewards no motion along its periodic coordinate (growth branches where the policy stops moving forward)",
-                    });
-                }
                 let cost = Objective::Task(task.cost.clone());
                 (cost, progress, task.control_limits.clone())
             }
@@ -675,6 +707,7 @@ impl<'a> Build<'a> {
             settings,
             cost,
             progress,
+            success,
             control_limits,
             kick: Normal::new(0.0, settings.kick_variance.sqrt())
                 .map_err(|e| LibraryError::Invalid(e.to_string()))?,
@@ -721,7 +754,13 @@ impl<'a> Build<'a> {
                 sol = self.reach(&x1, sol, passes)?;
             }
             let p = self.progress;
-            let values = local_values(&sol, &self.cost, s.keep, p.coordinate, p.period);
+            let values = local_values(
+                &sol,
+                &self.cost,
+                s.keep,
+                p.coordinate,
+                p.period.unwrap_or(0.0),
+            );
             for (t, value) in values.into_iter().enumerate() {
                 let entry = Entry {
                     x: sol.states[t].clone(),
@@ -960,6 +999,12 @@ fn branched(
 }
 
 /// One growth round (see [`Exploration::Branches`]): the number of branches added.
+///
+/// Failure is the task's: for a task that rewards progress, a stall (the progress coordinate advancing
+/// less than [`STALL_ADVANCE`] the rewarded way in [`STALL_WINDOW`] seconds), and a branch starts where
+/// the policy stalled; for a target task, not being back within its success tolerance
+/// ([`crate::Success::tolerance`]) [`crate::Success::settle`] seconds after a kick (or at the end of the
+/// first interval, from the start), and a branch starts from the state the kick left.
 fn grow(
     task: &Build,
     dynamics: &mut FingerDynamics,
@@ -969,20 +1014,14 @@ fn grow(
     report: &(dyn Fn(&Entry) + Sync),
 ) -> Result<usize, LibraryError> {
     let s = task.settings;
-    let Progress {
-        coordinate: free,
-        period,
-        forward,
-    } = task.progress;
-    // Checked when the build was set up: growth needs a direction of progress.
-    let forward = forward.unwrap_or(1.0);
+    let progress = task.progress;
+    let free = progress.coordinate;
     let policy_of = |built: &Built| {
-        Policy::with_period(
+        Policy::for_progress(
             &built.entries,
             task.scene.n_state(),
             task.scene.n_controls,
-            free,
-            period,
+            &progress,
         )?
         .with_neighbours(s.neighbours)
     };
@@ -1011,25 +1050,46 @@ fn grow(
     let steps = (GROWTH_SECONDS / h).round() as usize;
     let kick_steps = ((10.0 / h).round() as usize).max(1);
     let window = ((STALL_WINDOW / h).round() as usize).max(1);
+    // A target task's time bound after a kick (from the start: the first interval).
+    let settle = ((task.success.settle / h).round() as usize).clamp(1, kick_steps);
     let mut recent = std::collections::VecDeque::with_capacity(window + 1);
     let mut x = s.x0.clone();
     let mut u = vec![0.0; task.scene.n_controls];
     let mut grown = 0;
+    // A target task's last perturbed state, the controller used there, and when to judge the way back.
+    let mut kicked: Option<(Vec<f64>, usize)> = None;
+    let mut judge_at = kick_steps - 1;
     for k in 0..steps {
         if k > 0 && k % kick_steps == 0 {
             task.perturb(&mut x, &mut rng);
             recent.clear();
-        }
-        recent.push_back(x[free]);
-        if recent.len() > window {
-            recent.pop_front();
+            kicked = None;
+            judge_at = k + settle;
         }
         let i = policy.control(&x, &mut u)?;
-        if recent.len() == window && forward * (x[free] - recent[0]) < STALL_ADVANCE {
-            // Stalled: a branch from here, warm-started from the plan of the controller in use.
+        if kicked.is_none() {
+            kicked = Some((x.clone(), i));
+        }
+        let failed_at = match progress.forward {
+            Some(forward) => {
+                recent.push_back(x[free]);
+                if recent.len() > window {
+                    recent.pop_front();
+                }
+                // Stalled: a branch from here, warm-started from the plan of the controller in use.
+                (recent.len() == window && forward * (x[free] - recent[0]) < STALL_ADVANCE)
+                    .then(|| (x.clone(), i))
+            }
+            None if k == judge_at && task.success.distance(&x) > task.success.tolerance => {
+                // Not back within tolerance in time: a branch from the state the kick left.
+                kicked.clone()
+            }
+            None => None,
+        };
+        if let Some((from, i)) = failed_at {
             let (trajectory, offset) = (i / s.keep, i % s.keep);
             let plan = ddp::shift_controls(&built.plans[trajectory], offset);
-            let branch = task.chain(dynamics, x.clone(), plan, length, false, |_, _| {}, report)?;
+            let branch = task.chain(dynamics, from, plan, length, false, |_, _| {}, report)?;
             built.append(branch);
             policy = policy_of(built)?;
             recent.clear();

@@ -63,12 +63,15 @@ pub struct Evaluation {
     /// Kicks applied.
     pub kicks: usize,
     /// Kicks after which the progress coordinate moved the way the task rewards (forward for the finger)
-    /// over the second half of the next interval.
+    /// over the second half of the next interval; for a target task, after which every judged target was
+    /// back within tolerance at the end of the interval.
     pub recovered: usize,
     /// Kicks after which the progress coordinate turned a further quarter turn the way the task rewards
-    /// before the next kick (the stricter measure).
+    /// before the next kick (the stricter measure); for a target task, after which every judged target was
+    /// back within tolerance within the task's settle time ([`crate::Success::settle`]).
     pub resumed: usize,
-    /// Mean time from a kick to that quarter turn, over the kicks that resumed, s; `None` when none did.
+    /// Mean time from a kick to that quarter turn (or back within tolerance), over the kicks that
+    /// resumed, s; `None` when none did.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub resume_time: Option<f64>,
     /// Mean spin rate over the second half of each interval between kicks, rad/s; `None` without kicks.
@@ -81,6 +84,24 @@ pub struct Evaluation {
     /// The task-neutral measures, read off the library's task cost.
     #[serde(default)]
     pub task: TaskMeasures,
+    /// Whether the run met the task's success criterion.
+    pub success: Verdict,
+}
+
+/// A run judged by its task's success criterion ([`crate::Success`]).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Verdict {
+    /// Whether it succeeded.
+    pub passed: bool,
+    /// The least last-quarter rate, the rewarded way, of the rewarded coordinates (`None`: none).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rate: Option<f64>,
+    /// The largest distance of a judged target from its target: the worst over the last quarter without
+    /// kicks, at the end with them (`None`: no judged target).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub distance: Option<f64>,
+    /// The criterion in words.
+    pub criterion: String,
 }
 
 /// What a closed-loop run achieved by the measure of the library's own task cost (any scene and task;
@@ -304,6 +325,9 @@ pub fn evaluate_in(
     // The direction the task rewards (the finger's forward spin is +1; a task with a negative linear
     // weight rewards the other way): the kick measures count progress that way.
     let forward = progress.forward.unwrap_or(1.0);
+    // A task that rewards no progress has its kicks judged by the way back to its targets.
+    let success = library.success()?;
+    let holds = progress.forward.is_none();
     let world_free = match library.task() {
         Some(_) => free,
         None => crate::free_joint(scene)?,
@@ -385,6 +409,8 @@ pub fn evaluate_in(
     let mut angle_at_quarter = x[free];
     let mut meter = TaskMeter::new(library.cost()?, n, settings.h, library.settings.h, quarter);
     let mut at_quarter = x.clone();
+    let settle_steps = ((success.settle / settings.h).round() as usize).max(1);
+    let mut late_distance: f64 = 0.0;
     for k in 0..steps {
         if k == quarter {
             angle_at_quarter = x[free];
@@ -406,9 +432,17 @@ pub fn evaluate_in(
             let rate = (x[free] - interval_start) / (settings.h * (kick_steps / 2) as f64);
             after_sum += rate * (kick_steps / 2) as f64 * settings.h;
             after_time += (kick_steps / 2) as f64 * settings.h;
-            if forward * rate > 0.0 {
+            let back = if holds {
+                success.distance(&x) <= success.tolerance
+            } else {
+                forward * rate > 0.0
+            };
+            if back {
                 recovered += 1;
             }
+        }
+        if k >= quarter {
+            late_distance = late_distance.max(success.distance(&x));
         }
         policy.control(&x, &mut u)?;
         meter.observe(k, &x, &u);
@@ -418,12 +452,20 @@ pub fn evaluate_in(
         }
         contacts.observe(s.normal_impulse());
         x = s.x_next;
-        if let Some((at, angle)) = since_kick
-            && forward * (x[free] - angle) >= std::f64::consts::FRAC_PI_2
-        {
-            resumed += 1;
-            resume_steps += k + 1 - at;
-            since_kick = None;
+        if let Some((at, angle)) = since_kick {
+            let after = k + 1 - at;
+            let back = if holds {
+                success.distance(&x) <= success.tolerance
+            } else {
+                forward * (x[free] - angle) >= std::f64::consts::FRAC_PI_2
+            };
+            if back && (!holds || after <= settle_steps) {
+                resumed += 1;
+                resume_steps += after;
+                since_kick = None;
+            } else if holds && after > settle_steps {
+                since_kick = None;
+            }
         }
         if !x.iter().all(|v| v.is_finite()) {
             return Err(LibraryError::Invalid(format!(
@@ -435,6 +477,28 @@ pub fn evaluate_in(
     let task = meter.finish(scene, steps, &settings.x0, &at_quarter, &x);
     let turned = x[free] - settings.x0[free];
     let time = steps as f64 * settings.h;
+    let late_time = (steps - quarter) as f64 * settings.h;
+    let rate = success
+        .rates
+        .iter()
+        .map(|&(i, direction)| direction * (x[i] - at_quarter[i]) / late_time)
+        .reduce(f64::min);
+    let distance = (!success.targets.is_empty()).then(|| {
+        let last = success.distance(&x);
+        if kicks > 0 {
+            last
+        } else {
+            late_distance.max(last)
+        }
+    });
+    let verdict = Verdict {
+        passed: rate.is_none_or(|r| r >= success.min_rate)
+            && distance.is_none_or(|d| d <= success.tolerance)
+            && (rate.is_some() || distance.is_some()),
+        rate,
+        distance,
+        criterion: success.describe(&scene.coordinate_names()),
+    };
     Ok(Evaluation {
         spin_rate: turned / time,
         final_spin_rate: (x[free] - angle_at_quarter) / ((steps - quarter) as f64 * settings.h),
@@ -450,6 +514,7 @@ pub fn evaluate_in(
         unconverged_steps: unconverged,
         final_angle: x[free],
         task,
+        success: verdict,
     })
 }
 

@@ -21,7 +21,7 @@ use std::path::Path;
 /// The file's magic bytes.
 pub const MAGIC: &[u8; 8] = b"SLCPLIB\0";
 /// The format version this build writes and reads.
-pub const VERSION: u32 = 5;
+pub const VERSION: u32 = 6;
 const HEADER: usize = 8 + 4 + 8 + 4;
 
 /// A trajectory library: the scene and settings it was built with and its local controllers.
@@ -197,15 +197,20 @@ impl Library {
     /// The global policy (eq. 20) over its controllers.
     pub fn policy(&self) -> Result<Policy, LibraryError> {
         let s = &self.scene;
-        let p = self.progress()?;
-        Policy::with_period(
-            &self.entries,
-            s.n_state(),
-            s.n_controls,
-            p.coordinate,
-            p.period,
-        )?
-        .with_neighbours(self.settings.neighbours)
+        Policy::for_progress(&self.entries, s.n_state(), s.n_controls, &self.progress()?)?
+            .with_neighbours(self.settings.neighbours)
+    }
+
+    /// What counts as success for its task ([`crate::Success`]): the task's, or for the finger's built-in
+    /// task a spin of at least pi / 10 rad/s.
+    pub fn success(&self) -> Result<crate::Success, LibraryError> {
+        match self.task() {
+            Some(task) => Ok(task.success.clone()),
+            None => Ok(crate::Success::spin(
+                crate::free_joint(&self.scene)?,
+                std::f64::consts::PI,
+            )),
+        }
     }
 
     /// `Err` unless the library was built for `scene`.

@@ -17,17 +17,20 @@ mod task;
 pub use anneal::{AnnealStep, anneal};
 pub use build::{
     Entry, Exploration, GROWTH_BRANCHES, GROWTH_SECONDS, LibrarySettings, LocalValue,
-    MAX_NEIGHBOURS, Model, Objective, Progress, STALL_ADVANCE, STALL_WINDOW, build_entries,
-    build_entries_for, free_joint,
+    MAX_NEIGHBOURS, Model, Objective, Progress, STALL_ADVANCE, STALL_WINDOW, WORLD_TIME_STEP,
+    build_entries, build_entries_for, free_joint,
 };
 pub use error::LibraryError;
 pub use evaluate::{
     CONTACT_IMPULSE, ContactEvents, CoordinateRate, Evaluation, EvaluationSettings, TargetDistance,
-    TaskMeasures, evaluate, evaluate_in,
+    TaskMeasures, Verdict, evaluate, evaluate_in,
 };
 pub use file::{Library, MAGIC, VERSION, write_atomically};
 pub use policy::Policy;
-pub use problem::{ProblemFile, START_TOLERANCE, Task, TaskCost, TaskSpec, Term, TermSpec};
+pub use problem::{
+    DEFAULT_SETTLE, ProblemFile, START_TOLERANCE, Success, SuccessSpec, Task, TaskCost, TaskSpec,
+    Term, TermSpec,
+};
 pub use reach::{
     CONTINUATION_DOUBLINGS, Continuation, contact_felt, continue_in_noise, noise_scale,
 };

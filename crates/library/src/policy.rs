@@ -95,7 +95,11 @@ pub struct Policy {
     n: usize,
     m: usize,
     free: usize,
+    /// The free entry's period (0: no periodic entry; states compare as they are).
     period: f64,
+    /// The shifts, in whole periods, each stored state is kept at: [`SHIFTS`], or `[0]` without a
+    /// period.
+    shifts: &'static [f64],
     /// Whole periods each stored state's free angle was reduced by.
     turns: Vec<f64>,
     index: Index,
@@ -109,6 +113,11 @@ pub struct Policy {
     values: Vec<LocalValue>,
     /// Stored controllers compared by their value models (1: the nearest alone, eq. 20).
     neighbours: usize,
+}
+
+/// Whole periods `p` in `x` (rounded down; 0 without a period, `p = 0`).
+fn whole_periods(x: f64, p: f64) -> f64 {
+    if p > 0.0 { (x / p).floor() } else { 0.0 }
 }
 
 /// `x` wrapped into `(-p/2, p/2]`.
@@ -128,6 +137,20 @@ impl Policy {
         Policy::with_period(entries, n_state, m, free, PI)
     }
 
+    /// The policy of a task's library: modulo its periodic entry if it has one
+    /// ([`crate::Progress::period`]), else comparing states as they are.
+    pub fn for_progress(
+        entries: &[Entry],
+        n_state: usize,
+        m: usize,
+        progress: &crate::Progress,
+    ) -> Result<Self, LibraryError> {
+        match progress.period {
+            Some(p) => Policy::with_period(entries, n_state, m, progress.coordinate, p),
+            None => Policy::build(entries, n_state, m, 0, None),
+        }
+    }
+
     /// [`Policy::new`] with the periodic state entry `free` of period `period` (a task's, see
     /// [`crate::Progress::of_task`]).
     pub fn with_period(
@@ -137,17 +160,28 @@ impl Policy {
         free: usize,
         period: f64,
     ) -> Result<Self, LibraryError> {
-        if free >= n_state {
-            return Err(LibraryError::Invalid(format!(
-                "periodic state entry {free} of a state of {n_state}"
-            )));
-        }
         if !(period.is_finite() && period > 0.0) {
             return Err(LibraryError::Setting {
                 name: "period",
                 value: period,
                 expected: "finite and positive",
             });
+        }
+        Policy::build(entries, n_state, m, free, Some(period))
+    }
+
+    /// [`Policy::with_period`], or without a periodic entry for `None`.
+    fn build(
+        entries: &[Entry],
+        n_state: usize,
+        m: usize,
+        free: usize,
+        period: Option<f64>,
+    ) -> Result<Self, LibraryError> {
+        if free >= n_state {
+            return Err(LibraryError::Invalid(format!(
+                "periodic state entry {free} of a state of {n_state}"
+            )));
         }
         if entries.is_empty() {
             return Err(LibraryError::Invalid(
@@ -180,13 +214,15 @@ impl Policy {
         // The free angle's circular mean (period pi: angles doubled), then every state's free angle
         // unwrapped next to it.
         let (s, c) = entries.iter().fold((0.0, 0.0), |(s, c), e| {
-            let a = 2.0 * PI * e.x[free] / period;
+            let a = 2.0 * PI * e.x[free] / period.unwrap_or(1.0);
             (s + a.sin(), c + a.cos())
         });
-        let centre = s.atan2(c) * period / (2.0 * PI);
         let unwrapped = |x: &[f64]| -> Vec<f64> {
             let mut y = x.to_vec();
-            y[free] = centre + wrap(x[free] - centre, period);
+            if let Some(period) = period {
+                let centre = s.atan2(c) * period / (2.0 * PI);
+                y[free] = centre + wrap(x[free] - centre, period);
+            }
             y
         };
         let mut mean = vec![0.0; n];
@@ -218,17 +254,25 @@ impl Policy {
         let chol = cholesky(&cov, n).ok_or_else(|| {
             LibraryError::Invalid("the states' covariance is not positive".into())
         })?;
+        let (period, shifts): (f64, &'static [f64]) = match period {
+            Some(p) => (p, &SHIFTS),
+            None => (0.0, &[0.0]),
+        };
         let mut unit = vec![0.0; n];
         unit[free] = period;
         let period_shift = forward(&chol, n, &unit);
         let states: Vec<Vec<f64>> = entries.iter().map(|e| e.x.clone()).collect();
-        let turns: Vec<f64> = states.iter().map(|x| (x[free] / period).floor()).collect();
-        let points = shifted_points(&chol, &period_shift, &states, &turns);
+        let turns: Vec<f64> = states
+            .iter()
+            .map(|x| whole_periods(x[free], period))
+            .collect();
+        let points = shifted_points(&chol, &period_shift, &states, &turns, shifts);
         Ok(Policy {
             n,
             m,
             free,
             period,
+            shifts,
             turns,
             index: Index::new(points, n),
             period_shift,
@@ -284,6 +328,7 @@ impl Policy {
                 &self.period_shift,
                 &self.states,
                 &self.turns,
+                self.shifts,
             ));
         }
         self
@@ -298,7 +343,7 @@ impl Policy {
     /// angle between it and `x`.
     pub fn nearest_n(&self, x: &[f64], count: usize) -> Result<Vec<(usize, f64)>, LibraryError> {
         crate::check("x", x, self.n)?;
-        let k = (x[self.free] / self.period).floor();
+        let k = whole_periods(x[self.free], self.period);
         let mut y = forward(&self.chol, self.n, x);
         for (y, p) in y.iter_mut().zip(&self.period_shift) {
             *y -= k * p;
@@ -308,10 +353,10 @@ impl Policy {
             .nearest(&y, count.max(1))
             .into_iter()
             .map(|item| {
-                let (i, s) = (item / SHIFTS.len(), item % SHIFTS.len());
+                let (i, s) = (item / self.shifts.len(), item % self.shifts.len());
                 // The stored point is w_i - (k_i - j) p and the query y - k p: x is k - k_i + j periods
                 // on.
-                (i, k - self.turns[i] + SHIFTS[s])
+                (i, k - self.turns[i] + self.shifts[s])
             })
             .collect())
     }
@@ -380,12 +425,13 @@ fn shifted_points(
     period_shift: &[f64],
     states: &[Vec<f64>],
     turns: &[f64],
+    shifts: &[f64],
 ) -> Vec<f64> {
     let n = period_shift.len();
-    let mut points = Vec::with_capacity(SHIFTS.len() * states.len() * n);
+    let mut points = Vec::with_capacity(shifts.len() * states.len() * n);
     for (x, k) in states.iter().zip(turns) {
         let w = forward(chol, n, x);
-        for j in SHIFTS {
+        for &j in shifts {
             points.extend(w.iter().zip(period_shift).map(|(w, p)| w - (k - j) * p));
         }
     }

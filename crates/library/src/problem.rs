@@ -84,7 +84,59 @@ pub struct TaskSpec {
     /// Terms of the final cost, charged at the end of the horizon.
     #[serde(default, rename = "final")]
     pub final_terms: Vec<TermSpec>,
+    /// What counts as success in closed loop (`[task.NAME.success]`); every field has a default derived
+    /// from the terms ([`Success`]).
+    #[serde(default)]
+    pub success: SuccessSpec,
 }
+
+/// A task's `[task.NAME.success]` table: what `evaluate` and the library's growth call success. Every
+/// field is optional.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SuccessSpec {
+    /// The least rate (the coordinate's unit per second, in the direction the task rewards) at which
+    /// every linearly rewarded coordinate must advance over a run's last quarter.
+    #[serde(default)]
+    pub min_rate: Option<f64>,
+    /// The coordinates whose targets must be reached (names of coordinates with a quadratic term);
+    /// default: every position target of a task that rewards no progress, none of one that does.
+    #[serde(default)]
+    pub targets: Option<Vec<String>>,
+    /// How far from its target each judged coordinate may be.
+    #[serde(default)]
+    pub tolerance: Option<f64>,
+    /// Seconds after a perturbation by which a target task must be back within tolerance, or a progress
+    /// task moving forward again.
+    #[serde(default)]
+    pub settle: Option<f64>,
+}
+
+/// A task's success criterion, checked ([`SuccessSpec`] with its defaults filled in).
+///
+/// A run succeeds when every rewarded coordinate in [`Success::rates`] advanced at least
+/// [`Success::min_rate`] per second the rewarded way over its last quarter, and every judged target in
+/// [`Success::targets`] stayed within [`Success::tolerance`] of its target throughout the last quarter
+/// (after kicks: is within it at the end, a whole kick interval after the last kick).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Success {
+    /// `(state entry, direction)` of each coordinate the running cost rewards linearly (`direction` is
+    /// 1 where the task rewards increase, -1 decrease).
+    pub rates: Vec<(usize, f64)>,
+    /// The least last-quarter rate. Default: a tenth of the coordinate's period per second for a periodic
+    /// one (the finger: pi / 10 = 0.31 rad/s), 0.1 per second otherwise.
+    pub min_rate: f64,
+    /// `(state entry, target, period)` of each judged position target.
+    pub targets: Vec<(usize, f64, Option<f64>)>,
+    /// How far from its target each may be. Default: 0.05, or a tenth of the farthest judged target's
+    /// distance from the start if that is more.
+    pub tolerance: f64,
+    /// Seconds after a kick to be back (within tolerance, or moving forward). Default 5.
+    pub settle: f64,
+}
+
+/// [`Success::settle`]'s default, seconds.
+pub const DEFAULT_SETTLE: f64 = 5.0;
 
 /// A checked term: the state entry it reads and its weights.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -201,6 +253,8 @@ pub struct Task {
     pub control_limits: Option<ControlLimits>,
     /// The period of each state entry (`None`: not periodic); velocities are never periodic.
     pub periods: Vec<Option<f64>>,
+    /// What counts as success in closed loop.
+    pub success: Success,
 }
 
 impl Task {
@@ -354,20 +408,259 @@ impl Task {
                 })
             }
         };
+        let cost = TaskCost {
+            running: terms("running", &spec.running)?,
+            final_terms: terms("final", &spec.final_terms)?,
+            control_weight,
+        };
+        let success = Success::new(&spec.success, &cost, &x0, &periods, &names, &bad)?;
         Ok(Task {
             name: name.to_string(),
             h: spec.h,
             horizon: spec.horizon,
             model,
             x0,
-            cost: TaskCost {
-                running: terms("running", &spec.running)?,
-                final_terms: terms("final", &spec.final_terms)?,
-                control_weight,
-            },
+            cost,
             control_limits,
             periods,
+            success,
         })
+    }
+}
+
+impl Task {
+    /// `Err` naming the reason when the task cannot have a library of controllers on `scene`: the scene
+    /// has no control to feed back, or the cost rewards nothing (no state term, so every trajectory's
+    /// best is to do nothing).
+    pub fn check_for_library(&self, scene: &Scene) -> Result<(), LibraryError> {
+        let refuse = |field: &str, problem: &str| {
+            Err(LibraryError::Task {
+                task: self.name.clone(),
+                field: field.to_string(),
+                problem: problem.to_string(),
+            })
+        };
+        if scene.n_controls == 0 {
+            return refuse(
+                "",
+                "the scene has no actuated joint: a library stores feedback controllers and there is nothing to control",
+            );
+        }
+        let weighs = self
+            .cost
+            .running
+            .iter()
+            .chain(&self.cost.final_terms)
+            .any(|t| t.linear != 0.0 || t.quadratic != 0.0);
+        if !weighs {
+            return refuse(
+                "running",
+                "the cost rewards nothing (no running or final term with a non-zero weight): the best control is none, and a library of it is empty of purpose",
+            );
+        }
+        Ok(())
+    }
+}
+
+impl Success {
+    /// `spec` checked against a task's cost, initial state and periods (`names`: the scene's coordinate
+    /// names; `bad` makes the error for a field).
+    fn new(
+        spec: &SuccessSpec,
+        cost: &TaskCost,
+        x0: &[f64],
+        periods: &[Option<f64>],
+        names: &[String],
+        bad: &dyn Fn(&str, String) -> LibraryError,
+    ) -> Result<Self, LibraryError> {
+        let n = names.len();
+        let rates = Success::rewarded(cost, n);
+        let min_rate = match spec.min_rate {
+            Some(r) if r.is_finite() && r >= 0.0 => r,
+            Some(r) => {
+                return Err(bad(
+                    "success.min_rate",
+                    format!("{r} must be finite and at least zero"),
+                ));
+            }
+            None => rates
+                .iter()
+                .map(|&(i, _)| periods[i].map_or(0.1, |p| p / 10.0))
+                .fold(f64::INFINITY, f64::min),
+        };
+        let min_rate = if min_rate.is_finite() { min_rate } else { 0.1 };
+        // Every position target a quadratic term pulls to, once per entry and target.
+        let mut all: Vec<(usize, f64, Option<f64>)> = Vec::new();
+        for t in cost.running.iter().chain(&cost.final_terms) {
+            if t.quadratic != 0.0
+                && t.index < n
+                && !all
+                    .iter()
+                    .any(|&(i, target, _)| i == t.index && target == t.target)
+            {
+                all.push((t.index, t.target, t.period));
+            }
+        }
+        let targets = match &spec.targets {
+            None if rates.is_empty() => all,
+            None => Vec::new(),
+            Some(list) => {
+                let mut out = Vec::new();
+                for c in list {
+                    let chosen: Vec<_> = all
+                        .iter()
+                        .filter(|&&(i, ..)| names[i] == *c)
+                        .copied()
+                        .collect();
+                    if chosen.is_empty() {
+                        return Err(bad(
+                            "success.targets",
+                            format!(
+                                "\"{c}\" has no position target (no quadratic term on it); the targets are {}",
+                                if all.is_empty() {
+                                    "none".to_string()
+                                } else {
+                                    all.iter()
+                                        .map(|&(i, ..)| names[i].clone())
+                                        .collect::<Vec<_>>()
+                                        .join(", ")
+                                }
+                            ),
+                        ));
+                    }
+                    out.extend(chosen);
+                }
+                out
+            }
+        };
+        let tolerance = match spec.tolerance {
+            Some(t) if t.is_finite() && t > 0.0 => t,
+            Some(t) => {
+                return Err(bad(
+                    "success.tolerance",
+                    format!("{t} must be finite and positive"),
+                ));
+            }
+            None => targets
+                .iter()
+                .map(|&(i, target, period)| {
+                    let term = Term {
+                        index: i,
+                        linear: 0.0,
+                        quadratic: 0.0,
+                        target,
+                        period,
+                    };
+                    term.offset(x0[i]).abs() / 10.0
+                })
+                .fold(0.05, f64::max),
+        };
+        let settle = match spec.settle {
+            Some(s) if s.is_finite() && s > 0.0 => s,
+            Some(s) => {
+                return Err(bad(
+                    "success.settle",
+                    format!("{s} must be finite and positive (seconds)"),
+                ));
+            }
+            None => DEFAULT_SETTLE,
+        };
+        Ok(Success {
+            rates,
+            min_rate,
+            targets,
+            tolerance,
+            settle,
+        })
+    }
+
+    /// `(position entry, direction)` of every coordinate whose linear running weights (on it and on its
+    /// velocity) sum to a reward, the direction the cost falls.
+    pub fn rewarded(cost: &TaskCost, n: usize) -> Vec<(usize, f64)> {
+        let mut weights: Vec<(usize, f64)> = Vec::new();
+        for t in &cost.running {
+            if t.linear == 0.0 {
+                continue;
+            }
+            let j = t.index % n;
+            match weights.iter_mut().find(|(i, _)| *i == j) {
+                Some((_, w)) => *w += t.linear,
+                None => weights.push((j, t.linear)),
+            }
+        }
+        weights
+            .into_iter()
+            .filter(|&(_, w)| w != 0.0)
+            .map(|(j, w)| (j, -w.signum()))
+            .collect()
+    }
+
+    /// The criterion of a task that rewards turning the entry `free` (period `period`) forward: the
+    /// finger's built-in task's.
+    pub fn spin(free: usize, period: f64) -> Self {
+        Success {
+            rates: vec![(free, 1.0)],
+            min_rate: period / 10.0,
+            targets: Vec::new(),
+            tolerance: 0.05,
+            settle: DEFAULT_SETTLE,
+        }
+    }
+
+    /// The largest distance of a judged target from its target at `x` (0 without targets).
+    pub fn distance(&self, x: &[f64]) -> f64 {
+        self.targets
+            .iter()
+            .map(|&(i, target, period)| {
+                Term {
+                    index: i,
+                    linear: 0.0,
+                    quadratic: 0.0,
+                    target,
+                    period,
+                }
+                .offset(x[i])
+                .abs()
+            })
+            .fold(0.0, f64::max)
+    }
+
+    /// Whether the task holds targets (and rewards no progress): perturbations are judged by the way
+    /// back to them.
+    pub fn holds(&self) -> bool {
+        self.rates.is_empty()
+    }
+
+    /// In words.
+    pub fn describe(&self, names: &[String]) -> String {
+        let mut parts = Vec::new();
+        if !self.rates.is_empty() {
+            parts.push(format!(
+                "{} at least {:.3} per second the rewarded way over the last quarter",
+                self.rates
+                    .iter()
+                    .map(|&(i, _)| names[i].clone())
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                self.min_rate
+            ));
+        }
+        if !self.targets.is_empty() {
+            parts.push(format!(
+                "{} within {} of the target throughout the last quarter",
+                self.targets
+                    .iter()
+                    .map(|&(i, t, _)| format!("{} -> {t}", names[i]))
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                self.tolerance
+            ));
+        }
+        if parts.is_empty() {
+            "nothing (the task rewards no progress and holds no target)".into()
+        } else {
+            parts.join("; ")
+        }
     }
 }
 
