@@ -835,3 +835,28 @@ running = [{ coordinate = "wheel.angle", quadratic = 1.0, target = 1.0 }]
             .unwrap_err();
     assert!(err.to_string().contains("nothing to control"), "{err}");
 }
+
+/// A task's control limits bind the policy too: the linear law far from a stored state asks for more
+/// than the actuators the trajectories were optimised under give, and the policy saturates it.
+#[test]
+fn the_policy_keeps_the_tasks_control_limits() {
+    let file = wheel_to_target("").unwrap();
+    let task = file.task(None).unwrap();
+    let lib =
+        library::Library::build_task(&file, None, &default_recipe(&task, 8), |_, _| {}).unwrap();
+    let policy = lib.policy().unwrap();
+    let mut u = [0.0];
+    // Far from every stored state the gains ask for far more than 2.
+    for x in [[-3.0, -40.0], [1.0, 60.0], [0.9, 0.0]] {
+        policy.control(&x, &mut u).unwrap();
+        assert!((-2.0..=2.0).contains(&u[0]), "{x:?}: {u:?}");
+    }
+    policy.control(&[-3.0, -40.0], &mut u).unwrap();
+    assert_eq!(u[0], 2.0);
+    // Bounds of the wrong size are refused.
+    let bad = ddp::ControlLimits {
+        lower: vec![-1.0, -1.0],
+        upper: vec![1.0, 1.0],
+    };
+    assert!(lib.policy().unwrap().with_limits(Some(bad)).is_err());
+}

@@ -1023,7 +1023,8 @@ fn grow(
             task.scene.n_controls,
             &progress,
         )?
-        .with_neighbours(s.neighbours)
+        .with_neighbours(s.neighbours)?
+        .with_limits(task.control_limits.clone())
     };
     let mut policy = policy_of(built)?;
     // Odd rounds run on hard contact: the policy is meant for the smoothed and the hard world alike.

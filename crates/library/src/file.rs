@@ -198,7 +198,8 @@ impl Library {
     pub fn policy(&self) -> Result<Policy, LibraryError> {
         let s = &self.scene;
         Policy::for_progress(&self.entries, s.n_state(), s.n_controls, &self.progress()?)?
-            .with_neighbours(self.settings.neighbours)
+            .with_neighbours(self.settings.neighbours)?
+            .with_limits(self.task().and_then(|t| t.control_limits.clone()))
     }
 
     /// What counts as success for its task ([`crate::Success`]): the task's, or for the finger's built-in

@@ -113,6 +113,8 @@ pub struct Policy {
     values: Vec<LocalValue>,
     /// Stored controllers compared by their value models (1: the nearest alone, eq. 20).
     neighbours: usize,
+    /// Bounds the controls are saturated to (the task's control limits), if any.
+    limits: Option<ddp::ControlLimits>,
 }
 
 /// Whole periods `p` in `x` (rounded down; 0 without a period, `p = 0`).
@@ -282,7 +284,31 @@ impl Policy {
             gains: entries.iter().map(|e| e.gain.clone()).collect(),
             values: entries.iter().map(|e| e.value.convexified()).collect(),
             neighbours: 1,
+            limits: None,
         })
+    }
+
+    /// The same policy with its controls saturated to `limits` (a task's control limits: the linear law
+    /// `u + K (x - x_i)` far from the stored state can ask for more than the actuators the trajectories
+    /// were optimised under give). `Err` unless the bounds have the controls' size with lower <= upper.
+    pub fn with_limits(mut self, limits: Option<ddp::ControlLimits>) -> Result<Self, LibraryError> {
+        if let Some(l) = &limits
+            && (l.lower.len() != self.m
+                || l.upper.len() != self.m
+                || l.lower
+                    .iter()
+                    .zip(&l.upper)
+                    .any(|(a, b)| a.is_nan() || b.is_nan() || a > b))
+        {
+            return Err(LibraryError::Invalid(format!(
+                "control limits for {} controls: {} lower and {} upper bounds, each lower at most its upper",
+                self.m,
+                l.lower.len(),
+                l.upper.len()
+            )));
+        }
+        self.limits = limits;
+        Ok(self)
     }
 
     /// The same policy choosing, among the `neighbours` stored states nearest to the query, the
@@ -413,6 +439,9 @@ impl Policy {
                 .iter()
                 .zip(&d)
                 .fold(self.controls[i][a], |s, (k, d)| s + k * d);
+            if let Some(l) = &self.limits {
+                *u = u.clamp(l.lower[a], l.upper[a]);
+            }
         }
         Ok(i)
     }
