@@ -539,16 +539,8 @@ fn the_default_recipe_fits_every_budget() {
 /// mirrored finger spinning the other way recovered from none).
 #[test]
 fn kick_measures_count_progress_the_way_the_task_rewards() {
-    let text = r#"
-gravity = [0.0, -4.0]
-
-[[body]]
-name = "wheel"
-semi_axes = [0.5, 0.3]
-parent = "world"
-anchor = [0.0, 0.0]
-centre = [0.0, 0.0]
-joint = { damping = 0.5, actuated = true }
+    let text = wheel_scene(true)
+        + r#"
 
 [[body]]
 name = "post"
@@ -574,7 +566,7 @@ periods = { "wheel.angle" = 3.141592653589793 }
 running = [{ coordinate = "wheel.angle", linear = 1.0 }]
 final = [{ coordinate = "wheel.angle", linear = 1.0 }]
 "#;
-    let file = ProblemFile::from_toml_str(text).unwrap();
+    let file = ProblemFile::from_toml_str(&text).unwrap();
     let task = file.task(Some("back")).unwrap();
     assert_eq!(
         library::Progress::of_task(&task).unwrap().forward,
@@ -654,21 +646,18 @@ fn default_recipe(task: &library::Task, trajectories: usize) -> library::Library
     }
 }
 
+/// A scene of one wheel on a hinge at the origin, driven or not (more bodies and tasks may follow).
+fn wheel_scene(actuated: bool) -> String {
+    format!(
+        "\ngravity = [0.0, -4.0]\n\n[[body]]\nname = \"wheel\"\nsemi_axes = [0.5, 0.3]\nparent = \"world\"\nanchor = [0.0, 0.0]\ncentre = [0.0, 0.0]\njoint = {{ damping = 0.5, actuated = {actuated} }}\n"
+    )
+}
+
 /// A wheel on a driven hinge (no contact needed) with a target task: turn it to 1.0 and hold it there,
 /// `success` being the task's `[task.hold.success]` table (or none).
 fn wheel_to_target(success: &str) -> Result<ProblemFile, LibraryError> {
     ProblemFile::from_toml_str(&format!(
-        r#"
-gravity = [0.0, -4.0]
-
-[[body]]
-name = "wheel"
-semi_axes = [0.5, 0.3]
-parent = "world"
-anchor = [0.0, 0.0]
-centre = [0.0, 0.0]
-joint = {{ damping = 0.5, actuated = true }}
-
+        r#"{}
 [task.hold]
 h = 0.05
 horizon = 30
@@ -682,7 +671,8 @@ final = [
     {{ coordinate = "wheel.angle", velocity = true, quadratic = 2.0 }},
 ]
 {success}
-"#
+"#,
+        wheel_scene(true)
     ))
 }
 
@@ -809,24 +799,15 @@ fn a_task_that_cannot_have_a_library_is_refused_with_the_reason() {
         .unwrap_err();
     assert!(err.to_string().contains("rewards nothing"), "{err}");
     let uncontrolled = ProblemFile::from_toml_str(
-        r#"
-gravity = [0.0, -4.0]
-
-[[body]]
-name = "wheel"
-semi_axes = [0.5, 0.3]
-parent = "world"
-anchor = [0.0, 0.0]
-centre = [0.0, 0.0]
-joint = { damping = 0.5 }
-
+        &(wheel_scene(false)
+            + r#"
 [task.t]
 h = 0.05
 horizon = 10
 model = "hard"
 control_weight = 0.05
 running = [{ coordinate = "wheel.angle", quadratic = 1.0, target = 1.0 }]
-"#,
+"#),
     )
     .unwrap();
     let task = uncontrolled.task(None).unwrap();
