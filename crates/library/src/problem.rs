@@ -156,17 +156,22 @@ pub struct Term {
 impl Term {
     /// `y - target`, wrapped into `[-period / 2, period / 2)` for a periodic entry.
     pub fn offset(&self, y: f64) -> f64 {
-        let d = y - self.target;
-        match self.period {
-            Some(p) => d - p * (d / p + 0.5).floor(),
-            None => d,
-        }
+        wrapped_offset(y, self.target, self.period)
     }
 
     fn value(&self, x: &[f64]) -> f64 {
         let y = x[self.index];
         let d = self.offset(y);
         self.linear * y + 0.5 * self.quadratic * d * d
+    }
+}
+
+/// `y - target`, wrapped into `[-period / 2, period / 2)` when there is a period.
+fn wrapped_offset(y: f64, target: f64, period: Option<f64>) -> f64 {
+    let d = y - target;
+    match period {
+        Some(p) => d - p * (d / p + 0.5).floor(),
+        None => d,
     }
 }
 
@@ -543,16 +548,7 @@ impl Success {
             }
             None => targets
                 .iter()
-                .map(|&(i, target, period)| {
-                    let term = Term {
-                        index: i,
-                        linear: 0.0,
-                        quadratic: 0.0,
-                        target,
-                        period,
-                    };
-                    term.offset(x0[i]).abs() / 10.0
-                })
+                .map(|&(i, target, period)| wrapped_offset(x0[i], target, period).abs() / 10.0)
                 .fold(0.05, f64::max),
         };
         let settle = match spec.settle {
@@ -611,17 +607,7 @@ impl Success {
     pub fn distance(&self, x: &[f64]) -> f64 {
         self.targets
             .iter()
-            .map(|&(i, target, period)| {
-                Term {
-                    index: i,
-                    linear: 0.0,
-                    quadratic: 0.0,
-                    target,
-                    period,
-                }
-                .offset(x[i])
-                .abs()
-            })
+            .map(|&(i, target, period)| wrapped_offset(x[i], target, period).abs())
             .fold(0.0, f64::max)
     }
 
