@@ -105,8 +105,9 @@ class Library:
         model: Optional[str] = None,
         sigma: Optional[float] = None,
     ) -> "Library":
-        """Build a library as ``cargo xtask train`` does: for a task of a scene file, or without scene
-        and task the finger's built-in task; the default recipe or the paper's (``paper=True``); the
+        """Build a library as ``cargo xtask train`` does: for a task of a scene file (its only one when
+        ``task`` is None; without a scene the built-in ``scenes/finger.toml``, whose only task is the
+        paper's ``spin``); the default recipe or the paper's (``paper=True``); the
         task's contact model and sigma unless ``model`` or ``sigma`` is given. Releases the GIL."""
     @staticmethod
     def load(path: Path) -> "Library":
@@ -119,8 +120,8 @@ class Library:
     def states(self) -> Matrix:
         """The controllers' states, shape ``(len, n_state)``."""
     @property
-    def task(self) -> Optional[str]:
-        """The task's name (None: the finger's built-in task)."""
+    def task(self) -> str:
+        """The name of the task it was built for (``spin`` for the built-in finger's)."""
     @property
     def settings(self) -> dict[str, Any]:
         """The settings it was built with."""

@@ -4,8 +4,8 @@
 //! released for the whole of any long computation (rollouts, optimisation, library builds, evaluations).
 
 use ::library::{
-    Evaluation, EvaluationSettings, Exploration, FingerDynamics, Library as RsLibrary,
-    LibrarySettings, Model as LibModel, Policy as RsPolicy, ProblemFile, Task,
+    Evaluation, EvaluationSettings, Exploration, Library as RsLibrary, LibrarySettings,
+    Model as LibModel, Policy as RsPolicy, ProblemFile, SceneDynamics, Task,
 };
 use ddp::{Ddp, DdpSettings, Method};
 use dynamics::{Scene, Simulator as RsSimulator, StepSettings};
@@ -22,9 +22,6 @@ create_exception!(
     pyo3::exceptions::PyValueError,
     "An error of the slcp crates (a bad scene, task or library file, a bad input such as a NaN state or an array of the wrong length, an impossible setting), with the crate's message."
 );
-
-/// The flicking finger's scene file (SCENE.md), with its task `spin`.
-const FINGER_FILE: &str = include_str!("../../scenes/finger.toml");
 
 fn error(e: impl std::fmt::Display) -> PyErr {
     SlcpError::new_err(e.to_string())
@@ -128,10 +125,11 @@ fn contact_model(own: LibModel, model: Option<&str>, sigma: Option<f64>) -> PyRe
     }
 }
 
-/// The scene file at `path`, or the finger's with `None`.
+/// The scene file at `path`, or with `None` the built-in one (`scenes/finger.toml`, whose only task is
+/// `spin`).
 fn problem_file(path: Option<PathBuf>) -> PyResult<ProblemFile> {
     match path {
-        None => ProblemFile::from_toml_str(FINGER_FILE).map_err(error),
+        None => Ok(ProblemFile::builtin()),
         Some(p) => ProblemFile::load(&p).map_err(|e| error(format!("scene {}: {e}", p.display()))),
     }
 }
@@ -163,12 +161,12 @@ struct Simulator {
 #[pymethods]
 impl Simulator {
     /// `Simulator(scene=None, model="logistic", sigma=0.1, h=0.05)`: the scene file at `scene` (TOML,
-    /// docs/scenes.md), or the flicking finger of SCENE.md.
+    /// docs/scenes.md), or the built-in one (`scenes/finger.toml`, SCENE.md's flicking finger).
     #[new]
     #[pyo3(signature = (scene=None, model="logistic", sigma=0.1, h=0.05))]
     fn new(scene: Option<PathBuf>, model: &str, sigma: f64, h: f64) -> PyResult<Self> {
         let scene = match scene {
-            None => Scene::flicking_finger(),
+            None => ProblemFile::builtin().scene,
             Some(p) => {
                 let text = std::fs::read_to_string(&p)
                     .map_err(|e| error(format!("reading {}: {e}", p.display())))?;
@@ -453,7 +451,7 @@ fn optimize<'py>(
     let cost = task.cost.clone();
     let sol = py.allow_threads(move || {
         shielded(|| {
-            ddp.solve(&mut FingerDynamics::new(sim), &cost, &x0, &us)
+            ddp.solve(&mut SceneDynamics::new(sim), &cost, &x0, &us)
                 .map_err(error)
         })
     })?;
@@ -516,8 +514,10 @@ impl Library {
 impl Library {
     /// `Library.train(scene=None, task=None, trajectories=400, seed=1, paper=False, horizon=None,
     /// growth=None, trunk=None, settle=None, length=None, chains=1, model=None, sigma=None)`: build a
-    /// library as `cargo xtask train` does (the contact model and sigma the task's unless given): for the task of a scene file (`task`, or the file's only task when a scene is given),
-    /// or without either the finger's built-in task with the default recipe (`paper=True`: the paper's).
+    /// library as `cargo xtask train` does (the contact model and sigma the task's unless given) for the
+    /// task `task` of the scene file `scene` (its only task when `task` is None; without a scene the
+    /// built-in `scenes/finger.toml`, whose only task is the paper's `spin`), with the default recipe
+    /// (`paper=True`: the paper's).
     /// The GIL is released while it builds.
     #[staticmethod]
     #[pyo3(signature = (scene=None, task=None, trajectories=400, seed=1, paper=false, horizon=None, growth=None, trunk=None, settle=None, length=None, chains=1, model=None, sigma=None))]
@@ -538,21 +538,14 @@ impl Library {
         model: Option<&str>,
         sigma: Option<f64>,
     ) -> PyResult<Self> {
-        let with_task = scene.is_some() || task.is_some();
         let file = problem_file(scene)?;
-        let chosen: Option<Task> = if with_task {
-            Some(file.task(task).map_err(error)?)
-        } else {
-            None
-        };
-        let mut base = if paper {
+        let chosen: Task = file.task(task).map_err(error)?;
+        let base = if paper {
             LibrarySettings::paper()
         } else {
             LibrarySettings::default()
-        };
-        if let Some(t) = &chosen {
-            base = base.for_task(t);
         }
+        .for_task(&chosen);
         let fitted = base.clone().fitted(trajectories);
         let exploration = match fitted.exploration {
             Exploration::Branches {
@@ -586,11 +579,7 @@ impl Library {
         };
         let lib = py.allow_threads(move || {
             shielded(|| {
-                match &chosen {
-                    Some(t) => RsLibrary::build_task(&file, Some(&t.name), &settings, |_, _| {}),
-                    None => RsLibrary::build(&file.scene, &settings, |_, _| {}),
-                }
-                .map_err(error)
+                RsLibrary::build(&file, Some(&chosen.name), &settings, |_, _| {}).map_err(error)
             })
         })?;
         Library::wrap(lib)
@@ -630,10 +619,10 @@ impl Library {
         )
     }
 
-    /// The task's name (`None`: the finger's built-in task).
+    /// The name of the task it was built for.
     #[getter]
-    fn task(&self) -> Option<String> {
-        self.lib.task().map(|t| t.name.clone())
+    fn task(&self) -> String {
+        self.lib.task().name.clone()
     }
 
     /// The settings it was built with, as a dict.
@@ -645,7 +634,7 @@ impl Library {
     /// The initial state of its first trajectory (its task's).
     #[getter]
     fn x0<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        self.lib.settings.x0.clone().into_pyarray(py)
+        self.lib.x0().to_vec().into_pyarray(py)
     }
 
     /// `policy(x) -> u`: the global policy's control at `x` (eq. 20, or the value-ranked choice among
@@ -682,7 +671,7 @@ impl Library {
         let world = contact_model(self.lib.settings.model, model, sigma)?;
         let x0 = match &x0 {
             Some(a) => vector(a, "x0", self.lib.scene().n_state())?,
-            None => self.lib.settings.x0.clone(),
+            None => self.lib.x0().to_vec(),
         };
         if !(seconds.is_finite() && seconds <= 1e6) {
             return Err(error(format!(

@@ -142,7 +142,7 @@ def small_library():
 
 def test_a_library_trains_saves_loads_and_its_policy_runs(tmp_path):
     lib = small_library()
-    assert len(lib) == 32 and lib.task is None
+    assert len(lib) == 32 and lib.task == "spin"
     assert lib.states.shape == (32, 6)
     u = lib.policy(lib.x0)
     assert u.shape == (2,) and np.all(np.isfinite(u))

@@ -3,12 +3,14 @@
 //! linear cost, has none and crawls; smaller noise makes the contact invisible to the optimiser.
 
 use ddp::{Ddp, DdpSettings, Method, Solution};
-use dynamics::{Complementarity, Scene, Simulator, StepSettings};
-use library::{FingerDynamics, finger_cost};
+use dynamics::{Complementarity, Simulator, StepSettings};
+use library::{ProblemFile, SceneDynamics};
 
 fn solve(sigma: f64, method: Method, max_iterations: usize) -> Solution {
+    // scenes/finger.toml's spin task: -theta3 + 0.05 |u|^2, from the finger apart at rest.
+    let (scene, task) = ProblemFile::builtin_task();
     let sim = Simulator::new(
-        Scene::flicking_finger(),
+        scene,
         StepSettings {
             model: Complementarity::Logistic { sigma },
             ..StepSettings::default()
@@ -22,9 +24,9 @@ fn solve(sigma: f64, method: Method, max_iterations: usize) -> Solution {
     })
     .unwrap()
     .solve(
-        &mut FingerDynamics::new(sim),
-        &finger_cost(3, 2, 2),
-        &dynamics::FLICKING_FINGER_X0,
+        &mut SceneDynamics::new(sim),
+        &task.cost,
+        &task.x0,
         &vec![vec![0.0; 2]; 75],
     )
     .unwrap()
@@ -119,13 +121,13 @@ fn a_step_started_from_a_nearby_steps_solution_is_the_same_step() {
             h: case["h"].as_f64().unwrap(),
             ..StepSettings::default()
         };
-        let sim = || Simulator::new(Scene::flicking_finger(), settings).unwrap();
+        let sim = || Simulator::new(library::ProblemFile::builtin().scene, settings).unwrap();
         let (x, u) = (vector(&case["x"]), vector(&case["u"]));
         for shift in [1e-6, 1e-3, 0.1] {
             let near_x: Vec<f64> = x.iter().map(|e| e + shift).collect();
             let near_u: Vec<f64> = u.iter().map(|e| e - shift).collect();
             // The same knot's data from a step near this one (the line search's hint).
-            let mut hinted = FingerDynamics::new(sim());
+            let mut hinted = SceneDynamics::new(sim());
             let mut near = hinted.create_data();
             let mut scratch = vec![0.0; 6];
             hinted
@@ -137,7 +139,7 @@ fn a_step_started_from_a_nearby_steps_solution_is_the_same_step() {
                 .calc(&mut data, Some(&near), &x, &u, &mut next)
                 .unwrap();
             let mut plain = vec![0.0; 6];
-            let mut fresh = FingerDynamics::new(sim());
+            let mut fresh = SceneDynamics::new(sim());
             let mut data = fresh.create_data();
             fresh.calc(&mut data, None, &x, &u, &mut plain).unwrap();
             let diff = next

@@ -34,13 +34,14 @@ fn run_for(lib: &Library, model: Model, h: f64, kick_every: f64, seconds: f64) -
         e.kicks,
         e.resume_time
     );
-    // The task-neutral measures of the finger's built-in task: the rate of its one rewarded coordinate is
-    // the spin, no targets, and the running cost per second is what -theta3 + 0.05 |u|^2 sums to.
+    // The task-neutral measures of the finger's spin task: the rate of its one rewarded coordinate is the
+    // spin (weighed -1 per step and -1 at the end: -2 in all), no targets, and the running cost per
+    // second is what -theta3 + 0.05 |u|^2 sums to.
     let [rate] = e.task.rates.as_slice() else {
         panic!("{:?}", e.task.rates)
     };
     assert_eq!(rate.coordinate, "ellipse.angle");
-    assert_eq!(rate.weight, -1.0);
+    assert_eq!(rate.weight, -2.0);
     assert_eq!(rate.rate, e.spin_rate);
     assert_eq!(rate.final_rate, e.final_spin_rate);
     assert!(e.task.targets.is_empty());

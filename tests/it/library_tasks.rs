@@ -4,7 +4,7 @@
 
 use ddp::{Cost, CostDerivatives};
 use dynamics::Scene;
-use library::{LibraryError, Model, ProblemFile, finger_cost};
+use library::{LibraryError, Model, ProblemFile};
 use proptest::prelude::*;
 
 const FINGER: &str = include_str!("../../scenes/finger.toml");
@@ -33,17 +33,90 @@ fn derivatives(c: &dyn Cost, x: &[f64], u: &[f64]) -> CostDerivatives {
 #[test]
 fn the_finger_file_carries_the_papers_task() {
     let file = ProblemFile::from_toml_str(FINGER).unwrap();
-    assert_eq!(file.scene.spec(), Scene::flicking_finger().spec());
-    // The dynamics crate reads the same file, leaving the tasks to this one.
+    // The built-in file is this one.
+    assert_eq!(file.scene.spec(), ProblemFile::builtin().scene.spec());
+    assert_eq!(library::BUILTIN_SCENE_FILE, FINGER);
+    // SCENE.md's numbers: two links of semi-axes 0.8 x 0.25 on hinges at the origin and at 1.6 along
+    // link 1, limits [-pi, 0] and [-2 pi / 3, 0], drag 0.2; the free ellipse 0.7 x 0.5 hinged at
+    // (0, -3), drag 0.7; gravity -4; friction 0.5 between link 2 and the ellipse.
+    let pi = std::f64::consts::PI;
+    let spec = file.scene.spec();
+    assert_eq!(spec.gravity, [0.0, -4.0]);
+    let bodies: Vec<_> = spec
+        .bodies
+        .iter()
+        .map(|b| {
+            (
+                b.name.as_str(),
+                b.semi_axes,
+                b.density,
+                b.parent.as_str(),
+                b.anchor,
+                b.centre,
+                b.joint.limits,
+                b.joint.damping,
+                b.joint.actuated,
+            )
+        })
+        .collect();
     assert_eq!(
-        Scene::from_toml_str(FINGER).unwrap().spec(),
-        Scene::flicking_finger().spec()
+        bodies,
+        vec![
+            (
+                "link1",
+                [0.8, 0.25],
+                1.0,
+                "world",
+                [0.0, 0.0],
+                [0.8, 0.0],
+                Some([-pi, 0.0]),
+                0.2,
+                true
+            ),
+            (
+                "link2",
+                [0.8, 0.25],
+                1.0,
+                "link1",
+                [1.6, 0.0],
+                [0.8, 0.0],
+                Some([-2.0 * pi / 3.0, 0.0]),
+                0.2,
+                true
+            ),
+            (
+                "ellipse",
+                [0.7, 0.5],
+                1.0,
+                "world",
+                [0.0, -3.0],
+                [0.0, 0.0],
+                None,
+                0.7,
+                false
+            ),
+        ]
     );
+    assert!(
+        spec.bodies
+            .iter()
+            .all(|b| b.joint.kind == dynamics::JointKind::Hinge)
+    );
+    let [pair] = spec.contacts.as_slice() else {
+        panic!("{:?}", spec.contacts)
+    };
+    assert_eq!(
+        (pair.a.as_str(), pair.b.as_str(), pair.friction),
+        ("link2", "ellipse", 0.5)
+    );
+    assert!(spec.planes.is_empty() && spec.fixed.is_empty());
+    // The dynamics crate reads the same file, leaving the tasks to this one.
+    assert_eq!(Scene::from_toml_str(FINGER).unwrap().spec(), spec);
     let task = file.task(None).unwrap();
     assert_eq!(task.name, "spin");
     assert_eq!((task.h, task.horizon), (0.05, 75));
     assert_eq!(task.model, Model::Logistic(0.1));
-    assert_eq!(task.x0, dynamics::FLICKING_FINGER_X0.to_vec());
+    assert_eq!(task.x0, vec![-pi / 4.0, -pi / 6.0, 0.0, 0.0, 0.0, 0.0]);
     assert_eq!(
         task.periods,
         vec![None, None, Some(std::f64::consts::PI), None, None, None]
@@ -59,7 +132,8 @@ proptest! {
         u in proptest::collection::vec(-10.0..10.0f64, 2),
     ) {
         let task = ProblemFile::from_toml_str(FINGER).unwrap().task(None).unwrap();
-        let paper = finger_cost(3, 2, 2);
+        // The paper's: -theta3 + 0.05 |u|^2 per step, -theta3 at the end.
+        let paper = ddp::QuadraticCost::linear_state(&[0.0, 0.0, -1.0, 0.0, 0.0, 0.0], 0.05, 2);
         let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * (1.0 + a.abs());
         prop_assert!(close(task.cost.running(3, &x, &u), paper.running(3, &x, &u)));
         prop_assert!(close(task.cost.terminal(&x), paper.terminal(&x)));
@@ -284,7 +358,7 @@ fn the_example_scenes_tasks_are_solved_from_rest() {
         })
         .unwrap()
         .solve(
-            &mut library::FingerDynamics::new(sim),
+            &mut library::SceneDynamics::new(sim),
             &task.cost,
             &task.x0,
             &vec![vec![0.0; m]; task.horizon],
@@ -348,10 +422,10 @@ fn a_library_is_built_for_a_task_of_a_scene_file_and_keeps_it() {
     assert_eq!(progress.period, Some(std::f64::consts::PI));
     assert_eq!(progress.forward, None);
     let settings = small_settings(&task, 3);
-    let lib = library::Library::build_task(&file, Some("turn"), &settings, |_, _| {}).unwrap();
+    let lib = library::Library::build(&file, Some("turn"), &settings, |_, _| {}).unwrap();
     assert_eq!(lib.entries.len(), 3);
     assert_eq!(lib.entries[0].x, task.x0);
-    assert_eq!(lib.task().map(|t| t.name.as_str()), Some("turn"));
+    assert_eq!(lib.task().name, "turn");
     assert_eq!(lib.progress().unwrap(), progress);
     // The task travels with the file, checked again on loading.
     let again = library::Library::from_bytes(&lib.to_bytes().unwrap()).unwrap();
@@ -420,7 +494,7 @@ fn a_task_library_takes_no_periodic_coordinate_or_one() {
         "{err}"
     );
     let err =
-        library::Library::build_task(&two, None, &small_settings(&task, 2), |_, _| {}).unwrap_err();
+        library::Library::build(&two, None, &small_settings(&task, 2), |_, _| {}).unwrap_err();
     assert!(matches!(err, LibraryError::Task { .. }), "{err}");
     // No period: progress along the rewarded coordinate, which the policy does not wrap.
     let none = finger_with(
@@ -439,8 +513,7 @@ fn a_task_library_takes_no_periodic_coordinate_or_one() {
         (p.coordinate, p.period, p.forward),
         (ellipse, None, Some(1.0))
     );
-    let lib =
-        library::Library::build_task(&none, None, &small_settings(&task, 3), |_, _| {}).unwrap();
+    let lib = library::Library::build(&none, None, &small_settings(&task, 3), |_, _| {}).unwrap();
     let policy = lib.policy().unwrap();
     // A state a whole turn of the ellipse on is not the same state to this policy: the nearest stored
     // state is reached with no periods in between.
@@ -451,7 +524,10 @@ fn a_task_library_takes_no_periodic_coordinate_or_one() {
     // The paper's task on the finger spins forward: growth has its direction.
     let file = ProblemFile::from_toml_str(FINGER).unwrap();
     let p = library::Progress::of_task(&file.task(None).unwrap()).unwrap();
-    assert_eq!(p, library::Progress::finger(&file.scene).unwrap());
+    assert_eq!(
+        (p.coordinate, p.period, p.forward),
+        (2, Some(std::f64::consts::PI), Some(1.0))
+    );
 }
 
 /// Issue 28: a task whose initial state puts bodies inside each other, or a joint past its limit, is
@@ -508,7 +584,7 @@ fn overlaps_are_named_deepest_first() {
 /// finger's budget of 400 keeps the recipe it was chosen for.
 #[test]
 fn the_default_recipe_fits_every_budget() {
-    let scene = Scene::flicking_finger();
+    let scene = library::ProblemFile::builtin().scene;
     let base = library::LibrarySettings::default();
     assert_eq!(base.exploration.fitted(400), base.exploration);
     assert_eq!(base.exploration.fitted(4000), base.exploration);
@@ -573,7 +649,7 @@ final = [{ coordinate = "wheel.angle", linear = 1.0 }]
         Some(-1.0)
     );
     let settings = default_recipe(&task, 8);
-    let lib = library::Library::build_task(&file, Some("back"), &settings, |_, _| {}).unwrap();
+    let lib = library::Library::build(&file, Some("back"), &settings, |_, _| {}).unwrap();
     let policy = lib.policy().unwrap();
     let e = library::evaluate(
         &lib,
@@ -620,7 +696,7 @@ fn a_library_whose_contact_starts_out_of_reach_still_pushes() {
         .position(|c| c == "block.x")
         .unwrap();
     let settings = default_recipe(&task, 4);
-    let lib = library::Library::build_task(&file, Some("push"), &settings, |_, _| {}).unwrap();
+    let lib = library::Library::build(&file, Some("push"), &settings, |_, _| {}).unwrap();
     // The first trajectory's cost: 14.4 untouched (the block 0.6 from its target over the horizon).
     assert!(
         lib.entries[0].cost < 5.0,
@@ -739,7 +815,7 @@ fn a_target_task_is_judged_and_grown_by_its_own_criterion() {
     let file = wheel_to_target("").unwrap();
     let task = file.task(None).unwrap();
     let settings = default_recipe(&task, 16);
-    let lib = library::Library::build_task(&file, None, &settings, |_, _| {}).unwrap();
+    let lib = library::Library::build(&file, None, &settings, |_, _| {}).unwrap();
     let policy = lib.policy().unwrap();
     let run = |kick_every: f64| {
         library::evaluate(
@@ -778,7 +854,7 @@ fn a_target_task_is_judged_and_grown_by_its_own_criterion() {
             growth: 1,
             ..default_recipe(&task, 16)
         };
-        let lib = library::Library::build_task(&file, None, &settings, |_, _| {}).unwrap();
+        let lib = library::Library::build(&file, None, &settings, |_, _| {}).unwrap();
         lib.entries.len() / settings.keep - settings.trajectories
     };
     assert_eq!(grown("[task.hold.success]\ntolerance = 100.0\n"), 0);
@@ -795,8 +871,8 @@ fn a_task_that_cannot_have_a_library_is_refused_with_the_reason() {
     )
     .unwrap();
     let task = nothing.task(None).unwrap();
-    let err = library::Library::build_task(&nothing, None, &small_settings(&task, 2), |_, _| {})
-        .unwrap_err();
+    let err =
+        library::Library::build(&nothing, None, &small_settings(&task, 2), |_, _| {}).unwrap_err();
     assert!(err.to_string().contains("rewards nothing"), "{err}");
     let uncontrolled = ProblemFile::from_toml_str(
         &(wheel_scene(false)
@@ -811,9 +887,8 @@ running = [{ coordinate = "wheel.angle", quadratic = 1.0, target = 1.0 }]
     )
     .unwrap();
     let task = uncontrolled.task(None).unwrap();
-    let err =
-        library::Library::build_task(&uncontrolled, None, &small_settings(&task, 2), |_, _| {})
-            .unwrap_err();
+    let err = library::Library::build(&uncontrolled, None, &small_settings(&task, 2), |_, _| {})
+        .unwrap_err();
     assert!(err.to_string().contains("nothing to control"), "{err}");
 }
 
@@ -823,8 +898,7 @@ running = [{ coordinate = "wheel.angle", quadratic = 1.0, target = 1.0 }]
 fn the_policy_keeps_the_tasks_control_limits() {
     let file = wheel_to_target("").unwrap();
     let task = file.task(None).unwrap();
-    let lib =
-        library::Library::build_task(&file, None, &default_recipe(&task, 8), |_, _| {}).unwrap();
+    let lib = library::Library::build(&file, None, &default_recipe(&task, 8), |_, _| {}).unwrap();
     let policy = lib.policy().unwrap();
     let mut u = [0.0];
     // Far from every stored state the gains ask for far more than 2.

@@ -39,8 +39,13 @@ fn built_once(
     settings: fn() -> library::LibrarySettings,
 ) -> &'static library::Library {
     cell.get_or_init(|| {
-        library::Library::build(&dynamics::Scene::flicking_finger(), &settings(), |_, _| {})
-            .unwrap()
+        library::Library::build(
+            &library::ProblemFile::builtin(),
+            None,
+            &settings(),
+            |_, _| {},
+        )
+        .unwrap()
     })
 }
 

@@ -144,7 +144,7 @@ fn a_crafted_length_prefix_is_refused_without_allocating_it() {
 #[test]
 fn a_library_used_with_another_scene_says_what_differs() {
     let lib = crate::support::paper_library();
-    let mut spec = dynamics::Scene::flicking_finger().spec().clone();
+    let mut spec = library::ProblemFile::builtin().scene.spec().clone();
     spec.bodies[1].joint.damping = 0.7;
     let other = dynamics::Scene::new(spec).unwrap();
     let err = lib.check_scene(&other).unwrap_err().to_string();
@@ -195,7 +195,7 @@ fn a_file_being_replaced_is_never_seen_in_part() {
 fn a_converged_step_keeps_its_joint_limits_at_any_input_scale() {
     use dynamics::{Complementarity, Simulator, StepSettings};
     use rand::{Rng, SeedableRng};
-    let scene = dynamics::Scene::flicking_finger();
+    let scene = library::ProblemFile::builtin().scene;
     let n = scene.n_dof();
     let limits: Vec<Option<[f64; 2]>> = scene.coordinates.iter().map(|c| c.limits).collect();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(27);
@@ -211,7 +211,7 @@ fn a_converged_step_keeps_its_joint_limits_at_any_input_scale() {
             },
         )
         .unwrap();
-        let x0 = dynamics::FLICKING_FINGER_X0.to_vec();
+        let x0 = library::ProblemFile::builtin_task().1.x0;
         let s = sim.step(&x0, &[1e20, 0.0]).unwrap();
         let [lo, hi] = limits[0].unwrap();
         assert!(
@@ -265,7 +265,7 @@ fn full_ddp_past_its_memory_limit_is_refused_with_the_estimate_and_ilqr_runs() {
     let model = dynamics::Model::new(scene, dynamics::StepSettings::default()).unwrap();
     let per_knot = model.second_order_bytes();
     assert!(per_knot > 100 << 20, "{per_knot}");
-    let mut dynamics = library::FingerDynamics::from_model(model);
+    let mut dynamics = library::SceneDynamics::from_model(model);
     let cost = ddp::QuadraticCost::diagonal(&vec![1.0; n], &vec![0.1; nu], &vec![1.0; n]);
     let x0 = vec![0.0; n];
     let controls = vec![vec![0.0; nu]; 60];

@@ -76,7 +76,7 @@ fn in_a_browser_a_drag_against_the_spin_holds_the_ellipse_and_the_spin_resumes()
     let Some(result) = in_browser(
         ViewerConfig {
             addr: SocketAddr::from((Ipv4Addr::LOCALHOST, 0)),
-            scene: dynamics::Scene::flicking_finger(),
+            scene: library::ProblemFile::builtin().scene,
             library: Some(crate::support::finger_library().clone()),
             world: WorldSettings {
                 policy: PolicyKind::Library,
@@ -108,7 +108,7 @@ fn in_a_browser_the_pushing_scene_shows_its_ground_and_its_free_block_can_be_lif
                 policy: PolicyKind::Off,
                 x0: task.x0.clone(),
                 h: task.h,
-                task: Some(task),
+                task,
                 ..WorldSettings::default()
             },
         },

@@ -8,7 +8,7 @@ use viewer::{ViewerError, World, WorldSettings};
 fn online_mpc_spins_the_ellipse_from_rest_and_recovers_from_a_drag() {
     // Seeded by the library's policy at the start and whenever its plan stalls.
     let mut world = World::new(
-        dynamics::Scene::flicking_finger(),
+        library::ProblemFile::builtin().scene,
         Some(crate::support::finger_library().clone()),
         WorldSettings {
             policy: PolicyKind::Mpc,
@@ -60,7 +60,7 @@ fn online_mpc_spins_the_ellipse_from_rest_and_recovers_from_a_drag() {
 
 #[test]
 fn bad_world_settings_and_messages_are_typed_errors_that_change_nothing() {
-    let scene = dynamics::Scene::flicking_finger();
+    let scene = library::ProblemFile::builtin().scene;
     for settings in [
         WorldSettings {
             h: 0.0,
@@ -173,7 +173,7 @@ proptest::proptest! {
         // Whatever the page sends (valid or not, in any order), the world answers Ok or a typed error,
         // keeps stepping, and its state stays finite, with the library's policy in the loop or none.
         let mut world = World::new(
-            dynamics::Scene::flicking_finger(),
+            library::ProblemFile::builtin().scene,
             with_library.then(|| crate::support::finger_library().clone()),
             WorldSettings {
                 policy: PolicyKind::Off,
@@ -201,7 +201,7 @@ proptest::proptest! {
 #[test]
 fn switching_to_online_mpc_never_stalls_the_world_and_spreads_its_first_solve_over_steps() {
     let mut world = World::new(
-        dynamics::Scene::flicking_finger(),
+        library::ProblemFile::builtin().scene,
         Some(crate::support::finger_library().clone()),
         WorldSettings {
             policy: PolicyKind::Off,
@@ -261,7 +261,7 @@ fn task_world(text: &str, task: &str, policy: PolicyKind) -> World {
             x0: task.x0.clone(),
             h: task.h,
             sigma,
-            task: Some(task),
+            task,
             ..WorldSettings::default()
         },
     )
@@ -357,13 +357,20 @@ fn the_two_finger_scene_turns_to_its_target_under_online_mpc_and_never_counts_a_
 #[test]
 fn a_scene_with_a_fixed_peg_and_a_ground_sends_both_and_keeps_them_in_the_window() {
     // The pendulum of dynamics_world: two hinged links over a ground, a fixed peg beside them.
-    let scene = dynamics::Scene::from_toml_str(crate::dynamics_world::PENDULUM).unwrap();
+    // A task for it: hold the upper link level (the world follows the task's target).
+    let text = format!(
+        "{}\n[task.level]\nh = 0.05\nhorizon = 10\nmodel = \"hard\"\ncontrol_weight = 0.1\nrunning = [{{ coordinate = \"upper.angle\", quadratic = 1.0 }}]\n",
+        crate::dynamics_world::PENDULUM
+    );
+    let problem = library::ProblemFile::from_toml_str(&text).unwrap();
+    let scene = problem.scene.clone();
     let mut world = World::new(
         scene.clone(),
         None,
         WorldSettings {
             policy: PolicyKind::Off,
             x0: vec![-1.2, 0.3, 0.0, 0.0],
+            task: problem.task(None).unwrap(),
             ..WorldSettings::default()
         },
     )

@@ -6,7 +6,7 @@ use ddp::{
     ControlLimits, Ddp, DdpSettings, Dynamics, Method, Regularisation, SecondOrder, Solution,
 };
 use dynamics::{Complementarity, Scene, Simulator, StepSettings};
-use library::{FingerDynamics, finger_cost};
+use library::{ProblemFile, SceneDynamics};
 use std::time::{Duration, Instant};
 
 /// Dynamics that time every call of the wrapped ones.
@@ -86,10 +86,10 @@ impl<D: Dynamics> SecondOrder<D::Data> for Timed<D> {
     }
 }
 
-fn finger(sigma: f64) -> FingerDynamics {
-    FingerDynamics::new(
+fn finger(sigma: f64) -> SceneDynamics {
+    SceneDynamics::new(
         Simulator::new(
-            Scene::flicking_finger(),
+            ProblemFile::builtin().scene,
             StepSettings {
                 model: Complementarity::Logistic { sigma },
                 ..StepSettings::default()
@@ -112,7 +112,7 @@ fn settings(method: Method, regularisation: Regularisation) -> DdpSettings {
 fn solve_finger(
     sigma: f64,
     s: DdpSettings,
-) -> anyhow::Result<(Solution, f64, Timed<FingerDynamics>)> {
+) -> anyhow::Result<(Solution, f64, Timed<SceneDynamics>)> {
     let mut d = Timed {
         inner: finger(sigma),
         step: Duration::ZERO,
@@ -120,13 +120,9 @@ fn solve_finger(
         second: Duration::ZERO,
         second_calls: 0,
     };
+    let task = ProblemFile::builtin_task().1;
     let t = Instant::now();
-    let sol = Ddp::new(s)?.solve(
-        &mut d,
-        &finger_cost(3, 2, 2),
-        &dynamics::FLICKING_FINGER_X0,
-        &vec![vec![0.0; 2]; 75],
-    )?;
+    let sol = Ddp::new(s)?.solve(&mut d, &task.cost, &task.x0, &vec![vec![0.0; 2]; 75])?;
     Ok((sol, t.elapsed().as_secs_f64(), d))
 }
 
@@ -273,14 +269,15 @@ pub fn section() -> anyhow::Result<String> {
     let mut passes = Vec::new();
     let mut times = Vec::new();
     let mut costs = Vec::new();
+    let task = ProblemFile::builtin_task().1;
     for k in 0..8 {
-        let mut x0 = dynamics::FLICKING_FINGER_X0.to_vec();
+        let mut x0 = task.x0.clone();
         x0[0] += 0.01 * (k as f64 - 3.5);
         x0[5] += 0.02 * (k % 3) as f64;
         let t = Instant::now();
         let sol = Ddp::new(settings(Method::Full, Regularisation::State))?.solve(
             &mut finger(0.1),
-            &finger_cost(3, 2, 2),
+            &task.cost,
             &x0,
             &vec![vec![0.0; 2]; 75],
         )?;
@@ -303,8 +300,7 @@ pub fn section() -> anyhow::Result<String> {
     ));
 
     // One pass from a trajectory midway through a solve: a one-pass solve minus its initial rollout.
-    let cost = finger_cost(3, 2, 2);
-    let x0 = dynamics::FLICKING_FINGER_X0;
+    let (cost, x0) = (task.cost.clone(), task.x0.clone());
     let midway = Ddp::new(DdpSettings {
         max_iterations: 30,
         ..DdpSettings::default()
@@ -364,7 +360,7 @@ One pass (backward pass with the steps' derivatives, then the forward pass with 
         let step = t.step.as_secs_f64() * 1e3;
         let rest = total - second - step - t.first.as_secs_f64() * 1e3;
         out.push_str(&format!(
-            "\nWhere the time of the full-DDP solve at sigma = 0.1 goes ({passes} passes, {total:.0} ms): second derivatives of the steps (`FingerDynamics`'s `calc_diff_second`: one `Model::second_order` per step and trajectory (of the step the forward pass stored in the knot's data, not solved again), kept in the knot's data, then a cheap contraction per backward attempt; {} calls) {second:.0} ms ({:.0}%), steps of the forward passes and line searches {step:.0} ms ({:.0}%), the optimiser's own backward-pass algebra, box QP and bookkeeping {rest:.0} ms ({:.0}%).\n",
+            "\nWhere the time of the full-DDP solve at sigma = 0.1 goes ({passes} passes, {total:.0} ms): second derivatives of the steps (`SceneDynamics`'s `calc_diff_second`: one `Model::second_order` per step and trajectory (of the step the forward pass stored in the knot's data, not solved again), kept in the knot's data, then a cheap contraction per backward attempt; {} calls) {second:.0} ms ({:.0}%), steps of the forward passes and line searches {step:.0} ms ({:.0}%), the optimiser's own backward-pass algebra, box QP and bookkeeping {rest:.0} ms ({:.0}%).\n",
             t.second_calls,
             100.0 * second / total,
             100.0 * step / total,
@@ -382,23 +378,21 @@ fn scenes_pass_table() -> anyhow::Result<String> {
     let mut out = String::from(
         "\nOne full-DDP pass (as above) on scenes of other sizes, N = 75, logistic sigma = 0.1, cost -(angle of the free body) + 0.05 |u|^2 from rest (two fingers and pushing: their tasks' costs and initial states), median of 21:\n\n| scene | states / controls | pass (ms) | per knot (us) | passes to get there |\n|---|---:|---:|---:|---:|\n",
     );
-    let three = Scene::from_toml_str(include_str!("../../scenes/three_link_finger.toml"))?;
+    // The two spin tasks' costs (-(the ellipse's angle) + 0.05 |u|^2); the three-link finger from a
+    // start of its own, bent further than its task's.
+    let (finger, spin) = ProblemFile::builtin_task();
+    let three = ProblemFile::from_toml_str(include_str!("../../scenes/three_link_finger.toml"))?;
+    let three_spin = three.task(Some("spin"))?;
     let cases = [
-        (
-            "finger (SCENE.md)",
-            Scene::flicking_finger(),
-            dynamics::FLICKING_FINGER_X0.to_vec(),
-        ),
+        ("finger (SCENE.md)", finger, spin.x0.clone(), spin.cost),
         (
             "three-link finger (three_link_finger.toml)",
-            three,
+            three.scene,
             vec![-1.2, -0.6, -0.8, 0.0, 0.0, 0.0, 0.0, 0.0],
+            three_spin.cost,
         ),
     ];
-    for (name, scene, x0) in cases {
-        let n = scene.n_dof();
-        let free = library::free_joint(&scene).unwrap_or(n - 1);
-        let cost = finger_cost(n, free, scene.n_controls);
+    for (name, scene, x0, cost) in cases {
         out.push_str(&pass_row(name, &scene, &x0, &cost)?);
     }
     // The two target tasks on their own costs and initial states.
@@ -434,11 +428,8 @@ fn pass_row<C: ddp::Cost>(
         model: Complementarity::Logistic { sigma: 0.1 },
         ..StepSettings::default()
     };
-    let make = || -> anyhow::Result<FingerDynamics> {
-        Ok(FingerDynamics::new(Simulator::new(
-            scene.clone(),
-            settings,
-        )?))
+    let make = || -> anyhow::Result<SceneDynamics> {
+        Ok(SceneDynamics::new(Simulator::new(scene.clone(), settings)?))
     };
     let before = Ddp::new(DdpSettings {
         max_iterations: 30,

@@ -7,12 +7,20 @@ use std::hint::black_box;
 use std::path::Path;
 use std::time::Instant;
 
-const X0: [f64; 6] = dynamics::FLICKING_FINGER_X0;
+/// The finger apart, at rest: the built-in scene file's task start (SCENE.md's x0).
+fn x0() -> Vec<f64> {
+    library::ProblemFile::builtin_task().1.x0
+}
+
+/// SCENE.md's flicking finger: the built-in scene file's scene.
+fn finger() -> Scene {
+    library::ProblemFile::builtin().scene
+}
 const U: [f64; 2] = [0.3, -0.2];
 
 fn sim(model: Complementarity, h: f64) -> Simulator {
     Simulator::new(
-        Scene::flicking_finger(),
+        finger(),
         StepSettings {
             model,
             h,
@@ -27,11 +35,11 @@ fn median(mut v: Vec<f64>) -> f64 {
     v[v.len() / 2]
 }
 
-/// Trajectory from X0 under U for `seconds`; returns the states.
+/// Trajectory from [`x0`] under U for `seconds`; returns the states.
 fn trajectory(sim: &mut Simulator, seconds: f64) -> Vec<Vec<f64>> {
     let h = sim.settings().h;
     let steps = (seconds / h).round() as usize;
-    let mut x = X0.to_vec();
+    let mut x = x0();
     let mut out = vec![x.clone()];
     for _ in 0..steps {
         x = sim.step(&x, &U).expect("step").x_next;
@@ -157,7 +165,7 @@ pub fn section(reference_dir: &Path) -> anyhow::Result<String> {
         };
         // The reference answers are SCENE.md's step: penetration recovered at the velocity level.
         let mut s = Simulator::new(
-            Scene::flicking_finger(),
+            finger(),
             StepSettings {
                 model,
                 h: case["h"].as_f64().unwrap(),
@@ -253,7 +261,7 @@ pub fn section(reference_dir: &Path) -> anyhow::Result<String> {
             },
             ..StepSettings::default()
         };
-        let mut s = Simulator::new(Scene::flicking_finger(), settings).unwrap();
+        let mut s = Simulator::new(finger(), settings).unwrap();
         let t = Instant::now();
         let traj = trajectory(&mut s, 3.75);
         (traj, t.elapsed().as_nanos() as f64 / 75.0)
@@ -326,7 +334,7 @@ fn scenes_table(finger_states: &[Vec<f64>]) -> anyhow::Result<String> {
     let cases: [Case; 4] = [
         (
             "finger (finger.toml)",
-            Scene::flicking_finger(),
+            finger(),
             finger_states.iter().take(8).cloned().collect(),
             U.to_vec(),
         ),

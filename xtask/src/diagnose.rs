@@ -9,8 +9,8 @@
 use crate::figures::{Run, both, draw_cycle_2d, register_font};
 use anyhow::Context;
 use ddp::{Ddp, DdpSettings};
-use dynamics::{Complementarity, Scene, Simulator, StepSettings};
-use library::{ContactEvents, FingerDynamics, Library, LibrarySettings, finger_cost};
+use dynamics::{Complementarity, Simulator, StepSettings};
+use library::{ContactEvents, Library, LibrarySettings, SceneDynamics};
 use plotters::prelude::*;
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -93,7 +93,7 @@ fn model(hard: bool) -> Complementarity {
 /// The world's simulator at h = 0.05.
 fn world(hard: bool) -> anyhow::Result<Simulator> {
     Ok(Simulator::new(
-        Scene::flicking_finger(),
+        library::ProblemFile::builtin().scene,
         StepSettings {
             model: model(hard),
             h: 0.05,
@@ -103,17 +103,13 @@ fn world(hard: bool) -> anyhow::Result<Simulator> {
 }
 
 fn receding(horizon: usize, shift: usize, hard: bool, seconds: f64) -> anyhow::Result<Run> {
-    let scene = Scene::flicking_finger();
+    let (scene, task) = library::ProblemFile::builtin_task();
     let settings = LibrarySettings {
         horizon,
-        ..LibrarySettings::default()
+        ..LibrarySettings::default().for_task(&task)
     };
-    let mut dynamics = FingerDynamics::new(settings.simulator(&scene)?);
-    let cost = finger_cost(
-        scene.n_dof(),
-        library::free_joint(&scene)?,
-        scene.n_controls,
-    );
+    let mut dynamics = SceneDynamics::new(settings.simulator(&scene)?);
+    let cost = task.cost;
     let mut sim = world(hard)?;
     let mut x = settings.x0.clone();
     let mut plan = vec![vec![0.0; scene.n_controls]; horizon];
@@ -156,7 +152,7 @@ fn receding(horizon: usize, shift: usize, hard: bool, seconds: f64) -> anyhow::R
 
 fn online(lib: &Library, hard: bool, seconds: f64) -> anyhow::Result<Run> {
     let mut w = World::new(
-        Scene::flicking_finger(),
+        library::ProblemFile::builtin().scene,
         Some(lib.clone()),
         WorldSettings {
             policy: PolicyKind::Mpc,
@@ -190,7 +186,7 @@ fn online(lib: &Library, hard: bool, seconds: f64) -> anyhow::Result<Run> {
 fn policy(lib: &Library, hard: bool, seconds: f64) -> anyhow::Result<Run> {
     let policy = lib.policy()?;
     let mut sim = world(hard)?;
-    let mut x = lib.settings.x0.clone();
+    let mut x = lib.x0().to_vec();
     let mut u = vec![0.0; lib.scene().n_controls];
     let mut run = Run {
         states: vec![x.clone()],
@@ -245,7 +241,11 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     println!("building the paper's and the default library ...");
     let libraries: Vec<Library> = std::thread::scope(|scope| {
         let jobs: Vec<_> = [LibrarySettings::paper(), LibrarySettings::default()]
-            .map(|s| scope.spawn(move || Library::build(&Scene::flicking_finger(), &s, |_, _| {})))
+            .map(|s| {
+                scope.spawn(move || {
+                    Library::build(&library::ProblemFile::builtin(), None, &s, |_, _| {})
+                })
+            })
             .into_iter()
             .collect();
         jobs.into_iter()

@@ -93,9 +93,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         "library {}: {} controllers for task {}, built on {:?} at h = {}; {}, from the library's initial state",
         args.library.display(),
         library.entries.len(),
-        library
-            .task()
-            .map_or("the finger's (built in)".to_string(), |t| t.name.clone()),
+        library.task().name,
         library.settings.model,
         library.settings.h,
         if spin {
@@ -122,7 +120,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             kick_every: args.kick_every,
             kick_std: args.kick_std,
             seed: args.seed,
-            x0: library.settings.x0.clone(),
+            x0: library.x0().to_vec(),
         };
         let e = evaluate(&library, &policy, &settings)?;
         let kicked = e.kicks > 0;

@@ -9,7 +9,7 @@ use crate::figures::{both, err, register_font};
 use anyhow::Context;
 use ddp::{Ddp, DdpSettings};
 use library::{
-    Evaluation, EvaluationSettings, FingerDynamics, Library, LibrarySettings, Model, ProblemFile,
+    Evaluation, EvaluationSettings, Library, LibrarySettings, Model, ProblemFile, SceneDynamics,
     Task, evaluate,
 };
 use plotters::prelude::*;
@@ -186,7 +186,7 @@ fn from_rest(problem: &ProblemFile, task: &Task) -> anyhow::Result<FromRest> {
     })?;
     let start = Instant::now();
     let sol = ddp.solve(
-        &mut FingerDynamics::new(sim),
+        &mut SceneDynamics::new(sim),
         &task.cost,
         &task.x0,
         &vec![vec![0.0; m]; task.horizon],
@@ -357,7 +357,7 @@ fn run_example(
     let runs = crate::on_two_threads(&seed_list, |&seed| -> anyhow::Result<(SeedRun, Library)> {
         let settings = crate::train::defaults_for(&task, seed);
         let start = Instant::now();
-        let lib = Library::build_task(&problem, Some(&e.task), &settings, |_, _| {})?;
+        let lib = Library::build(&problem, Some(&e.task), &settings, |_, _| {})?;
         let build_seconds = start.elapsed().as_secs_f64();
         let mut run = SeedRun {
             seed,

@@ -541,12 +541,10 @@ fn finger_shaped(scene: &Scene) -> bool {
 /// A task library's figures (any scene): its policy from the library's initial state for 40 s on its own
 /// model and on hard contact, the watched entry over time and eight frames.
 pub fn write_task(lib: &Library, dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
-    let task = lib
-        .task()
-        .ok_or_else(|| anyhow!("the library has no task of a scene file"))?;
+    let task = lib.task();
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let task = library::Task {
-        x0: lib.settings.x0.clone(),
+        x0: lib.x0().to_vec(),
         h: lib.settings.h,
         ..task.clone()
     };
@@ -580,7 +578,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             args.library.display()
         )
     })?;
-    let written = if lib.task().is_some() && !finger_shaped(lib.scene()) {
+    let written = if !finger_shaped(lib.scene()) {
         write_task(&lib, &args.out)?
     } else {
         write_all(&lib, &args.out)?
@@ -611,7 +609,8 @@ mod tests {
             growth: 0,
             ..LibrarySettings::default()
         };
-        let lib = Library::build(&Scene::flicking_finger(), &settings, |_, _| {}).unwrap();
+        let lib =
+            Library::build(&library::ProblemFile::builtin(), None, &settings, |_, _| {}).unwrap();
         let dir = std::env::temp_dir().join(format!("slcp-figures-{}", std::process::id()));
         let files = write_all(&lib, &dir).unwrap();
         assert_eq!(files.len(), 8);

@@ -68,10 +68,12 @@ enum Command {
     Step(step::StepArgs),
     /// Roll out a control sequence from a state; writes the trajectory and impulses as JSON or CSV.
     Simulate(step::SimulateArgs),
-    /// iLQG / DDP on the finger (or the unicycle benchmark): one line per pass behind a progress bar,
+    /// iLQG / DDP on a task of a scene file (the built-in finger's by default) or the unicycle
+    /// benchmark: one line per pass behind a progress bar,
     /// then passes, final cost and time; --out writes the trajectory and its linear policy as JSON.
     Optimize(optimize::Args),
-    /// Build the finger's controller library (receding-horizon iLQG, paper IV-C) and save it.
+    /// Build a task's controller library (receding-horizon iLQG, paper IV-C; the built-in finger's spin by
+    /// default) and save it.
     Train(train::Args),
     /// Run a library's global policy in closed loop on the smoothed and the hard system, with kicks.
     Evaluate(evaluate::Args),

@@ -1,12 +1,13 @@
-//! `cargo xtask optimize`: iLQG / DDP on the flicking finger or on the unicycle benchmark, one line per
-//! pass behind a progress bar, the trajectory and its linear policy as JSON.
+//! `cargo xtask optimize`: iLQG / DDP on a task of a scene file (the built-in scenes/finger.toml's `spin`,
+//! the paper's, by default) or on the unicycle benchmark, one line per pass behind a progress bar, the
+//! trajectory and its linear policy as JSON.
 
 use crate::step::SimArgs;
 use anyhow::Context;
 use ddp::problems::Unicycle;
 use ddp::{ControlLimits, Ddp, DdpSettings, Iteration, Method, Regularisation, Solution};
 use indicatif::{ProgressBar, ProgressStyle};
-use library::{FingerDynamics, finger_cost};
+use library::SceneDynamics;
 use serde::Serialize;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -14,8 +15,10 @@ use std::time::Instant;
 /// Which problem.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum Problem {
-    /// The flicking finger of SCENE.md (cost -theta3 + 0.05 |u|^2).
-    Finger,
+    /// A task of a scene file (--scene, --task; the built-in scenes/finger.toml's `spin` is the flicking
+    /// finger of SCENE.md, cost -theta3 + 0.05 |u|^2).
+    #[value(alias = "finger")]
+    Task,
     /// The unicycle benchmark: x0 = [-1, -1, 1], dt = 0.1, T = 75, 50|x|^2 + 0.5|u|^2, final 50|x|^2.
     Unicycle,
 }
@@ -44,17 +47,17 @@ pub enum RegArg {
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// Problem to solve.
-    #[arg(long, value_enum, default_value = "finger")]
+    #[arg(long, value_enum, default_value = "task")]
     problem: Problem,
-    /// Simulator options (finger only).
+    /// Simulator options (scene files only).
     #[command(flatten)]
     sim: SimArgs,
-    /// A task of the scene file (its `[task.NAME]` table; the finger's is `spin`): its cost, initial
-    /// state, time step, horizon, contact model and control limits; a flag given on the command line
-    /// overrides the task's value.
+    /// A task of the scene file (its `[task.NAME]` table; the file's only one by default, the built-in
+    /// finger's `spin`): its cost, initial state, time step, horizon, contact model and control limits; a
+    /// flag given on the command line overrides the task's value.
     #[arg(long)]
     task: Option<String>,
-    /// Horizon N (1 to 100000) [default: 75, or the --task's].
+    /// Horizon N (1 to 100000) [default: the task's, or 75 for the unicycle].
     #[arg(long,
           value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=100_000))]
     horizon: Option<usize>,
@@ -74,7 +77,7 @@ pub struct Args {
     /// Box every control to [-L, L].
     #[arg(long)]
     limit: Option<f64>,
-    /// Initial state (comma-separated; default: SCENE.md's x0 or the unicycle's [-1, -1, 1]).
+    /// Initial state (comma-separated; default: the task's or the unicycle's [-1, -1, 1]).
     #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
     x0: Option<Vec<f64>>,
     /// Write the trajectory, its policy and the passes as JSON here.
@@ -83,11 +86,11 @@ pub struct Args {
     /// No per-pass lines.
     #[arg(long)]
     quiet: bool,
-    /// Exit with status 1 unless the optimiser converged (CostConverged or StepConverged) and, with a
-    /// task, its trajectory felt a contact.
+    /// Exit with status 1 unless the optimiser converged (CostConverged or StepConverged) and, for a
+    /// scene's task, its trajectory felt a contact.
     #[arg(long)]
     strict: bool,
-    /// With a task: when the solve at the task's noise scale never feels a contact, do not continue in
+    /// For a scene's task: when the solve at the task's noise scale never feels a contact, do not continue in
     /// the noise scale (doubling sigma until the contact is felt, then halving it back, each solve
     /// warm-started from the last); just say so.
     #[arg(long)]
@@ -174,12 +177,12 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     };
     let start = Instant::now();
     let horizon = args.horizon.unwrap_or(75);
-    // What a task's terms say of the solution (the finger's built-in report otherwise).
+    // What a task's terms say of the solution.
     let mut summary = None;
     // With a task: what the contact check said, when it found none felt at first.
     let mut felt_note: Option<String> = None;
     let (solution, problem) = match args.problem {
-        Problem::Finger if args.task.is_some() => {
+        Problem::Task => {
             let file = args.sim.problem_file()?;
             let task = file.task(args.task.as_deref())?;
             let sim = args.sim.simulator_of(file.scene.clone(), Some(&task))?;
@@ -196,7 +199,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             let base = *sim.settings();
             let mut probe = dynamics::Simulator::new(file.scene.clone(), base)?;
             let mut sol = ddp.solve_observed(
-                &mut FingerDynamics::new(sim),
+                &mut SceneDynamics::new(sim),
                 &task.cost,
                 &x0,
                 &vec![vec![0.0; m]; horizon],
@@ -268,30 +271,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             }
             felt_note = note;
             summary = Some(task_summary(&file.scene, &task, &sol.states));
-            (sol, "task")
-        }
-        Problem::Finger => {
-            let sim = args.sim.simulator()?;
-            let scene = sim.scene().clone();
-            let (n, m) = (scene.n_dof(), scene.n_controls);
-            let x0 = args
-                .x0
-                .clone()
-                .unwrap_or_else(|| dynamics::FLICKING_FINGER_X0.to_vec());
-            // The free body: the last unactuated joint (the finger's ellipse, theta3).
-            let free =
-                library::free_joint(&scene).context("the scene has no unactuated joint to spin")?;
-            let cost = finger_cost(n, free, m);
-            let mut dynamics = FingerDynamics::new(sim);
-            let ddp = Ddp::new(settings(args, m, None))?;
-            let sol = ddp.solve_observed(
-                &mut dynamics,
-                &cost,
-                &x0,
-                &vec![vec![0.0; m]; horizon],
-                observe,
-            )?;
-            (sol, "finger")
+            (sol, format!("task {}", task.name))
         }
         Problem::Unicycle => {
             anyhow::ensure!(
@@ -307,7 +287,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                 &vec![vec![0.0; 2]; horizon],
                 observe,
             )?;
-            (sol, "unicycle")
+            (sol, "unicycle".to_string())
         }
     };
     let seconds = start.elapsed().as_secs_f64();
@@ -329,19 +309,13 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         .iter()
         .flatten()
         .fold(0.0f64, |a, k| a.max(k.abs()));
-    if let Some(summary) = &summary {
-        println!("{summary}; largest feedback gain |K| {gain:.3e}");
-    } else if args.problem == Problem::Finger {
-        let n = solution.states[0].len() / 2;
-        let turned =
-            solution.states.last().expect("N + 1 states")[n - 1] - solution.states[0][n - 1];
-        println!(
-            "theta3 turned {turned:.4} rad over the horizon; largest feedback gain |K| {gain:.3e}"
-        );
+    match &summary {
+        Some(summary) => println!("{summary}; largest feedback gain |K| {gain:.3e}"),
+        None => println!("largest feedback gain |K| {gain:.3e}"),
     }
     if let Some(path) = &args.out {
         let report = Report {
-            problem: problem.into(),
+            problem,
             method,
             passes: solution.iterations.len(),
             status: format!("{:?}", solution.status),

@@ -8,8 +8,7 @@ use ddp::{Ddp, DdpSettings};
 use dynamics::{Complementarity, Scene, Simulator, StepSettings};
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
 use library::{
-    Evaluation, EvaluationSettings, FingerDynamics, Library, LibrarySettings, Model, evaluate,
-    finger_cost,
+    Evaluation, EvaluationSettings, Library, LibrarySettings, Model, SceneDynamics, evaluate,
 };
 use serde::Serialize;
 use std::fmt::Write as _;
@@ -204,8 +203,9 @@ struct Summary {
 }
 
 fn optimise(sigma: f64) -> anyhow::Result<Optimised> {
+    let (scene, task) = library::ProblemFile::builtin_task();
     let sim = Simulator::new(
-        Scene::flicking_finger(),
+        scene,
         StepSettings {
             model: Complementarity::Logistic { sigma },
             ..StepSettings::default()
@@ -213,10 +213,10 @@ fn optimise(sigma: f64) -> anyhow::Result<Optimised> {
     )?;
     let t = Instant::now();
     let sol = Ddp::new(DdpSettings::default())?.solve(
-        &mut FingerDynamics::new(sim),
-        &finger_cost(3, 2, 2),
-        &dynamics::FLICKING_FINGER_X0,
-        &vec![vec![0.0; 2]; 75],
+        &mut SceneDynamics::new(sim),
+        &task.cost,
+        &task.x0,
+        &vec![vec![0.0; 2]; task.horizon],
     )?;
     Ok(Optimised {
         sigma,
@@ -266,7 +266,9 @@ fn build(sigma: f64, bars: &MultiProgress) -> anyhow::Result<(Library, f64)> {
         .expect("a valid template"),
     );
     let t = Instant::now();
-    let lib = Library::build(&Scene::flicking_finger(), &settings, |_, _| bar.inc(1))?;
+    let lib = Library::build(&library::ProblemFile::builtin(), None, &settings, |_, _| {
+        bar.inc(1)
+    })?;
     bar.finish_and_clear();
     Ok((lib, t.elapsed().as_secs_f64()))
 }
@@ -301,7 +303,7 @@ fn on_both_worlds(
 
 /// The flicking finger with one property changed (SCENE.md: friction 0.5, density 1, ellipse drag 0.7).
 fn mismatched_scenes() -> Vec<(String, dynamics::SceneSpec)> {
-    let base = Scene::flicking_finger().spec().clone();
+    let base = library::ProblemFile::builtin().scene.spec().clone();
     let mut out = Vec::new();
     for friction in [0.1, 0.25, 1.0, 2.0] {
         let mut spec = base.clone();
@@ -364,7 +366,7 @@ fn further_seeds(args: &Args, bars: &MultiProgress) -> anyhow::Result<Vec<crate:
             seed,
             ..LibrarySettings::default()
         };
-        let lib = Library::build(&Scene::flicking_finger(), &settings, |_, _| {})?;
+        let lib = Library::build(&library::ProblemFile::builtin(), None, &settings, |_, _| {})?;
         let runs = crate::seeds::runs_of(seed, crate::seeds::DEFAULT_RECIPE, &lib, args.seconds);
         bar.inc(1);
         runs
@@ -471,12 +473,11 @@ fn experiments(bars: &MultiProgress) -> anyhow::Result<(Vec<Optimised>, Vec<Anne
     let schedule = [
         0.3, 0.2, 0.1, 0.05, 0.03, 0.02, 0.01, 0.005, 0.003, 0.002, 0.001,
     ];
-    let scene = Scene::flicking_finger();
-    let x0 = dynamics::FLICKING_FINGER_X0;
-    let warm = library::anneal(&scene, &x0, 0.05, 75, &schedule, 300)?;
+    let (scene, task) = library::ProblemFile::builtin_task();
+    let warm = library::anneal(&scene, &task, &schedule, 300)?;
     let mut annealing = Vec::new();
     for w in &warm {
-        let direct = &library::anneal(&scene, &x0, 0.05, 75, &[w.sigma], 300)?[0];
+        let direct = &library::anneal(&scene, &task, &[w.sigma], 300)?[0];
         annealing.push(Annealed {
             sigma: w.sigma,
             annealed_passes: w.passes,

@@ -6,7 +6,6 @@
 //! from. About twenty-four library builds: minutes, where `cargo xtask reproduce` (one seed) takes about
 //! one.
 
-use dynamics::Scene;
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
 use library::{Evaluation, Library, LibrarySettings};
 use serde::Serialize;
@@ -202,7 +201,12 @@ fn seed_sweep(args: &Args, bars: &MultiProgress) -> anyhow::Result<Vec<SeedRun>>
         .expect("a valid template"),
     );
     let run_job = |&(seed, build): &(u64, Build)| -> anyhow::Result<Vec<SeedRun>> {
-        let lib = Library::build(&Scene::flicking_finger(), &build.settings(seed), |_, _| {})?;
+        let lib = Library::build(
+            &library::ProblemFile::builtin(),
+            None,
+            &build.settings(seed),
+            |_, _| {},
+        )?;
         let mut runs = Vec::new();
         for (recipe, lib) in build.variants(lib) {
             runs.extend(runs_of(seed, recipe, &lib, args.seconds)?);

@@ -65,7 +65,7 @@ impl From<DragArg> for dynamics::Drag {
 impl SimArgs {
     pub fn simulator(&self) -> anyhow::Result<Simulator> {
         let scene = match &self.scene {
-            None => Scene::flicking_finger(),
+            None => library::ProblemFile::builtin().scene,
             Some(path) => {
                 let text = std::fs::read_to_string(path)
                     .with_context(|| format!("reading {}", path.display()))?;
@@ -75,13 +75,9 @@ impl SimArgs {
         self.simulator_of(scene, None)
     }
 
-    /// The scene file of `--scene` with its tasks (the flicking finger's, scenes/finger.toml, without it).
+    /// The scene file of `--scene` with its tasks (the built-in scenes/finger.toml without it).
     pub fn problem_file(&self) -> anyhow::Result<library::ProblemFile> {
-        Ok(match &self.scene {
-            None => library::ProblemFile::from_toml_str(FINGER_FILE)?,
-            Some(path) => library::ProblemFile::load(path)
-                .with_context(|| format!("scene {}", path.display()))?,
-        })
+        Ok(problem_file(self.scene.as_deref())?.0)
     }
 
     /// A simulator of `scene` with the model and time step of `task` (when given) unless the command line
@@ -137,8 +133,24 @@ pub fn contact_model(
     })
 }
 
-/// scenes/finger.toml: the flicking finger of SCENE.md with the paper's task.
-pub const FINGER_FILE: &str = include_str!("../../scenes/finger.toml");
+/// The scene file at `path` with its tasks, or without one the built-in file
+/// ([`library::ProblemFile::builtin`], scenes/finger.toml: SCENE.md's finger and the paper's `spin`), and
+/// the name to report it by.
+pub fn problem_file(
+    path: Option<&std::path::Path>,
+) -> anyhow::Result<(library::ProblemFile, String)> {
+    Ok(match path {
+        None => (
+            library::ProblemFile::builtin(),
+            "scenes/finger.toml (built in)".into(),
+        ),
+        Some(path) => (
+            library::ProblemFile::load(path)
+                .with_context(|| format!("scene {}", path.display()))?,
+            path.display().to_string(),
+        ),
+    })
+}
 
 #[derive(Debug, clap::Args)]
 pub struct StepArgs {
@@ -517,7 +529,7 @@ mod tests {
     /// a noise scale given for a hard task is refused.
     #[test]
     fn a_tasks_settings_yield_to_the_command_lines() {
-        let file = library::ProblemFile::from_toml_str(FINGER_FILE).unwrap();
+        let file = library::ProblemFile::builtin();
         let task = file.task(Some("spin")).unwrap();
         let args = |model, sigma, h| SimArgs {
             model,
@@ -641,7 +653,7 @@ mod tests {
     /// simulator, and first derivatives with it.
     #[test]
     fn a_hessian_line_answers_any_scene() {
-        let mut spec = Scene::flicking_finger().spec().clone();
+        let mut spec = library::ProblemFile::builtin().scene.spec().clone();
         let mut link = spec.bodies[1].clone();
         link.name = "link3".into();
         link.parent = "link2".into();

@@ -2,7 +2,6 @@
 //! for a task of a scene file, behind a progress bar and save it.
 
 use anyhow::Context;
-use dynamics::Scene;
 use indicatif::{ProgressBar, ProgressStyle};
 use library::{Library, LibrarySettings};
 use std::path::PathBuf;
@@ -70,13 +69,13 @@ pub struct Args {
     /// With the default recipe: trajectories per branch [default: 20].
     #[arg(long)]
     length: Option<usize>,
-    /// Scene file (TOML); default: the flicking finger of SCENE.md (scenes/finger.toml).
+    /// Scene file (TOML); default: the built-in scenes/finger.toml (SCENE.md's flicking finger).
     #[arg(long)]
     scene: Option<PathBuf>,
     /// A task of the scene file (`[task.NAME]`, docs/tasks.md): the library minimises its cost from its
     /// initial state under its control limits, with its contact model, time step and horizon unless
     /// given here, and its policy compares states modulo its one periodic coordinate. Without it, the
-    /// finger's built-in task (spin the last unactuated joint).
+    /// file's only task (the built-in finger's: `spin`).
     #[arg(long)]
     task: Option<String>,
 }
@@ -91,43 +90,17 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     }
     Library::check_destination(&args.out)
         .with_context(|| format!("--out {} cannot be written", args.out.display()))?;
-    let text = match &args.scene {
-        None => crate::step::FINGER_FILE.to_string(),
-        Some(path) => {
-            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?
-        }
-    };
-    let source = args
-        .scene
-        .as_ref()
-        .map_or("scenes/finger.toml".into(), |p| p.display().to_string());
-    let problem = match &args.task {
-        Some(_) => Some(
-            library::ProblemFile::from_toml_str(&text)
-                .with_context(|| format!("scene {source}"))?,
-        ),
-        None => None,
-    };
-    let task = match &problem {
-        Some(p) => Some(p.task(args.task.as_deref())?),
-        None => None,
-    };
-    let scene = match (&problem, &args.scene) {
-        (Some(p), _) => p.scene.clone(),
-        (None, None) => Scene::flicking_finger(),
-        (None, Some(_)) => {
-            Scene::from_toml_str(&text).with_context(|| format!("scene {source}"))?
-        }
-    };
-    let mut base = if args.paper {
+    let (problem, source) = crate::step::problem_file(args.scene.as_deref())?;
+    let task = problem
+        .task(args.task.as_deref())
+        .with_context(|| format!("scene {source}"))?;
+    let base = if args.paper {
         LibrarySettings::paper()
     } else {
         LibrarySettings::default()
-    };
-    if let Some(task) = &task {
-        base = base.for_task(task);
     }
-    let model = crate::step::contact_model(args.model, args.sigma, task.as_ref())?;
+    .for_task(&task);
+    let model = crate::step::contact_model(args.model, args.sigma, Some(&task))?;
     // The default recipe's shape fitted to the budget; flags given override it.
     let fitted = base.clone().fitted(args.trajectories);
     let exploration = match fitted.exploration {
@@ -164,11 +137,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         exploration,
         ..base
     };
-    let progress = match &task {
-        Some(t) => library::Progress::of_task(t)?,
-        None => library::Progress::finger(&scene)?,
-    };
-    let watched = scene.coordinate_names()[progress.coordinate].clone();
+    let progress = library::Progress::of_task(&task)?;
+    let watched = problem.scene.coordinate_names()[progress.coordinate].clone();
     // One tick per optimised trajectory (each keeps `keep` controllers); growth adds trajectories beyond
     // the budget, and the bar grows with them.
     let bar = ProgressBar::new(settings.trajectories as u64);
@@ -189,10 +159,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             e.passes, e.x[progress.coordinate]
         ));
     };
-    let library = match &problem {
-        Some(p) => Library::build_task(p, args.task.as_deref(), &settings, tick)?,
-        None => Library::build(&scene, &settings, tick)?,
-    };
+    let library = Library::build(&problem, Some(&task.name), &settings, tick)?;
     bar.finish_and_clear();
     let seconds = start.elapsed().as_secs_f64();
     let firsts: Vec<_> = library.entries.iter().step_by(settings.keep).collect();

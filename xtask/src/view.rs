@@ -1,7 +1,6 @@
 //! `cargo xtask view`: the interactive viewer on 127.0.0.1.
 
 use anyhow::Context;
-use dynamics::Scene;
 use indicatif::{ProgressBar, ProgressStyle};
 use library::{Library, LibrarySettings};
 use std::net::{Ipv4Addr, SocketAddr};
@@ -17,12 +16,13 @@ pub struct Args {
     /// that library built now (about 15 s) and saved there; for another --scene: none (online MPC).
     #[arg(long)]
     library: Option<PathBuf>,
-    /// Scene file (TOML) [default: the flicking finger, scenes/finger.toml, or the --library's scene].
+    /// Scene file (TOML) [default: the --library's scene, else the built-in scenes/finger.toml].
     #[arg(long)]
     scene: Option<PathBuf>,
     /// A task of the scene file (`[task.NAME]`): the online optimiser minimises its cost under its
     /// control limits from its initial state, at its time step and noise scale, and the page follows
-    /// its progress or target [default: the --library's task, else the finger's built-in one].
+    /// its progress or target [default: the --library's task, else the scene file's only task; the
+    /// built-in scenes/finger.toml's is `spin`].
     #[arg(long)]
     task: Option<String>,
     /// Port on 127.0.0.1 (0: any free port).
@@ -71,14 +71,18 @@ fn library(args: &Args) -> anyhow::Result<Library> {
             }
         }
     }
-    let settings = LibrarySettings::default();
+    let (file, task) = (
+        library::ProblemFile::builtin(),
+        library::ProblemFile::builtin_task().1,
+    );
+    let settings = LibrarySettings::default().for_task(&task);
     println!("building the default library (as `cargo xtask train` does) ...");
     let bar = ProgressBar::new(settings.trajectories as u64);
     bar.set_style(
         ProgressStyle::with_template("{bar:40} {pos}/{len} trajectories  {elapsed_precise}")
             .expect("a valid template"),
     );
-    let lib = Library::build(&Scene::flicking_finger(), &settings, |_, _| bar.inc(1))?;
+    let lib = Library::build(&file, Some(&task.name), &settings, |_, _| bar.inc(1))?;
     bar.finish_and_clear();
     std::fs::create_dir_all("results").context("creating results/")?;
     lib.save(&path)?;
@@ -103,44 +107,38 @@ fn config(args: &Args) -> anyhow::Result<ViewerConfig> {
     let scene = match (&problem, &library) {
         (Some(p), _) => p.scene.clone(),
         (None, Some(lib)) => lib.scene().clone(),
-        (None, None) => Scene::flicking_finger(),
+        (None, None) => library::ProblemFile::builtin().scene,
     };
+    // The task named in the scene file (the built-in file's without --scene), else the library's, else
+    // the scene file's only task.
     let task = match (&args.task, &problem, &library) {
-        (Some(name), Some(p), _) => Some(p.task(Some(name))?),
-        (Some(name), None, _) => {
-            Some(library::ProblemFile::from_toml_str(crate::step::FINGER_FILE)?.task(Some(name))?)
-        }
-        (None, _, Some(lib)) => lib.task().cloned(),
-        (None, _, None) => None,
+        (Some(name), Some(p), _) => p.task(Some(name))?,
+        (Some(name), None, _) => library::ProblemFile::builtin().task(Some(name))?,
+        (None, _, Some(lib)) => lib.task().clone(),
+        (None, Some(p), None) => p.task(None)?,
+        (None, None, None) => library::ProblemFile::builtin_task().1,
     };
     if let Some(lib) = &library {
         lib.check_scene(&scene)
             .context("the --library was built for another scene")?;
     }
     let defaults = WorldSettings::default();
-    let (x0, h, sigma, world) = match &task {
-        Some(t) => (
-            t.x0.clone(),
-            t.h,
-            match t.model {
-                library::Model::Logistic(s) | library::Model::Normal(s) => s,
-                library::Model::Hard => defaults.sigma,
-            },
-            if t.model == library::Model::Hard {
-                viewer::protocol::WorldKind::Hard
-            } else {
-                viewer::protocol::WorldKind::Smoothed
-            },
-        ),
-        None => (
-            library
-                .as_ref()
-                .map_or(defaults.x0.clone(), |l| l.settings.x0.clone()),
-            defaults.h,
-            defaults.sigma,
-            defaults.world,
-        ),
-    };
+    let (x0, h, sigma, world) = (
+        match (&args.task, &library) {
+            (None, Some(lib)) => lib.x0().to_vec(),
+            _ => task.x0.clone(),
+        },
+        task.h,
+        match task.model {
+            library::Model::Logistic(s) | library::Model::Normal(s) => s,
+            library::Model::Hard => defaults.sigma,
+        },
+        if task.model == library::Model::Hard {
+            viewer::protocol::WorldKind::Hard
+        } else {
+            viewer::protocol::WorldKind::Smoothed
+        },
+    );
     let policy = match args.policy {
         Some(Policy::Library) => PolicyKind::Library,
         Some(Policy::Mpc) => PolicyKind::Mpc,
@@ -212,7 +210,7 @@ mod tests {
         let c = config(&args(Some("scenes/pushing.toml"), Some("push"), None)).unwrap();
         assert!(c.library.is_none());
         assert_eq!(c.scene.n_dof(), 5);
-        let task = c.world.task.as_ref().unwrap();
+        let task = &c.world.task;
         assert_eq!(task.name, "push");
         assert_eq!(c.world.x0, task.x0);
         assert_eq!((c.world.h, c.world.sigma), (0.05, 0.05));

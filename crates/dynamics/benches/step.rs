@@ -5,10 +5,23 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use dynamics::{Complementarity, Scene, Simulator, StepSettings};
 use std::hint::black_box;
 
+/// SCENE.md's flicking finger, from its scene file.
+fn finger() -> Scene {
+    Scene::from_toml_str(include_str!("../../../scenes/finger.toml")).unwrap()
+}
+
 /// States along the reference rollout's contact phase (link 2 on the free ellipse), by simulation.
 fn contact_states() -> Vec<Vec<f64>> {
-    let mut sim = Simulator::new(Scene::flicking_finger(), StepSettings::default()).unwrap();
-    let mut x = dynamics::FLICKING_FINGER_X0.to_vec();
+    let mut sim = Simulator::new(finger(), StepSettings::default()).unwrap();
+    // The finger apart, at rest (scenes/finger.toml's task start).
+    let mut x = vec![
+        -std::f64::consts::FRAC_PI_4,
+        -std::f64::consts::FRAC_PI_6,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+    ];
     let mut out = Vec::new();
     for _ in 0..75 {
         let s = sim.step(&x, &[0.3, -0.2]).unwrap();
@@ -31,7 +44,7 @@ fn step(c: &mut Criterion) {
     ];
     for (name, model) in models {
         let mut sim = Simulator::new(
-            Scene::flicking_finger(),
+            finger(),
             StepSettings {
                 model,
                 ..StepSettings::default()
@@ -47,7 +60,7 @@ fn step(c: &mut Criterion) {
             })
         });
     }
-    let mut sim = Simulator::new(Scene::flicking_finger(), StepSettings::default()).unwrap();
+    let mut sim = Simulator::new(finger(), StepSettings::default()).unwrap();
     let mut k = 0;
     group.bench_function("logistic_0.1_with_derivatives", |b| {
         b.iter(|| {
@@ -56,7 +69,7 @@ fn step(c: &mut Criterion) {
             black_box(sim.step_with_derivatives(x, &[0.3, -0.2]).unwrap())
         })
     });
-    let mut sim = Simulator::new(Scene::flicking_finger(), StepSettings::default()).unwrap();
+    let mut sim = Simulator::new(finger(), StepSettings::default()).unwrap();
     let mut k = 0;
     let c = [0.3, -0.7, 1.0, 0.2, -0.1, 0.5];
     group.bench_function("logistic_0.1_with_hessian_of_c_f", |b| {
@@ -67,7 +80,7 @@ fn step(c: &mut Criterion) {
         })
     });
     // For comparison: forward differences of the same step, one extra step per state and control entry.
-    let mut sim = Simulator::new(Scene::flicking_finger(), StepSettings::default()).unwrap();
+    let mut sim = Simulator::new(finger(), StepSettings::default()).unwrap();
     let mut k = 0;
     group.bench_function("logistic_0.1_forward_differences", |b| {
         b.iter(|| {

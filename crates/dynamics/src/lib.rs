@@ -3,7 +3,7 @@
 //! stochastically smoothed contact with relaxed Coulomb friction (SCENE.md).
 //!
 //! - [`Scene`]: checked, immutable scene data, from a TOML file ([`Scene::from_toml_str`],
-//!   `scenes/finger.toml`) or [`Scene::flicking_finger`].
+//!   such as `scenes/finger.toml`, SCENE.md's flicking finger).
 //! - [`Kinematics`]: positions, point Jacobians, `M(q)`, `r(q, v)`.
 //! - [`Constraints`]: `d(q)` and `J(q)` in the order of [`Scene::rows`] (SCENE.md's), each row typed by [`ConstraintRow`]; a [`Step`] gives each pair's [`ContactImpulse`].
 //! - [`Model`] (the scene, its settings, the rows' noise; fixed while it steps) and [`StepData`] (what a
@@ -15,9 +15,12 @@
 //!   [`Complementarity::Hard`], `Logistic` (eq. 17) and `Normal` (eq. 14 with 15).
 //!
 //! ```
-//! use dynamics::{FLICKING_FINGER_X0, Scene, Simulator, StepSettings};
-//! let mut sim = Simulator::new(Scene::flicking_finger(), StepSettings::default())?;
-//! let step = sim.step(&FLICKING_FINGER_X0, &[0.0, 0.0])?;
+//! use dynamics::{Scene, Simulator, StepSettings};
+//! let finger = include_str!(concat!(env!("CARGO_MANIFEST_DIR"), "/../../scenes/finger.toml"));
+//! let mut sim = Simulator::new(Scene::from_toml_str(finger)?, StepSettings::default())?;
+//! // The finger apart, at rest: [theta1, theta2, theta3, their velocities].
+//! let x0 = [-std::f64::consts::FRAC_PI_4, -std::f64::consts::FRAC_PI_6, 0.0, 0.0, 0.0, 0.0];
+//! let step = sim.step(&x0, &[0.0, 0.0])?;
 //! // Apart and at rest, the free ellipse feels (next to) nothing; gravity turns the finger clockwise.
 //! assert!(step.x_next[5].abs() < 1e-12);
 //! assert!(step.x_next[3] < 0.0);
@@ -44,10 +47,9 @@ pub use error::{DynamicsError, SceneProblem};
 pub use jet::{Jet, Jet1};
 pub use kinematics::{Kinematics, Ring, Scalar};
 pub use scene::{
-    Body, BodySpec, ContactPair, ContactSpec, Coordinate, CoordinateKind, DENSITY_RANGE,
-    FLICKING_FINGER_X0, Fixed, FixedSpec, JointKind, JointSpec, MAX_BODIES, MAX_CONTACTS,
-    MAX_DAMPING, MAX_FRICTION, MAX_GRAVITY, MAX_LENGTH, MAX_SCENE_TEXT, Overlap, Plane, PlaneSpec,
-    Scene, SceneSpec, Side,
+    Body, BodySpec, ContactPair, ContactSpec, Coordinate, CoordinateKind, DENSITY_RANGE, Fixed,
+    FixedSpec, JointKind, JointSpec, MAX_BODIES, MAX_CONTACTS, MAX_DAMPING, MAX_FRICTION,
+    MAX_GRAVITY, MAX_LENGTH, MAX_SCENE_TEXT, Overlap, Plane, PlaneSpec, Scene, SceneSpec, Side,
 };
 pub use simulator::Simulator;
 pub use step::{

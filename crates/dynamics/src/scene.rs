@@ -3,7 +3,8 @@
 //! fixed ellipses) and an explicit list of contact pairs (SCENE.md, docs/scenes.md).
 //!
 //! A scene is data: [`SceneSpec`] is what a TOML file holds (`scenes/finger.toml`), [`Scene::new`] checks it
-//! and reports every problem with the field it is in, and [`Scene::flicking_finger`] builds SCENE.md.
+//! and reports every problem with the field it is in; SCENE.md's flicking finger is `scenes/finger.toml` like
+//! any other scene.
 //!
 //! Frames: every body has a joint frame, rotated by its absolute angle `phi` (the sum of its own and its
 //! ancestors' turning coordinates), with its origin at its anchor (a hinge's pivot) moved by its sliding
@@ -14,16 +15,6 @@ use crate::constraint::ConstraintRow;
 use crate::error::{DynamicsError, SceneProblem};
 use geometry::Ellipse;
 use serde::{Deserialize, Serialize};
-
-/// SCENE.md's default initial state of the flicking finger: `[-pi/4, -pi/6, 0, 0, 0, 0]` (apart, at rest).
-pub const FLICKING_FINGER_X0: [f64; 6] = [
-    -std::f64::consts::FRAC_PI_4,
-    -std::f64::consts::FRAC_PI_6,
-    0.0,
-    0.0,
-    0.0,
-    0.0,
-];
 
 /// How a body moves relative to its parent's joint frame.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -694,64 +685,6 @@ impl Scene {
     /// The description this scene was built from (for saving it beside results).
     pub fn spec(&self) -> &SceneSpec {
         &self.spec
-    }
-
-    /// The flicking finger of SCENE.md, identical to `scenes/finger.toml`.
-    pub fn flicking_finger() -> Self {
-        let joint = |limits, damping, actuated| JointSpec {
-            kind: JointKind::Hinge,
-            axis: None,
-            limits,
-            damping,
-            actuated,
-        };
-        let body = |name: &str, semi_axes, parent: &str, anchor, centre, joint| BodySpec {
-            name: name.into(),
-            semi_axes,
-            density: 1.0,
-            parent: parent.into(),
-            anchor,
-            centre,
-            joint,
-        };
-        let pi = std::f64::consts::PI;
-        Scene::new(SceneSpec {
-            gravity: [0.0, -4.0],
-            bodies: vec![
-                body(
-                    "link1",
-                    [0.8, 0.25],
-                    "world",
-                    [0.0, 0.0],
-                    [0.8, 0.0],
-                    joint(Some([-pi, 0.0]), 0.2, true),
-                ),
-                body(
-                    "link2",
-                    [0.8, 0.25],
-                    "link1",
-                    [1.6, 0.0],
-                    [0.8, 0.0],
-                    joint(Some([-2.0 * pi / 3.0, 0.0]), 0.2, true),
-                ),
-                body(
-                    "ellipse",
-                    [0.7, 0.5],
-                    "world",
-                    [0.0, -3.0],
-                    [0.0, 0.0],
-                    joint(None, 0.7, false),
-                ),
-            ],
-            contacts: vec![ContactSpec {
-                a: "link2".into(),
-                b: "ellipse".into(),
-                friction: 0.5,
-            }],
-            planes: Vec::new(),
-            fixed: Vec::new(),
-        })
-        .expect("SCENE.md is a valid scene")
     }
 
     /// The time step below which every free body of the scene rests stably on its flat side on each plane

@@ -5,17 +5,20 @@
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use ddp::{Ddp, DdpSettings, Method};
-use dynamics::{Scene, Simulator, StepSettings};
-use library::{FingerDynamics, finger_cost};
+use dynamics::{Simulator, StepSettings};
+use library::{ProblemFile, SceneDynamics};
 use std::hint::black_box;
 
-fn finger() -> FingerDynamics {
-    FingerDynamics::new(Simulator::new(Scene::flicking_finger(), StepSettings::default()).unwrap())
+fn finger() -> SceneDynamics {
+    SceneDynamics::new(
+        Simulator::new(ProblemFile::builtin().scene, StepSettings::default()).unwrap(),
+    )
 }
 
 fn optimise(c: &mut Criterion) {
-    let cost = finger_cost(3, 2, 2);
-    let x0 = dynamics::FLICKING_FINGER_X0;
+    // scenes/finger.toml's spin task: -theta3 + 0.05 |u|^2 per step, from the finger apart at rest.
+    let task = ProblemFile::builtin_task().1;
+    let (cost, x0) = (task.cost, task.x0);
     // A trajectory midway: 30 passes of full DDP from zero controls.
     let midway = Ddp::new(DdpSettings {
         max_iterations: 30,

@@ -6,16 +6,20 @@
 //! ```
 //!
 //! Sixty receding-horizon trajectories and no growth build in a few seconds; the default
-//! library (`LibrarySettings::default()`, what `cargo xtask train` builds) takes longer and spins more
+//! library (`LibrarySettings::default().for_task(&task)`, what `cargo xtask train` builds) takes longer and spins more
 //! robustly (docs/results.md).
 
-use dynamics::Scene;
-use library::{EvaluationSettings, Exploration, Library, LibrarySettings, Model, evaluate};
+use library::{
+    EvaluationSettings, Exploration, Library, LibrarySettings, Model, ProblemFile, evaluate,
+};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let out = std::env::args()
         .nth(1)
         .unwrap_or_else(|| std::env::temp_dir().join("small.lib").display().to_string());
+    // The built-in scene file, scenes/finger.toml, and its spin task.
+    let file = ProblemFile::builtin();
+    let task = file.task(Some("spin"))?;
     // The default recipe scaled down: a trunk of 40 unperturbed trajectories (the cycle), 2 kicked
     // branches of 10 around it, no growth rounds.
     let settings = LibrarySettings {
@@ -26,12 +30,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             length: 10,
         },
         growth: 0,
-        ..LibrarySettings::default()
+        ..LibrarySettings::default().for_task(&task)
     };
-    settings.validate(&Scene::flicking_finger())?;
+    settings.validate(&file.scene)?;
     let start = std::time::Instant::now();
     // The callback sees each trajectory's controllers as they are stored (a progress bar's hook).
-    let library = Library::build(&Scene::flicking_finger(), &settings, |_, _| {})?;
+    let library = Library::build(&file, Some("spin"), &settings, |_, _| {})?;
     println!(
         "built {} controllers in {:.1} s",
         library.entries.len(),

@@ -3,7 +3,8 @@
 //! distance guides the early solves and the later ones refine a trajectory that already touches.
 
 use crate::error::LibraryError;
-use crate::task::{FingerDynamics, finger_cost};
+use crate::problem::Task;
+use crate::task::SceneDynamics;
 use ddp::{Ddp, DdpSettings};
 use dynamics::{Complementarity, Scene, Simulator, StepSettings};
 use serde::{Deserialize, Serialize};
@@ -19,26 +20,26 @@ pub struct AnnealStep {
     pub converged: bool,
     /// Its cost.
     pub cost: f64,
-    /// How far the free angle turned over the horizon.
+    /// How far the task's progress coordinate ([`crate::Progress`]) moved over the horizon.
     pub turned: f64,
     /// The optimised controls (the next solve's warm start).
     #[serde(skip)]
     pub controls: Vec<Vec<f64>>,
 }
 
-/// Solve the finger's task from `x0` at each sigma of `schedule` in turn (logistic model, time step `h`,
-/// horizon `horizon`), each solve warm-started from the previous one's controls (the first from zero).
+/// Solve `task` from its initial state at each sigma of `schedule` in turn (the logistic model at the
+/// task's time step and horizon, within its control limits), each solve warm-started from the previous
+/// one's controls (the first from zero).
 pub fn anneal(
     scene: &Scene,
-    x0: &[f64],
-    h: f64,
-    horizon: usize,
+    task: &Task,
     schedule: &[f64],
     max_passes: usize,
 ) -> Result<Vec<AnnealStep>, LibraryError> {
+    let x0 = task.x0.as_slice();
     crate::check("x0", x0, scene.n_state())?;
-    let free = crate::free_joint(scene)?;
-    let cost = finger_cost(scene.n_dof(), free, scene.n_controls);
+    let (h, horizon, cost) = (task.h, task.horizon, &task.cost);
+    let free = crate::Progress::of_task(task)?.coordinate;
     let mut controls = vec![vec![0.0; scene.n_controls]; horizon];
     let mut out = Vec::with_capacity(schedule.len());
     for (k, &sigma) in schedule.iter().enumerate() {
@@ -52,9 +53,10 @@ pub fn anneal(
         )?;
         let sol = Ddp::new(DdpSettings {
             max_iterations: max_passes,
+            control_limits: task.control_limits.clone(),
             ..DdpSettings::default()
         })
-        .and_then(|d| d.solve(&mut FingerDynamics::new(sim), &cost, x0, &controls))
+        .and_then(|d| d.solve(&mut SceneDynamics::new(sim), cost, x0, &controls))
         .map_err(|source| LibraryError::Optimiser {
             trajectory: k,
             source,

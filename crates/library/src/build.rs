@@ -5,7 +5,7 @@
 use crate::error::LibraryError;
 use crate::policy::Policy;
 use crate::problem::{Task, TaskCost};
-use crate::task::{FingerDynamics, finger_cost};
+use crate::task::SceneDynamics;
 use ddp::{Ddp, DdpError, DdpSettings};
 use dynamics::{Complementarity, Scene, Simulator, StepSettings};
 use rand::{Rng, SeedableRng};
@@ -63,7 +63,7 @@ pub struct LibrarySettings {
     pub kick_variance: f64,
     /// Seed of the perturbations.
     pub seed: u64,
-    /// The first trajectory's initial state.
+    /// The first trajectory's initial state; empty (the default): the task's.
     pub x0: Vec<f64>,
     /// Passes at most for the first solve (from zero controls).
     pub first_passes: usize,
@@ -170,7 +170,7 @@ impl Default for LibrarySettings {
             kick_every: 15,
             kick_variance: 4.0,
             seed: 1,
-            x0: dynamics::FLICKING_FINGER_X0.to_vec(),
+            x0: Vec::new(),
             first_passes: 300,
             warm_passes: 100,
             tolerance: 1e-5,
@@ -338,6 +338,9 @@ impl LibrarySettings {
                 return bad("length", 0.0, "at least 1");
             }
         }
+        if self.x0.is_empty() {
+            return Ok(());
+        }
         crate::check("x0", &self.x0, scene.n_state())
     }
 
@@ -486,17 +489,6 @@ pub(crate) fn local_values(
         .collect()
 }
 
-/// The free joint whose angle the task spins: the last unactuated turning coordinate.
-pub fn free_joint(scene: &Scene) -> Result<usize, LibraryError> {
-    (0..scene.n_dof())
-        .rev()
-        .find(|&j| {
-            let c = &scene.coordinates[j];
-            c.actuator.is_none() && c.kind == dynamics::CoordinateKind::Angle
-        })
-        .ok_or_else(|| LibraryError::Invalid("the scene has no unactuated joint to spin".into()))
-}
-
 /// The state entry a library's progress is measured along, its period when the policy compares states
 /// modulo it, and the direction its task rewards along it (what growth rounds call progress).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -514,16 +506,6 @@ pub struct Progress {
 }
 
 impl Progress {
-    /// The finger's (SCENE.md): the free joint's angle, period pi (the ellipse is symmetric under a half
-    /// turn), spun forward.
-    pub fn finger(scene: &Scene) -> Result<Progress, LibraryError> {
-        Ok(Progress {
-            coordinate: free_joint(scene)?,
-            period: Some(std::f64::consts::PI),
-            forward: Some(1.0),
-        })
-    }
-
     /// A task's: its periodic coordinate if it has one (the policy compares states modulo at most one),
     /// forward where the running terms' linear weights on it (or on its velocity) sum to a reward; without
     /// one, the first rewarded coordinate, or none.
@@ -566,67 +548,27 @@ impl Progress {
     }
 }
 
-/// The cost a library's trajectories (and the viewer's online optimiser) minimise: the finger's built
-/// in, or a task's from a scene file.
-#[derive(Debug, Clone)]
-pub enum Objective {
-    /// The finger's: [`crate::finger_cost`].
-    Finger(ddp::QuadraticCost),
-    /// A task's.
-    Task(TaskCost),
-}
-
-impl ddp::Cost for Objective {
-    fn running(&self, i: usize, x: &[f64], u: &[f64]) -> f64 {
-        match self {
-            Objective::Finger(c) => c.running(i, x, u),
-            Objective::Task(c) => c.running(i, x, u),
-        }
-    }
-
-    fn terminal(&self, x: &[f64]) -> f64 {
-        match self {
-            Objective::Finger(c) => c.terminal(x),
-            Objective::Task(c) => c.terminal(x),
-        }
-    }
-
-    fn running_derivatives(&self, i: usize, x: &[f64], u: &[f64], out: &mut ddp::CostDerivatives) {
-        match self {
-            Objective::Finger(c) => c.running_derivatives(i, x, u, out),
-            Objective::Task(c) => c.running_derivatives(i, x, u, out),
-        }
-    }
-
-    fn terminal_derivatives(&self, x: &[f64], lx: &mut [f64], lxx: &mut [f64]) {
-        match self {
-            Objective::Finger(c) => c.terminal_derivatives(x, lx, lxx),
-            Objective::Task(c) => c.terminal_derivatives(x, lx, lxx),
-        }
-    }
-}
-
-/// Build the entries of a library (see the module documentation and [`Exploration`]): in an order that
-/// depends on the settings alone, whatever order threads finish in. `progress` sees each trajectory's
-/// first entry as it is made, with the number of trajectories done so far.
+/// Build the entries of a library for `task` on `scene` (see the module documentation and
+/// [`Exploration`]): its cost, control limits, periodic coordinate and success criterion; the settings'
+/// `model`, `h`, `horizon` and `x0` rule (an empty `x0` is the task's; [`LibrarySettings::for_task`]
+/// takes all four from the task). The entries come in an order that depends on the settings alone,
+/// whatever order threads finish in. `progress` sees each trajectory's first entry as it is made, with
+/// the number of trajectories done so far.
 pub fn build_entries(
     scene: &Scene,
-    settings: &LibrarySettings,
-    progress: impl FnMut(usize, &Entry) + Send,
-) -> Result<Vec<Entry>, LibraryError> {
-    build_entries_for(scene, None, settings, progress)
-}
-
-/// [`build_entries`] for `task`'s cost, control limits and periodic coordinate when given (the
-/// settings' `model`, `h`, `horizon` and `x0` still rule: [`LibrarySettings::for_task`] takes them
-/// from the task), the finger's otherwise.
-pub fn build_entries_for(
-    scene: &Scene,
-    task: Option<&Task>,
+    task: &Task,
     settings: &LibrarySettings,
     progress: impl FnMut(usize, &Entry) + Send,
 ) -> Result<Vec<Entry>, LibraryError> {
     settings.validate(scene)?;
+    let mut resolved;
+    let settings = if settings.x0.is_empty() {
+        resolved = settings.clone();
+        resolved.x0 = task.x0.clone();
+        &resolved
+    } else {
+        settings
+    };
     let task = Build::new(scene, task, settings)?;
     let done = std::sync::Mutex::new((0usize, progress));
     let report = |entry: &Entry| {
@@ -649,7 +591,7 @@ pub fn build_entries_for(
 struct Build<'a> {
     scene: &'a Scene,
     settings: &'a LibrarySettings,
-    cost: Objective,
+    cost: TaskCost,
     progress: Progress,
     success: crate::Success,
     control_limits: Option<ddp::ControlLimits>,
@@ -674,34 +616,22 @@ impl Built {
 impl<'a> Build<'a> {
     fn new(
         scene: &'a Scene,
-        task: Option<&Task>,
+        task: &Task,
         settings: &'a LibrarySettings,
     ) -> Result<Self, LibraryError> {
-        let success = match task {
-            Some(task) => task.success.clone(),
-            None => crate::Success::spin(free_joint(scene)?, std::f64::consts::PI),
-        };
-        let (cost, progress, control_limits) = match task {
-            None => {
-                let free = free_joint(scene)?;
-                let cost = finger_cost(scene.n_dof(), free, scene.n_controls);
-                (Objective::Finger(cost), Progress::finger(scene)?, None)
-            }
-            Some(task) => {
-                if task.x0.len() != scene.n_state() {
-                    return Err(LibraryError::SceneMismatch(format!(
-                        "task {} has {} state entries, the scene {}",
-                        task.name,
-                        task.x0.len(),
-                        scene.n_state()
-                    )));
-                }
-                task.check_for_library(scene)?;
-                let progress = Progress::of_task(task)?;
-                let cost = Objective::Task(task.cost.clone());
-                (cost, progress, task.control_limits.clone())
-            }
-        };
+        if task.x0.len() != scene.n_state() {
+            return Err(LibraryError::SceneMismatch(format!(
+                "task {} has {} state entries, the scene {}",
+                task.name,
+                task.x0.len(),
+                scene.n_state()
+            )));
+        }
+        task.check_for_library(scene)?;
+        let progress = Progress::of_task(task)?;
+        let cost = task.cost.clone();
+        let control_limits = task.control_limits.clone();
+        let success = task.success.clone();
         Ok(Build {
             scene,
             settings,
@@ -714,8 +644,8 @@ impl<'a> Build<'a> {
         })
     }
 
-    fn dynamics(&self) -> Result<FingerDynamics, LibraryError> {
-        Ok(FingerDynamics::new(self.settings.simulator(self.scene)?))
+    fn dynamics(&self) -> Result<SceneDynamics, LibraryError> {
+        Ok(SceneDynamics::new(self.settings.simulator(self.scene)?))
     }
 
     /// Add the velocity perturbation to `x`.
@@ -731,7 +661,7 @@ impl<'a> Build<'a> {
     #[allow(clippy::too_many_arguments)]
     fn chain(
         &self,
-        dynamics: &mut FingerDynamics,
+        dynamics: &mut SceneDynamics,
         mut x1: Vec<f64>,
         mut controls: Vec<Vec<f64>>,
         count: usize,
@@ -790,17 +720,15 @@ impl<'a> Build<'a> {
     /// even roll out from starts from zero controls instead.
     /// The first solve of a build, checked for the contact its task needs ([`crate::contact_felt`]); where
     /// none is felt and the model is smoothed, continued in the noise scale
-    /// ([`crate::continue_in_noise`]) and replaced by the result if that feels it. The finger's built-in
-    /// task, and every task whose first solve touches, is left as it was.
+    /// ([`crate::continue_in_noise`]) and replaced by the result if that feels it. A first solve that
+    /// touches (the finger's, for one) is left as it was.
     fn reach(
         &self,
         x1: &[f64],
         sol: ddp::Solution,
         passes: usize,
     ) -> Result<ddp::Solution, LibraryError> {
-        let Objective::Task(cost) = &self.cost else {
-            return Ok(sol);
-        };
+        let cost = &self.cost;
         let settings = *self.settings.simulator(self.scene)?.settings();
         if crate::noise_scale(settings.model).is_none() {
             return Ok(sol);
@@ -842,7 +770,7 @@ impl<'a> Build<'a> {
 
     fn solve(
         &self,
-        dynamics: &mut FingerDynamics,
+        dynamics: &mut SceneDynamics,
         x1: &[f64],
         controls: &[Vec<f64>],
         passes: usize,
@@ -1007,7 +935,7 @@ fn branched(
 /// first interval, from the start), and a branch starts from the state the kick left.
 fn grow(
     task: &Build,
-    dynamics: &mut FingerDynamics,
+    dynamics: &mut SceneDynamics,
     built: &mut Built,
     length: usize,
     round: usize,

@@ -26,7 +26,7 @@ pub struct EvaluationSettings {
     pub kick_std: f64,
     /// Seed of the kicks.
     pub seed: u64,
-    /// Initial state.
+    /// Initial state; empty (the default): the library's task's.
     pub x0: Vec<f64>,
 }
 
@@ -39,7 +39,7 @@ impl Default for EvaluationSettings {
             kick_every: 10.0,
             kick_std: 2.0,
             seed: 7,
-            x0: dynamics::FLICKING_FINGER_X0.to_vec(),
+            x0: Vec::new(),
         }
     }
 }
@@ -318,24 +318,18 @@ pub fn evaluate_in(
 ) -> Result<Evaluation, LibraryError> {
     let own = library.scene();
     let n = scene.n_dof();
-    // The library's periodic coordinate (its task's, or the finger's free joint, which the world must
-    // share).
+    // The coordinate the library's task measures progress along.
     let progress = library.progress()?;
     let free = progress.coordinate;
     // The direction the task rewards (the finger's forward spin is +1; a task with a negative linear
     // weight rewards the other way): the kick measures count progress that way.
     let forward = progress.forward.unwrap_or(1.0);
     // A task that rewards no progress has its kicks judged by the way back to its targets.
-    let success = library.success()?;
+    let success = library.success();
     let holds = progress.forward.is_none();
-    let world_free = match library.task() {
-        Some(_) => free,
-        None => crate::free_joint(scene)?,
-    };
-    if scene.n_state() != own.n_state() || scene.n_controls != own.n_controls || free != world_free
-    {
+    if scene.n_state() != own.n_state() || scene.n_controls != own.n_controls {
         return Err(LibraryError::SceneMismatch(format!(
-            "the world has {} states, {} controls and free joint {world_free}; the library {}, {} and {free}",
+            "the world has {} states and {} controls; the library {} and {}",
             scene.n_state(),
             scene.n_controls,
             own.n_state(),
@@ -377,7 +371,12 @@ pub fn evaluate_in(
             expected: "finite and non-negative",
         });
     }
-    crate::check("x0", &settings.x0, scene.n_state())?;
+    let x0 = if settings.x0.is_empty() {
+        &library.task().x0
+    } else {
+        &settings.x0
+    };
+    crate::check("x0", x0, scene.n_state())?;
     let mut world = Simulator::new(
         scene.clone(),
         StepSettings {
@@ -395,7 +394,7 @@ pub fn evaluate_in(
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(settings.seed);
     let kick =
         Normal::new(0.0, settings.kick_std).map_err(|e| LibraryError::Invalid(e.to_string()))?;
-    let mut x = settings.x0.clone();
+    let mut x = x0.clone();
     let mut u = vec![0.0; scene.n_controls];
     let mut contacts = ContactEvents::default();
     let mut unconverged = 0usize;
@@ -407,7 +406,13 @@ pub fn evaluate_in(
     let mut interval_start = x[free];
     let quarter = steps - steps / 4;
     let mut angle_at_quarter = x[free];
-    let mut meter = TaskMeter::new(library.cost()?, n, settings.h, library.settings.h, quarter);
+    let mut meter = TaskMeter::new(
+        library.cost().clone(),
+        n,
+        settings.h,
+        library.settings.h,
+        quarter,
+    );
     let mut at_quarter = x.clone();
     let settle_steps = ((success.settle / settings.h).round() as usize).max(1);
     let mut late_distance: f64 = 0.0;
@@ -474,8 +479,8 @@ pub fn evaluate_in(
         }
     }
     let (events, touching_steps) = (contacts.events, contacts.touching_steps);
-    let task = meter.finish(scene, steps, &settings.x0, &at_quarter, &x);
-    let turned = x[free] - settings.x0[free];
+    let task = meter.finish(scene, steps, x0, &at_quarter, &x);
+    let turned = x[free] - x0[free];
     let time = steps as f64 * settings.h;
     let late_time = (steps - quarter) as f64 * settings.h;
     let rate = success
@@ -541,10 +546,11 @@ mod tests {
             final_terms: vec![term(1, 0.0, 2.0, 0.0, None)],
             control_weight: 0.5,
         };
+        let finger = crate::ProblemFile::builtin().scene;
         let scene = dynamics::Scene::new(dynamics::SceneSpec {
-            bodies: vec![dynamics::Scene::flicking_finger().spec().bodies[2].clone()],
+            bodies: vec![finger.spec().bodies[2].clone()],
             contacts: vec![],
-            ..dynamics::Scene::flicking_finger().spec().clone()
+            ..finger.spec().clone()
         })
         .unwrap();
         let name = scene.coordinate_names()[0].clone();

@@ -6,11 +6,11 @@
 //! ```
 //!
 //! with the payload the `bincode` (2, standard configuration) encoding of the scene (as its TOML text),
-//! the task it was built for (its name and its table of the scene file; none for the finger's built-in
-//! task), the settings and the controllers. Loading checks all of it before anything is decoded, then the decoded
+//! the task it was built for (its name and its table of the scene file), the settings and the
+//! controllers. Loading checks all of it before anything is decoded, then the decoded
 //! library for consistency; a file that fails any check is refused whole.
 
-use crate::build::{Entry, LibrarySettings, Progress, build_entries_for};
+use crate::build::{Entry, LibrarySettings, Progress, build_entries};
 use crate::error::LibraryError;
 use crate::policy::Policy;
 use crate::problem::{ProblemFile, Task, TaskSpec};
@@ -21,16 +21,16 @@ use std::path::Path;
 /// The file's magic bytes.
 pub const MAGIC: &[u8; 8] = b"SLCPLIB\0";
 /// The format version this build writes and reads.
-pub const VERSION: u32 = 6;
+pub const VERSION: u32 = 7;
 const HEADER: usize = 8 + 4 + 8 + 4;
 
 /// A trajectory library: the scene and settings it was built with and its local controllers.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Library {
     scene: Scene,
-    /// The task of the scene file it was built for (`None`: the finger's, built in), checked against
-    /// the scene, with its name and text as the file gave them.
-    task: Option<(Task, TaskSpec)>,
+    /// The task of the scene file it was built for, checked against the scene, with its table as the
+    /// file gave it.
+    task: (Task, TaskSpec),
     /// How it was built.
     pub settings: LibrarySettings,
     /// The controllers, in the order they were built.
@@ -41,7 +41,7 @@ pub struct Library {
 struct Payload {
     scene_toml: String,
     /// The task's name and its table from the scene file.
-    task: Option<(String, TaskSpec)>,
+    task: (String, TaskSpec),
     settings: LibrarySettings,
     entries: Vec<Entry>,
 }
@@ -93,9 +93,16 @@ fn first_difference(
     }
 }
 
-/// Decode a payload with bincode's byte limit set to the smallest power of two at least the payload's
-/// size: every length prefix is claimed against the limit before anything is allocated, so no prefix (a
-/// crafted 2^62, say) can allocate more than twice the file's size; past the limit it is an error.
+/// How many bytes bincode may claim per byte of payload: it claims each primitive at its size in memory,
+/// and an integer of 8 bytes (a count, a length) may be encoded in one (a varint).
+const CLAIM_PER_BYTE: usize = 8;
+
+/// Decode a payload with bincode's byte limit set to the smallest power of two at least
+/// [`CLAIM_PER_BYTE`] times the payload's size: bincode claims every primitive at its size in memory
+/// (a `u64` counted as 8 bytes where its varint took 1), so a limit of the payload's size alone refused
+/// files it had just written whose payload sat a little below a power of two. Every length prefix is
+/// claimed against the limit before anything is allocated, so no prefix (a crafted 2^62, say) can
+/// allocate more than twice that bound; past the limit it is an error.
 fn decode_bounded(body: &[u8]) -> Result<(Payload, usize), bincode::error::DecodeError> {
     fn with<const LIMIT: usize>(
         body: &[u8],
@@ -104,13 +111,19 @@ fn decode_bounded(body: &[u8]) -> Result<(Payload, usize), bincode::error::Decod
     }
     macro_rules! ladder {
         ($($bits:literal)*) => {
-            match body.len().max(1).next_power_of_two().trailing_zeros() {
+            match body
+                .len()
+                .max(1)
+                .saturating_mul(CLAIM_PER_BYTE)
+                .checked_next_power_of_two()
+                .map_or(u32::MAX, usize::trailing_zeros)
+            {
                 $(b if b <= $bits => with::<{ 1usize << $bits }>(body),)*
                 _ => Err(bincode::error::DecodeError::LimitExceeded),
             }
         };
     }
-    ladder!(12 14 16 18 20 22 24 26 28 30 32 34 36)
+    ladder!(12 14 16 18 20 22 24 26 28 30 32 34 36 38 40)
 }
 
 fn io(path: &Path) -> impl Fn(std::io::Error) -> LibraryError + '_ {
@@ -121,26 +134,12 @@ fn io(path: &Path) -> impl Fn(std::io::Error) -> LibraryError + '_ {
 }
 
 impl Library {
-    /// Build a library on `scene` (paper section IV-C) for the finger's task; `progress` sees each
-    /// controller as it is added.
+    /// Build a library (paper section IV-C) for the task `name` of a scene file (its only one when
+    /// `None`; [`ProblemFile::builtin`] for the paper's finger): its cost, control limits, periodic
+    /// coordinate and success criterion; `settings` as [`LibrarySettings::for_task`] makes them (their
+    /// `model`, `h`, `horizon` and `x0` are the ones used; an empty `x0` is the task's). `progress` sees
+    /// each controller as it is added.
     pub fn build(
-        scene: &Scene,
-        settings: &LibrarySettings,
-        progress: impl FnMut(usize, &Entry) + Send,
-    ) -> Result<Self, LibraryError> {
-        let entries = build_entries_for(scene, None, settings, progress)?;
-        Ok(Library {
-            scene: scene.clone(),
-            task: None,
-            settings: settings.clone(),
-            entries,
-        })
-    }
-
-    /// Build a library for the task `name` of a scene file (the only one when `None`): its cost,
-    /// control limits and periodic coordinate; `settings` as [`LibrarySettings::for_task`] makes them
-    /// (their `model`, `h`, `horizon` and `x0` are the ones used).
-    pub fn build_task(
         problem: &ProblemFile,
         name: Option<&str>,
         settings: &LibrarySettings,
@@ -148,10 +147,10 @@ impl Library {
     ) -> Result<Self, LibraryError> {
         let task = problem.task(name)?;
         let spec = problem.tasks[&task.name].clone();
-        let entries = build_entries_for(&problem.scene, Some(&task), settings, progress)?;
+        let entries = build_entries(&problem.scene, &task, settings, progress)?;
         Ok(Library {
             scene: problem.scene.clone(),
-            task: Some((task, spec)),
+            task: (task, spec),
             settings: settings.clone(),
             entries,
         })
@@ -162,56 +161,41 @@ impl Library {
         &self.scene
     }
 
-    /// The task it was built for (`None`: the finger's, built in).
-    pub fn task(&self) -> Option<&Task> {
-        self.task.as_ref().map(|(t, _)| t)
+    /// The task it was built for.
+    pub fn task(&self) -> &Task {
+        &self.task.0
     }
 
-    /// The cost its trajectories minimise: its task's, or for the finger's built-in task `-theta3 +`
-    /// [`crate::CONTROL_WEIGHT`]` |u|^2` per step as a [`crate::TaskCost`].
-    pub fn cost(&self) -> Result<crate::TaskCost, LibraryError> {
-        match self.task() {
-            Some(task) => Ok(task.cost.clone()),
-            None => Ok(crate::TaskCost {
-                running: vec![crate::Term {
-                    index: crate::free_joint(&self.scene)?,
-                    linear: -1.0,
-                    quadratic: 0.0,
-                    target: 0.0,
-                    period: None,
-                }],
-                final_terms: Vec::new(),
-                control_weight: crate::CONTROL_WEIGHT,
-            }),
+    /// The start of its first trajectory: the settings' `x0`, or its task's when that is empty.
+    pub fn x0(&self) -> &[f64] {
+        if self.settings.x0.is_empty() {
+            &self.task.0.x0
+        } else {
+            &self.settings.x0
         }
+    }
+
+    /// The cost its trajectories minimise (its task's).
+    pub fn cost(&self) -> &crate::TaskCost {
+        &self.task.0.cost
     }
 
     /// The periodic coordinate its policy compares states modulo, and the direction its task rewards.
     pub fn progress(&self) -> Result<Progress, LibraryError> {
-        match self.task() {
-            Some(task) => Progress::of_task(task),
-            None => Progress::finger(&self.scene),
-        }
+        Progress::of_task(self.task())
     }
 
-    /// The global policy (eq. 20) over its controllers.
+    /// The global policy (eq. 20) over its controllers, saturated to its task's control limits.
     pub fn policy(&self) -> Result<Policy, LibraryError> {
         let s = &self.scene;
         Policy::for_progress(&self.entries, s.n_state(), s.n_controls, &self.progress()?)?
             .with_neighbours(self.settings.neighbours)?
-            .with_limits(self.task().and_then(|t| t.control_limits.clone()))
+            .with_limits(self.task().control_limits.clone())
     }
 
-    /// What counts as success for its task ([`crate::Success`]): the task's, or for the finger's built-in
-    /// task a spin of at least pi / 10 rad/s.
-    pub fn success(&self) -> Result<crate::Success, LibraryError> {
-        match self.task() {
-            Some(task) => Ok(task.success.clone()),
-            None => Ok(crate::Success::spin(
-                crate::free_joint(&self.scene)?,
-                std::f64::consts::PI,
-            )),
-        }
+    /// What counts as success for its task ([`crate::Success`]).
+    pub fn success(&self) -> &crate::Success {
+        &self.task().success
     }
 
     /// `Err` unless the library was built for `scene`.
@@ -244,10 +228,7 @@ impl Library {
         let payload = Payload {
             scene_toml: toml::to_string(self.scene.spec())
                 .map_err(|e| LibraryError::Invalid(format!("the scene does not serialise: {e}")))?,
-            task: self
-                .task
-                .as_ref()
-                .map(|(t, spec)| (t.name.clone(), spec.clone())),
+            task: (self.task.0.name.clone(), self.task.1.clone()),
             settings: self.settings.clone(),
             entries: self.entries.clone(),
         };
@@ -312,10 +293,8 @@ impl Library {
             .map_err(|e| LibraryError::Invalid(format!("its scene: {e}")))?;
         let scene = Scene::new(spec)?;
         payload.settings.validate(&scene)?;
-        let task = match payload.task {
-            Some((name, spec)) => Some((Task::new(&scene, &name, &spec)?, spec)),
-            None => None,
-        };
+        let (name, spec) = payload.task;
+        let task = (Task::new(&scene, &name, &spec)?, spec);
         let library = Library {
             scene,
             task,

@@ -1,6 +1,7 @@
-//! The flicking finger as an optimal control task and its controller library (paper sections IV-C and V):
-//! the simulator behind [`ddp::Dynamics`] and the task's cost ([`FingerDynamics`], [`finger_cost`]);
-//! receding-horizon library building ([`Library::build`]); the global nearest-neighbour policy of eq. (20)
+//! Optimal control tasks from scene files and their controller libraries (paper sections IV-C and V): tasks
+//! as data ([`ProblemFile`], [`Task`], [`TaskCost`]; the paper's flicking finger is the built-in
+//! `scenes/finger.toml`'s `spin`, [`ProblemFile::builtin`]), the simulator behind [`ddp::Dynamics`]
+//! ([`SceneDynamics`]); receding-horizon library building ([`Library::build`]); the global nearest-neighbour policy of eq. (20)
 //! ([`Policy`]); library files with a versioned, checksummed header ([`Library::save`],
 //! [`Library::load`]). The only library crate that touches the disk.
 
@@ -17,8 +18,7 @@ mod task;
 pub use anneal::{AnnealStep, anneal};
 pub use build::{
     Entry, Exploration, GROWTH_BRANCHES, GROWTH_SECONDS, LibrarySettings, LocalValue,
-    MAX_NEIGHBOURS, Model, Objective, Progress, STALL_ADVANCE, STALL_WINDOW, WORLD_TIME_STEP,
-    build_entries, build_entries_for, free_joint,
+    MAX_NEIGHBOURS, Model, Progress, STALL_ADVANCE, STALL_WINDOW, WORLD_TIME_STEP, build_entries,
 };
 pub use error::LibraryError;
 pub use evaluate::{
@@ -28,13 +28,13 @@ pub use evaluate::{
 pub use file::{Library, MAGIC, VERSION, write_atomically};
 pub use policy::Policy;
 pub use problem::{
-    DEFAULT_SETTLE, ProblemFile, START_TOLERANCE, Success, SuccessSpec, Task, TaskCost, TaskSpec,
-    Term, TermSpec,
+    BUILTIN_SCENE_FILE, DEFAULT_SETTLE, ProblemFile, START_TOLERANCE, Success, SuccessSpec, Task,
+    TaskCost, TaskSpec, Term, TermSpec,
 };
 pub use reach::{
     CONTINUATION_DOUBLINGS, Continuation, contact_felt, continue_in_noise, noise_scale,
 };
-pub use task::{CONTROL_WEIGHT, FingerDynamics, StepData, TaskError, finger_cost};
+pub use task::{SceneDynamics, StepData, TaskError};
 
 /// `Err` unless `v` has `len` finite entries.
 pub(crate) fn check(what: &'static str, v: &[f64], len: usize) -> Result<(), LibraryError> {

@@ -650,6 +650,11 @@ impl Success {
     }
 }
 
+/// The scene file the commands, the viewer and the Python package use when given none: `scenes/finger.toml`,
+/// SCENE.md's flicking finger with the paper's `spin` task (its only task). It is read like any other
+/// scene file ([`ProblemFile::builtin`]); nothing about the finger is written anywhere else.
+pub const BUILTIN_SCENE_FILE: &str = include_str!("../../../scenes/finger.toml");
+
 /// A scene file with its tasks: the scene checked by [`dynamics::Scene`], the `[task.NAME]` tables kept
 /// as written until one is asked for.
 #[derive(Debug, Clone)]
@@ -703,6 +708,20 @@ impl ProblemFile {
             Task::new(&scene, name, spec)?;
         }
         Ok(ProblemFile { scene, tasks })
+    }
+
+    /// [`BUILTIN_SCENE_FILE`], parsed (a test checks that it parses, so this cannot fail).
+    pub fn builtin() -> Self {
+        Self::from_toml_str(BUILTIN_SCENE_FILE).expect("scenes/finger.toml is a valid scene file")
+    }
+
+    /// The built-in file's scene and its only task (`spin`).
+    pub fn builtin_task() -> (Scene, Task) {
+        let file = Self::builtin();
+        let task = file
+            .task(None)
+            .expect("scenes/finger.toml has one valid task");
+        (file.scene, task)
     }
 
     /// Read and parse a scene file.

@@ -6,7 +6,7 @@
 
 use crate::error::LibraryError;
 use crate::problem::TaskCost;
-use crate::task::FingerDynamics;
+use crate::task::SceneDynamics;
 use ddp::{Ddp, Solution};
 use dynamics::{Complementarity, Scene, Side, Simulator, StepSettings};
 
@@ -120,7 +120,7 @@ pub fn continue_in_noise(
         )?)
     };
     let solve = |s: f64, controls: &[Vec<f64>]| -> Result<Solution, LibraryError> {
-        ddp.solve(&mut FingerDynamics::new(simulator(s)?), cost, x0, controls)
+        ddp.solve(&mut SceneDynamics::new(simulator(s)?), cost, x0, controls)
             .map_err(|source| LibraryError::Optimiser {
                 trajectory: 0,
                 source,

@@ -1,20 +1,8 @@
-//! The simulator as [`ddp::Dynamics`] and the task's cost: `l(x, u) = -theta3 + c_u |u|^2` per step and
-//! `-theta3` at the end (SCENE.md, paper section V-A).
+//! The simulator as [`ddp::Dynamics`] for any scene (the task's cost is [`crate::TaskCost`]).
 
-use ddp::{Dynamics, QuadraticCost, SecondOrder};
+use ddp::{Dynamics, SecondOrder};
 use dynamics::{DynamicsError, Model, SecondOrderStep, Simulator, Step};
 use thiserror::Error;
-
-/// SCENE.md's control weight `c_u`.
-pub const CONTROL_WEIGHT: f64 = 0.05;
-
-/// The task's cost for a scene whose free body is joint `free` (the finger: 2, theta3), state weight
-/// `c_x = 1`.
-pub fn finger_cost(n_dof: usize, free: usize, n_controls: usize) -> QuadraticCost {
-    let mut c = vec![0.0; 2 * n_dof];
-    c[free] = -1.0;
-    QuadraticCost::linear_state(&c, CONTROL_WEIGHT, n_controls)
-}
 
 /// Why a step of the task failed.
 #[derive(Debug, Error)]
@@ -38,11 +26,11 @@ pub enum TaskError {
 /// expansion once computed: a backward pass retried with more regularisation at the same trajectory
 /// changes only the vector the Hessian is contracted with, and costs the contraction alone.
 #[derive(Debug)]
-pub struct FingerDynamics {
+pub struct SceneDynamics {
     model: Model,
 }
 
-/// One knot's step, kept by [`FingerDynamics`] (see there).
+/// One knot's step, kept by [`SceneDynamics`] (see there).
 #[derive(Debug)]
 pub struct StepData {
     /// The model's data: the step last computed at the knot, and where the knot's next solve starts.
@@ -58,15 +46,15 @@ impl StepData {
     }
 }
 
-impl FingerDynamics {
+impl SceneDynamics {
     /// The dynamics of a simulator's model (its data is left behind).
     pub fn new(sim: Simulator) -> Self {
-        FingerDynamics::from_model(sim.into_model())
+        SceneDynamics::from_model(sim.into_model())
     }
 
     /// The dynamics of `model`.
     pub fn from_model(model: Model) -> Self {
-        FingerDynamics { model }
+        SceneDynamics { model }
     }
 
     /// The step model.
@@ -80,7 +68,7 @@ impl FingerDynamics {
     }
 }
 
-impl Dynamics for FingerDynamics {
+impl Dynamics for SceneDynamics {
     type Error = TaskError;
     type Data = StepData;
 
@@ -143,7 +131,7 @@ impl Dynamics for FingerDynamics {
     }
 }
 
-impl SecondOrder<StepData> for FingerDynamics {
+impl SecondOrder<StepData> for SceneDynamics {
     type Error = TaskError;
 
     fn bytes_per_knot(&self) -> usize {

@@ -6,7 +6,7 @@
 use crate::error::ViewerError;
 use ddp::{ControlLimits, Ddp, DdpError, DdpSettings, Solution};
 use dynamics::{Complementarity, Scene, Simulator, StepSettings};
-use library::{FingerDynamics, Objective, Policy, Progress, Task, finger_cost};
+use library::{Policy, Progress, SceneDynamics, Task, TaskCost};
 
 /// The largest regularisation carried from one control step to the next (a solve that gave up at a
 /// huge `mu` should not freeze the next ones).
@@ -43,8 +43,8 @@ impl Default for MpcSettings {
 #[derive(Debug)]
 pub struct OnlineMpc {
     settings: MpcSettings,
-    dynamics: FingerDynamics,
-    cost: Objective,
+    dynamics: SceneDynamics,
+    cost: TaskCost,
     control_limits: Option<ControlLimits>,
     plan: Vec<Vec<f64>>,
     /// The regularisation the last solve ended with: the next starts there, so that a few passes per
@@ -61,19 +61,10 @@ pub struct OnlineMpc {
 }
 
 impl OnlineMpc {
-    /// An optimiser for the finger's built-in task on `scene`, with an empty (all zero) plan; the horizon
-    /// at most [`MAX_MPC_HORIZON`] steps and the passes at most [`MAX_MPC_PASSES`].
-    pub fn new(scene: &Scene, settings: MpcSettings) -> Result<Self, ViewerError> {
-        Self::for_task(scene, None, settings)
-    }
-
-    /// [`OnlineMpc::new`] for `task` of a scene file when given (its cost and control limits; its
-    /// contact model, time step and horizon are the settings'), the finger's built-in task otherwise.
-    pub fn for_task(
-        scene: &Scene,
-        task: Option<&Task>,
-        settings: MpcSettings,
-    ) -> Result<Self, ViewerError> {
+    /// An optimiser for `task` on `scene` (its cost and control limits; its contact model, time step
+    /// and horizon are the settings'), with an empty (all zero) plan; the horizon at most
+    /// [`MAX_MPC_HORIZON`] steps and the passes at most [`MAX_MPC_PASSES`].
+    pub fn new(scene: &Scene, task: &Task, settings: MpcSettings) -> Result<Self, ViewerError> {
         if !(settings.sigma.is_finite() && settings.sigma > 0.0) {
             return Err(ViewerError::Setting {
                 name: "sigma",
@@ -93,22 +84,12 @@ impl OnlineMpc {
                 ..StepSettings::default()
             },
         )?;
-        let progress = match task {
-            Some(task) => Progress::of_task(task)?,
-            None => Progress::finger(scene)?,
-        };
+        let progress = Progress::of_task(task)?;
         Ok(OnlineMpc {
-            cost: match task {
-                Some(task) => Objective::Task(task.cost.clone()),
-                None => Objective::Finger(finger_cost(
-                    scene.n_dof(),
-                    progress.coordinate,
-                    scene.n_controls,
-                )),
-            },
-            control_limits: task.and_then(|t| t.control_limits.clone()),
+            cost: task.cost.clone(),
+            control_limits: task.control_limits.clone(),
             plan: vec![vec![0.0; scene.n_controls]; settings.horizon],
-            dynamics: FingerDynamics::new(sim),
+            dynamics: SceneDynamics::new(sim),
             settings,
             mu: DdpSettings::default().mu_init,
             planned_turn: 0.0,

@@ -52,24 +52,26 @@ pub struct WorldSettings {
     /// Seed of the kicks.
     pub seed: u64,
     /// The task of a scene file the online optimiser minimises, whose progress or target the page
-    /// follows (`None`: the finger's built-in task, spin the last unactuated joint). Its `x0`, `h` and
+    /// follows (by default the built-in file's, `scenes/finger.toml`'s `spin`). Its `x0`, `h` and
     /// contact model are not taken from it here: set them above.
-    pub task: Option<Task>,
+    pub task: Task,
 }
 
 impl Default for WorldSettings {
+    /// The built-in scene file's task ([`library::ProblemFile::builtin_task`]) from its start.
     fn default() -> Self {
+        let task = library::ProblemFile::builtin_task().1;
         WorldSettings {
             h: 0.05,
             sigma: 0.1,
             policy: PolicyKind::Library,
             world: WorldKind::Smoothed,
             speed: 1.0,
-            x0: dynamics::FLICKING_FINGER_X0.to_vec(),
+            x0: task.x0.clone(),
             mpc_horizon: MpcSettings::default().horizon,
             mpc_passes: MpcSettings::default().passes,
             seed: 1,
-            task: None,
+            task,
         }
     }
 }
@@ -84,14 +86,10 @@ struct Watched {
 }
 
 impl Watched {
-    fn of(scene: &Scene, task: Option<&Task>) -> Result<Self, ViewerError> {
+    fn of(scene: &Scene, task: &Task) -> Result<Self, ViewerError> {
         let names = scene.state_names();
-        let progress = match task {
-            Some(t) => Progress::of_task(t)?,
-            None => Progress::finger(scene)?,
-        };
-        if let Some(task) = task
-            && progress.forward.is_none()
+        let progress = Progress::of_task(task)?;
+        if progress.forward.is_none()
             && let Some(term) = task
                 .cost
                 .running
@@ -277,9 +275,8 @@ impl World {
                 "the library policy needs a library".into(),
             ));
         }
-        if let Some(task) = &settings.task
-            && task.x0.len() != scene.n_state()
-        {
+        let task = &settings.task;
+        if task.x0.len() != scene.n_state() {
             return Err(ViewerError::Message(format!(
                 "the task {} has {} state entries, the scene {}",
                 task.name,
@@ -287,7 +284,7 @@ impl World {
                 scene.n_state()
             )));
         }
-        let watched = Watched::of(&scene, settings.task.as_ref())?;
+        let watched = Watched::of(&scene, task)?;
         let sim = Self::simulator(&scene, settings.world, settings.sigma, settings.h)?;
         let m = scene.n_controls;
         let mut world = World {
@@ -344,9 +341,9 @@ impl World {
 
     /// (Re)start the online optimiser at the current sigma, seeded by the library's policy if any.
     fn start_mpc(&mut self) -> Result<(), ViewerError> {
-        let mut mpc = OnlineMpc::for_task(
+        let mut mpc = OnlineMpc::new(
             &self.scene,
-            self.settings.task.as_ref(),
+            &self.settings.task,
             MpcSettings {
                 sigma: self.sigma,
                 h: self.settings.h,
@@ -386,10 +383,7 @@ impl World {
             h: self.settings.h,
             library: self.library.is_some(),
             controllers: self.library.as_ref().map_or(0, |(l, _)| l.entries.len()),
-            title: match &self.settings.task {
-                Some(task) => format!("task {}", task.name),
-                None => "flicking finger".into(),
-            },
+            title: format!("task {}", self.settings.task.name),
             planes: self
                 .scene
                 .planes

@@ -487,6 +487,11 @@ mod tests {
     use super::*;
     use crate::{Scene, Simulator, StepSettings};
 
+    /// SCENE.md's flicking finger, from its scene file.
+    fn finger_scene() -> Scene {
+        Scene::from_toml_str(include_str!("../../../../scenes/finger.toml")).unwrap()
+    }
+
     /// The structured equation Hessians and the dual path (one pass, or one per pair of blocks of four
     /// directions) for the same step and `c`.
     fn both(sim: &mut Simulator, x: &[f64], u: &[f64], c: &[f64]) -> (Vec<f64>, Vec<f64>, f64) {
@@ -561,14 +566,14 @@ mod tests {
                 model,
                 ..StepSettings::default()
             };
-            let mut sim = Simulator::new(Scene::flicking_finger(), settings).unwrap();
+            let mut sim = Simulator::new(finger_scene(), settings).unwrap();
             assert!(
                 agree(&mut sim, &finger, &[0.3, -0.2]) > 0,
                 "{model:?}: no contact"
             );
         }
         // A third link: 4 joints, 3 controls, 11 directions (six pairs of blocks in duals).
-        let mut spec = Scene::flicking_finger().spec().clone();
+        let mut spec = finger_scene().spec().clone();
         let mut link = spec.bodies[1].clone();
         link.name = "link3".into();
         link.parent = "link2".into();
