@@ -116,7 +116,9 @@ fn the_finger_file_carries_the_papers_task() {
     assert_eq!(task.name, "spin");
     assert_eq!((task.h, task.horizon), (0.05, 75));
     assert_eq!(task.model, Model::Logistic(0.1));
-    assert_eq!(task.x0, vec![-pi / 4.0, -pi / 6.0, 0.0, 0.0, 0.0, 0.0]);
+    // SCENE.md's x0: the correctly rounded -pi/4 and -pi/6 (pi / 6.0 computed in floats is an ulp off).
+    use std::f64::consts::{FRAC_PI_4, FRAC_PI_6};
+    assert_eq!(task.x0, vec![-FRAC_PI_4, -FRAC_PI_6, 0.0, 0.0, 0.0, 0.0]);
     assert_eq!(
         task.periods,
         vec![None, None, Some(std::f64::consts::PI), None, None, None]
@@ -914,4 +916,47 @@ fn the_policy_keeps_the_tasks_control_limits() {
         upper: vec![1.0, 1.0],
     };
     assert!(lib.policy().unwrap().with_limits(Some(bad)).is_err());
+}
+
+/// Issue 28: a target task's growth branches for hard contact are optimised at a fraction of the noise
+/// scale (`growth_sharpening`), so the library it builds depends on that fraction; a progress task grows
+/// at its own noise scale, its library the same for any fraction.
+#[test]
+fn growth_sharpening_shapes_a_target_tasks_branches_and_leaves_a_progress_task_alone() {
+    let small = |task: &library::Task, sharpening: f64| library::LibrarySettings {
+        horizon: 40,
+        growth: 2,
+        growth_sharpening: sharpening,
+        ..default_recipe(task, 12)
+    };
+    let build = |file: &ProblemFile, name: &str, sharpening: f64| {
+        let task = file.task(Some(name)).unwrap();
+        library::Library::build(file, Some(name), &small(&task, sharpening), |_, _| {}).unwrap()
+    };
+    // The mirrored finger's target: round 1 (hard contact) grows branches, at 0.25 x sigma or at sigma.
+    let mirrored =
+        ProblemFile::from_toml_str(include_str!("../../scenes/mirrored_finger.toml")).unwrap();
+    let (sharp, own) = (
+        build(&mirrored, "turn", 0.25),
+        build(&mirrored, "turn", 1.0),
+    );
+    let trunk = 12 * sharp.settings.keep;
+    assert!(
+        sharp.entries.len() > trunk && own.entries.len() > trunk,
+        "no growth"
+    );
+    assert_eq!(sharp.entries[..trunk], own.entries[..trunk]);
+    assert_ne!(sharp.entries, own.entries);
+    // The finger's spin: the same library either way.
+    let finger = ProblemFile::builtin();
+    assert_eq!(
+        build(&finger, "spin", 0.25).entries,
+        build(&finger, "spin", 1.0).entries
+    );
+    // Outside (0, 1] it is refused by name.
+    let task = mirrored.task(Some("turn")).unwrap();
+    for bad in [0.0, -0.5, 1.5, f64::NAN] {
+        let err = small(&task, bad).validate(&mirrored.scene).unwrap_err();
+        assert!(err.to_string().contains("growth_sharpening"), "{err}");
+    }
 }
