@@ -364,6 +364,21 @@ fn a_scene_with_a_fixed_peg_and_a_ground_sends_both_and_keeps_them_in_the_window
     );
     let problem = library::ProblemFile::from_toml_str(&text).unwrap();
     let scene = problem.scene.clone();
+    // The default world's task (the built-in finger's spin) does not fit this scene: refused by its sizes.
+    let err = World::new(
+        scene.clone(),
+        None,
+        WorldSettings {
+            policy: PolicyKind::Off,
+            x0: vec![-1.2, 0.3, 0.0, 0.0],
+            ..WorldSettings::default()
+        },
+    )
+    .unwrap_err();
+    assert!(
+        err.to_string().contains("task spin has 6 state entries"),
+        "{err}"
+    );
     let mut world = World::new(
         scene.clone(),
         None,

@@ -636,14 +636,7 @@ impl<'a> Build<'a> {
         task: &Task,
         settings: &'a LibrarySettings,
     ) -> Result<Self, LibraryError> {
-        if task.x0.len() != scene.n_state() {
-            return Err(LibraryError::SceneMismatch(format!(
-                "task {} has {} state entries, the scene {}",
-                task.name,
-                task.x0.len(),
-                scene.n_state()
-            )));
-        }
+        task.check_scene(scene)?;
         task.check_for_library(scene)?;
         let progress = Progress::of_task(task)?;
         let cost = task.cost.clone();

@@ -434,6 +434,25 @@ impl Task {
 }
 
 impl Task {
+    /// `Err` unless the task's sizes (its state and, when it has them, its control limits) are `scene`'s:
+    /// a task is checked against its own scene file, and this is for a task used with another scene.
+    pub fn check_scene(&self, scene: &Scene) -> Result<(), LibraryError> {
+        let limits = self
+            .control_limits
+            .as_ref()
+            .map_or(scene.n_controls, |l| l.lower.len());
+        if self.x0.len() != scene.n_state() || limits != scene.n_controls {
+            return Err(LibraryError::SceneMismatch(format!(
+                "task {} has {} state entries and {limits} controls, the scene {} and {}",
+                self.name,
+                self.x0.len(),
+                scene.n_state(),
+                scene.n_controls
+            )));
+        }
+        Ok(())
+    }
+
     /// `Err` naming the reason when the task cannot have a library of controllers on `scene`: the scene
     /// has no control to feed back, or the cost rewards nothing (no state term, so every trajectory's
     /// best is to do nothing).

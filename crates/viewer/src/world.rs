@@ -276,14 +276,7 @@ impl World {
             ));
         }
         let task = &settings.task;
-        if task.x0.len() != scene.n_state() {
-            return Err(ViewerError::Message(format!(
-                "the task {} has {} state entries, the scene {}",
-                task.name,
-                task.x0.len(),
-                scene.n_state()
-            )));
-        }
+        task.check_scene(&scene)?;
         let watched = Watched::of(&scene, task)?;
         let sim = Self::simulator(&scene, settings.world, settings.sigma, settings.h)?;
         let m = scene.n_controls;
