@@ -500,7 +500,13 @@ pub fn write_all(lib: &Library, dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
     )?;
     let policy = lib.policy()?;
     let s = &lib.settings;
-    let run = closed_loop(lib, &policy, (s.model, s.h), &s.x0, (60.0 / s.h) as usize)?;
+    let run = closed_loop(
+        lib,
+        &policy,
+        (s.model, s.h),
+        lib.x0(),
+        (60.0 / s.h) as usize,
+    )?;
     both(
         dir,
         "fig4_limit_cycle",
