@@ -92,8 +92,9 @@ pub struct LibrarySettings {
     /// or at another time step) are optimised at this fraction of the library's noise scale, in (0, 1]
     /// (1: at its own). The smoothed contact acts at a distance, and a policy built on it alone leaves
     /// hard contact short of the target: the finger stops where the smoothed force would still push
-    /// (issue 28: the mirrored finger's turn, 0.19-0.24 rad short on hard contact at every seed, is back
-    /// within 0.05-0.08 with 0.25). A task that rewards progress grows at its own noise scale.
+    /// (issue 28, `cargo xtask examples`: the mirrored finger's turn, 0.19-0.24 rad short on hard contact
+    /// at every seed, ends 0.049-0.094 from it with 0.25). A task that rewards progress grows at its own
+    /// noise scale.
     pub growth_sharpening: f64,
 }
 
@@ -581,7 +582,7 @@ pub fn build_entries(
     let mut resolved;
     let settings = if settings.x0.is_empty() {
         resolved = settings.clone();
-        resolved.x0 = task.x0.clone();
+        resolved.x0 = start(&settings.x0, task).to_vec();
         &resolved
     } else {
         settings
@@ -602,6 +603,12 @@ pub fn build_entries(
             length,
         } => branched(&task, trunk, settle, length, &report),
     }
+}
+
+/// The start a setting's `x0` names: itself, or the task's when it is empty (the default of
+/// [`LibrarySettings`] and [`crate::EvaluationSettings`]).
+pub(crate) fn start<'a>(x0: &'a [f64], task: &'a Task) -> &'a [f64] {
+    if x0.is_empty() { &task.x0 } else { x0 }
 }
 
 /// What every chain of a build shares.

@@ -371,11 +371,7 @@ pub fn evaluate_in(
             expected: "finite and non-negative",
         });
     }
-    let x0 = if settings.x0.is_empty() {
-        &library.task().x0
-    } else {
-        &settings.x0
-    };
+    let x0 = crate::build::start(&settings.x0, library.task());
     crate::check("x0", x0, scene.n_state())?;
     let mut world = Simulator::new(
         scene.clone(),
@@ -394,7 +390,7 @@ pub fn evaluate_in(
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(settings.seed);
     let kick =
         Normal::new(0.0, settings.kick_std).map_err(|e| LibraryError::Invalid(e.to_string()))?;
-    let mut x = x0.clone();
+    let mut x = x0.to_vec();
     let mut u = vec![0.0; scene.n_controls];
     let mut contacts = ContactEvents::default();
     let mut unconverged = 0usize;
