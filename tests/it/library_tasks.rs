@@ -713,6 +713,55 @@ fn a_library_whose_contact_starts_out_of_reach_still_pushes() {
     assert!(farthest > 0.6, "the block reached only {farthest}");
 }
 
+/// A continuation that never feels the contact (the two fingers parked at their joint limits, 0.7 and
+/// 0.8 from the ellipse, which rests 0.1 rad off its target) keeps the task's own solve: not the last
+/// stage's, solved at 64 times the noise scale, which costs far more.
+#[test]
+fn a_continuation_that_finds_no_contact_keeps_the_tasks_own_solve() {
+    let file = ProblemFile::from_toml_str(include_str!("../../scenes/two_fingers.toml")).unwrap();
+    let task = file.task(Some("turn")).unwrap();
+    let x0 = [-1.0, -0.55, 4.1415, 0.567, 0.605, 0.0, 0.0, 0.0, 0.0, 0.0];
+    let sim = library::LibrarySettings::default()
+        .for_task(&task)
+        .simulator(&file.scene)
+        .unwrap();
+    let step = *sim.settings();
+    let ddp = ddp::Ddp::new(ddp::DdpSettings {
+        max_iterations: 50,
+        ..ddp::DdpSettings::default()
+    })
+    .unwrap();
+    let zero = vec![vec![0.0; 4]; task.horizon];
+    let start = ddp
+        .solve(
+            &mut library::SceneDynamics::new(sim),
+            &task.cost,
+            &x0,
+            &zero,
+        )
+        .unwrap();
+    let c = library::continue_in_noise(
+        &ddp,
+        &file.scene,
+        &step,
+        &task.cost,
+        &x0,
+        start.clone(),
+        |_, _, _| {},
+    )
+    .unwrap();
+    assert_eq!((c.felt_at, c.kept), (None, false), "{:?}", c.stages);
+    let last = c.stages.last().unwrap();
+    assert!(
+        last.3 > 10.0 * start.cost,
+        "{:?} vs {}",
+        c.stages,
+        start.cost
+    );
+    assert_eq!(c.solution.cost, start.cost);
+    assert_eq!(c.solution.controls, start.controls);
+}
+
 /// The default recipe on `task`, fitted to `trajectories`, without growth.
 fn default_recipe(task: &library::Task, trajectories: usize) -> library::LibrarySettings {
     let base = library::LibrarySettings::default().for_task(task);

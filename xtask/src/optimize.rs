@@ -252,12 +252,12 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                                  down to {sigma}"
                             ),
                             (Some(top), false) => format!(
-                                "no contact felt: found at sigma {top:.4}, and lost again on the way back \
-                                 down to {sigma}"
+                                "no contact felt: found at sigma {top:.4}, and lost again (or no cheaper \
+                                 than the solve at {sigma}) on the way back down; that solve is kept"
                             ),
                             (None, _) => format!(
                                 "no contact felt even at sigma {:.4} ({}x the task's): nothing the controls \
-                                 do reaches a contact within the horizon",
+                                 do reaches a contact within the horizon; the solve at the task's is kept",
                                 sigma * (1 << library::CONTINUATION_DOUBLINGS) as f64,
                                 1 << library::CONTINUATION_DOUBLINGS
                             ),
@@ -300,10 +300,18 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         solution.cost,
         seconds * 1e3
     );
-    println!("status: {}", meaning(solution.status));
     let never_felt = felt_note
         .as_deref()
         .is_some_and(|n| !n.starts_with("continued"));
+    if never_felt {
+        // Converged or not, a solve that never touches has optimised nothing through the contact.
+        println!(
+            "status: no contact felt, nothing moved through a contact (the optimiser: {})",
+            meaning(solution.status)
+        );
+    } else {
+        println!("status: {}", meaning(solution.status));
+    }
     let gain = solution
         .gains
         .iter()

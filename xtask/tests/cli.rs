@@ -419,6 +419,11 @@ fn optimize_says_when_no_contact_is_felt_and_continues_in_the_noise_scale() {
         stdout.contains("no contact felt (--no-continuation)"),
         "{stdout}"
     );
+    // The status line says so too, not a plain "converged".
+    assert!(
+        stdout.contains("status: no contact felt, nothing moved through a contact"),
+        "{stdout}"
+    );
     assert!(stderr.contains("--strict: no contact felt"), "{stderr}");
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -82,11 +82,12 @@ pub fn noise_scale(model: Complementarity) -> Option<f64> {
 /// What [`continue_in_noise`] found.
 #[derive(Debug, Clone)]
 pub struct Continuation {
-    /// The solution at the task's noise scale.
+    /// The solution at the task's noise scale: the continued one if it is kept, else the start.
     pub solution: Solution,
     /// The noise scale at which a solve first felt the contact and lowered the cost, if one did.
     pub felt_at: Option<f64>,
-    /// Whether the final solution still feels it.
+    /// Whether the continued solution replaced the start: it felt the contact, still feels it at the
+    /// task's noise scale, and costs less there than the start.
     pub kept: bool,
     /// Each stage: `(sigma, passes, converged, cost)`.
     pub stages: Vec<(f64, usize, bool, f64)>,
@@ -128,7 +129,7 @@ pub fn continue_in_noise(
     };
     let untouched = start.cost;
     let mut stages = Vec::new();
-    let mut sol = start;
+    let mut sol = start.clone();
     let mut felt_at = None;
     let mut s = sigma;
     for _ in 0..CONTINUATION_DOUBLINGS {
@@ -151,9 +152,14 @@ pub fn continue_in_noise(
             stage(s, &sol, None);
         }
     }
-    let kept = felt_at.is_some() && contact_felt(&mut simulator(sigma)?, cost, x0, &sol.controls)?;
+    // The continued solve replaces the start only where it ends at the task's noise scale, feeling the
+    // contact, at a lower cost: a continuation that never felt it ended at a larger noise scale, and one
+    // that lost it on the way down may have ended in a worse local minimum than the start's.
+    let kept = felt_at.is_some()
+        && sol.cost < untouched
+        && contact_felt(&mut simulator(sigma)?, cost, x0, &sol.controls)?;
     Ok(Continuation {
-        solution: sol,
+        solution: if kept { sol } else { start },
         felt_at,
         kept,
         stages,
