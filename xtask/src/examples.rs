@@ -205,10 +205,10 @@ fn from_rest(problem: &ProblemFile, task: &Task) -> anyhow::Result<FromRest> {
                 &settings,
                 &task.cost,
                 &task.x0,
-                sol.clone(),
+                sol,
                 |_, _, _| {},
             )?;
-            if c.kept { c.solution } else { sol }
+            c.solution
         }
         _ => sol,
     };

@@ -582,7 +582,7 @@ pub fn build_entries(
     let mut resolved;
     let settings = if settings.x0.is_empty() {
         resolved = settings.clone();
-        resolved.x0 = start(&settings.x0, task).to_vec();
+        resolved.x0 = task.x0.clone();
         &resolved
     } else {
         settings
@@ -737,7 +737,7 @@ impl<'a> Build<'a> {
     /// even roll out from starts from zero controls instead.
     /// The first solve of a build, checked for the contact its task needs ([`crate::contact_felt`]); where
     /// none is felt and the model is smoothed, continued in the noise scale
-    /// ([`crate::continue_in_noise`]) and replaced by the result if that feels it. A first solve that
+    /// ([`crate::continue_in_noise`]) and replaced by the result if that feels it and costs less. A first solve that
     /// touches (the finger's, for one) is left as it was.
     fn reach(
         &self,
@@ -771,7 +771,7 @@ impl<'a> Build<'a> {
             &settings,
             cost,
             x1,
-            sol.clone(),
+            sol,
             |s, stage, felt| {
                 tracing::info!(
                     sigma = s,
@@ -782,7 +782,8 @@ impl<'a> Build<'a> {
                 );
             },
         )?;
-        Ok(if c.kept { c.solution } else { sol })
+        // The task's own solve unless the continued one is kept (`continue_in_noise` decides).
+        Ok(c.solution)
     }
 
     fn solve(
