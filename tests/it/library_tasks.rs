@@ -762,6 +762,171 @@ fn a_continuation_that_finds_no_contact_keeps_the_tasks_own_solve() {
     assert_eq!(c.solution.controls, start.controls);
 }
 
+/// The task's solve from `x0` with zero controls at first, under `step`.
+fn solve_from(
+    file: &ProblemFile,
+    task: &library::Task,
+    step: dynamics::StepSettings,
+    ddp: &ddp::Ddp,
+    x0: &[f64],
+) -> ddp::Solution {
+    let sim = dynamics::Simulator::new(file.scene.clone(), step).unwrap();
+    let zero = vec![vec![0.0; file.scene.n_controls]; task.horizon];
+    ddp.solve(&mut library::SceneDynamics::new(sim), &task.cost, x0, &zero)
+        .unwrap()
+}
+
+fn felt(
+    file: &ProblemFile,
+    task: &library::Task,
+    step: dynamics::StepSettings,
+    x0: &[f64],
+    sol: &ddp::Solution,
+) -> bool {
+    let mut probe = dynamics::Simulator::new(file.scene.clone(), step).unwrap();
+    library::contact_felt(&mut probe, &task.cost, x0, &sol.controls).unwrap()
+}
+
+/// A contact out of reach is reached by pulling the pair together: the slider starts 0.45 behind its
+/// block, where the task's solve feels nothing (a zero gradient) on the smoothed model and on the hard
+/// one, which has no noise scale to continue in; the pull of the pusher-block pair (and not of the
+/// block on the ground, which the controls do not move) gives a solve that pushes the block most of the
+/// way to its target at a fraction of doing nothing's cost.
+#[test]
+fn a_contact_out_of_reach_is_reached_by_pulling_the_pair_together() {
+    let file = ProblemFile::from_toml_str(include_str!("../../scenes/slider_push.toml")).unwrap();
+    let task = file.task(Some("push")).unwrap();
+    assert_eq!(
+        library::needed_pairs(&file.scene, &task.cost),
+        Some(vec![1])
+    );
+    let ddp = ddp::Ddp::new(ddp::DdpSettings {
+        max_iterations: 100,
+        control_limits: task.control_limits.clone(),
+        ..ddp::DdpSettings::default()
+    })
+    .unwrap();
+    let smoothed = *library::LibrarySettings::default()
+        .for_task(&task)
+        .simulator(&file.scene)
+        .unwrap()
+        .settings();
+    let hard = dynamics::StepSettings {
+        model: dynamics::Complementarity::Hard,
+        ..smoothed
+    };
+    let block_x = file
+        .scene
+        .coordinate_names()
+        .iter()
+        .position(|c| c == "block.x")
+        .unwrap();
+    for step in [smoothed, hard] {
+        let start = solve_from(&file, &task, step, &ddp, &task.x0);
+        assert!(
+            !felt(&file, &task, step, &task.x0, &start),
+            "{:?}",
+            step.model
+        );
+        let r = library::reach_for_contact(
+            &ddp,
+            &file.scene,
+            &step,
+            &task.cost,
+            &task.x0,
+            start.clone(),
+        )
+        .unwrap();
+        assert_eq!(r.pair, Some(1), "{:?}: {:?}", step.model, r.tries);
+        assert!(felt(&file, &task, step, &task.x0, &r.solution));
+        assert!(
+            r.solution.cost < 0.5 * start.cost,
+            "{} vs {}",
+            r.solution.cost,
+            start.cost
+        );
+        let end = r.solution.states.last().unwrap()[block_x];
+        assert!(end > 0.3, "{:?}: the block ends at {end}", step.model);
+    }
+}
+
+/// Reaching keeps the start where touching does not pay: the two fingers parked at their joint limits
+/// 0.7 and 0.8 from the ellipse, 0.105 rad past its target, under the turn task's weights, where a pull
+/// brings a finger back and the ellipse onto its target; under a tenth of its running weight (swinging
+/// back costs more control than the error does) they keep doing nothing.
+#[test]
+fn reaching_replaces_the_start_only_where_touching_pays() {
+    let x0 = [-1.0, -0.55, 4.1415, 0.567, 0.605, 0.0, 0.0, 0.0, 0.0, 0.0];
+    let base = include_str!("../../scenes/two_fingers.toml");
+    let light = base.replace(
+        "running = [{ coordinate = \"ellipse.angle\", quadratic = 20.0, target = 0.5 }]",
+        "running = [{ coordinate = \"ellipse.angle\", quadratic = 2.0, target = 0.5 }]",
+    );
+    assert_ne!(light, base);
+    for (scene, pays) in [(base, true), (light.as_str(), false)] {
+        let file = ProblemFile::from_toml_str(scene).unwrap();
+        let task = file.task(Some("turn")).unwrap();
+        let step = *library::LibrarySettings::default()
+            .for_task(&task)
+            .simulator(&file.scene)
+            .unwrap()
+            .settings();
+        let ddp = ddp::Ddp::new(ddp::DdpSettings {
+            max_iterations: 60,
+            ..ddp::DdpSettings::default()
+        })
+        .unwrap();
+        let start = solve_from(&file, &task, step, &ddp, &x0);
+        assert!(!felt(&file, &task, step, &x0, &start));
+        let r =
+            library::reach_for_contact(&ddp, &file.scene, &step, &task.cost, &x0, start.clone())
+                .unwrap();
+        if pays {
+            assert!(r.pair.is_some(), "{:?}", r.tries);
+            let end = r.solution.states.last().unwrap()[4];
+            assert!((end - 0.5).abs() < 0.02, "the ellipse ends at {end}");
+        } else {
+            assert_eq!(r.pair, None, "{:?}", r.tries);
+            assert_eq!(r.tries.len(), 2, "both pairs tried: {:?}", r.tries);
+            assert_eq!(r.solution.controls, start.controls);
+        }
+    }
+}
+
+/// The pull's gradient is exact (central differences of its value), zero in touch, and its curvature
+/// the Gauss-Newton `w J^T J`: symmetric and positive semidefinite.
+#[test]
+fn the_pulls_gradient_is_exact() {
+    let file = ProblemFile::from_toml_str(include_str!("../../scenes/two_fingers.toml")).unwrap();
+    let task = file.task(Some("turn")).unwrap();
+    let pull = library::ReachCost::new(&task.cost, &file.scene, 0, 3.0).unwrap();
+    let x = [-0.6, -0.9, 4.0, 0.6, 0.3, 0.1, -0.2, 0.3, 0.0, 0.5];
+    let u = [0.1, -0.2, 0.3, 0.0];
+    assert!(pull.gap(&x).is_some());
+    let d = derivatives(&pull, &x, &u);
+    for i in 0..x.len() {
+        let e = 1e-6;
+        let (mut a, mut b) = (x, x);
+        a[i] += e;
+        b[i] -= e;
+        let fd = (pull.running(0, &a, &u) - pull.running(0, &b, &u)) / (2.0 * e);
+        assert!(
+            (fd - d.lx[i]).abs() < 1e-6 * (1.0 + fd.abs()),
+            "{i}: {fd} vs {}",
+            d.lx[i]
+        );
+    }
+    let n = x.len();
+    for a in 0..n {
+        for b in 0..n {
+            assert!((d.lxx[a * n + b] - d.lxx[b * n + a]).abs() < 1e-12);
+        }
+        assert!(d.lxx[a * n + a] >= 0.0);
+    }
+    assert!(library::ReachCost::new(&task.cost, &file.scene, 2, 1.0).is_err());
+    assert!(library::ReachCost::new(&task.cost, &file.scene, 0, f64::NAN).is_err());
+}
+
 /// The default recipe on `task`, fitted to `trajectories`, without growth.
 fn default_recipe(task: &library::Task, trajectories: usize) -> library::LibrarySettings {
     let base = library::LibrarySettings::default().for_task(task);

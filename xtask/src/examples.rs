@@ -191,27 +191,21 @@ fn from_rest(problem: &ProblemFile, task: &Task) -> anyhow::Result<FromRest> {
         &task.x0,
         &vec![vec![0.0; m]; task.horizon],
     )?;
-    // A solve that feels no contact is continued in the noise scale, as `optimize` and `train` do.
-    let mut probe = LibrarySettings::default()
+    // A solve that feels no contact reaches for it, as `optimize` and `train` do.
+    let probe = LibrarySettings::default()
         .for_task(task)
         .simulator(&problem.scene)?;
-    let felt = library::contact_felt(&mut probe, &task.cost, &task.x0, &sol.controls)?;
-    let settings = *probe.settings();
-    let sol = match (felt, library::noise_scale(settings.model)) {
-        (false, Some(_)) => {
-            let c = library::continue_in_noise(
-                &ddp,
-                &problem.scene,
-                &settings,
-                &task.cost,
-                &task.x0,
-                sol,
-                |_, _, _| {},
-            )?;
-            c.solution
-        }
-        _ => sol,
-    };
+    let sol = library::feel_contact(
+        &ddp,
+        &problem.scene,
+        probe.settings(),
+        &task.cost,
+        &task.x0,
+        sol,
+        true,
+        |_, _, _| {},
+    )?
+    .solution;
     let seconds = start.elapsed().as_secs_f64();
     let names = problem.scene.state_names();
     let last = sol.states.last().expect("N + 1 states");

@@ -90,9 +90,10 @@ pub struct Args {
     /// scene's task, its trajectory felt a contact.
     #[arg(long)]
     strict: bool,
-    /// For a scene's task: when the solve at the task's noise scale never feels a contact, do not continue in
-    /// the noise scale (doubling sigma until the contact is felt, then halving it back, each solve
-    /// warm-started from the last); just say so.
+    /// For a scene's task: when the solve never feels a contact, do not reach for it (pulling each
+    /// needed pair together, then, on a smoothed model, continuing in the noise scale: doubling sigma
+    /// until the contact is felt, then halving it back, each solve warm-started from the last); just say
+    /// so.
     #[arg(long)]
     no_continuation: bool,
 }
@@ -181,6 +182,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let mut summary = None;
     // With a task: what the contact check said, when it found none felt at first.
     let mut felt_note: Option<String> = None;
+    let mut never_felt = false;
     let (solution, problem) = match args.problem {
         Problem::Task => {
             let file = args.sim.problem_file()?;
@@ -213,57 +215,74 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                      is zero out of reach)",
                     base.model
                 );
-                match (library::noise_scale(base.model), args.no_continuation) {
-                    (None, _) => {
-                        note = Some(
-                            "no contact felt, and the hard model has no action at a distance to continue \
-                             from (--model logistic can feel it)"
-                                .to_string(),
+                if args.no_continuation {
+                    never_felt = true;
+                    note = Some("no contact felt (--no-continuation)".to_string());
+                } else {
+                    let search = library::feel_contact(
+                        &ddp,
+                        &file.scene,
+                        &base,
+                        &task.cost,
+                        &x0,
+                        sol,
+                        true,
+                        |s, stage, felt| {
+                            println!(
+                                "continuation: sigma {s:.4}: {:?} after {} passes, cost {:.6}{}",
+                                stage.status,
+                                stage.iterations.len(),
+                                stage.cost,
+                                match felt {
+                                    Some(true) => ", contact felt",
+                                    Some(false) => ", contact not felt",
+                                    None => "",
+                                }
+                            );
+                        },
+                    )?;
+                    let reach = search.reach.as_ref();
+                    for (pair, pulled, cost, felt) in reach.map_or(&[][..], |r| &r.tries[..]) {
+                        println!(
+                            "reach: {} pulled together (cost {pulled:.6}), then the task's own solve: cost \
+                         {cost:.6}, contact {}",
+                            pair_name(&file.scene, *pair),
+                            if *felt {
+                                "felt"
+                            } else {
+                                "not felt, or no cheaper"
+                            }
                         );
                     }
-                    (Some(_), true) => {
-                        note = Some("no contact felt (--no-continuation)".to_string());
-                    }
-                    (Some(sigma), false) => {
-                        let c = library::continue_in_noise(
-                            &ddp,
-                            &file.scene,
-                            &base,
-                            &task.cost,
-                            &x0,
-                            sol,
-                            |s, stage, felt| {
-                                println!(
-                                    "continuation: sigma {s:.4}: {:?} after {} passes, cost {:.6}{}",
-                                    stage.status,
-                                    stage.iterations.len(),
-                                    stage.cost,
-                                    match felt {
-                                        Some(true) => ", contact felt",
-                                        Some(false) => ", contact not felt",
-                                        None => "",
-                                    }
-                                );
-                            },
-                        )?;
-                        note = Some(match (c.felt_at, c.kept) {
-                            (Some(top), true) => format!(
-                                "continued in the noise scale: contact felt at sigma {top:.4}, solved back \
-                                 down to {sigma}"
-                            ),
-                            (Some(top), false) => format!(
-                                "no contact felt: found at sigma {top:.4}, and lost again (or no cheaper \
-                                 than the solve at {sigma}) on the way back down; that solve is kept"
-                            ),
-                            (None, _) => format!(
-                                "no contact felt even at sigma {:.4} ({}x the task's): nothing the controls \
-                                 do reaches a contact within the horizon; the solve at the task's is kept",
-                                sigma * (1 << library::CONTINUATION_DOUBLINGS) as f64,
-                                1 << library::CONTINUATION_DOUBLINGS
-                            ),
-                        });
-                        sol = c.solution;
-                    }
+                    let sigma = library::noise_scale(base.model);
+                    note = Some(match (reach.and_then(|r| r.pair), &search.continuation, sigma) {
+                    (Some(p), _, _) => format!(
+                        "reached the contact by pulling {} together, then solved the task's own cost",
+                        pair_name(&file.scene, p)
+                    ),
+                    (None, Some(c), Some(sigma)) => match (c.felt_at, c.kept) {
+                        (Some(top), true) => format!(
+                            "continued in the noise scale: contact felt at sigma {top:.4}, solved back \
+                             down to {sigma}"
+                        ),
+                        (Some(top), false) => format!(
+                            "no contact felt: found at sigma {top:.4}, and lost again (or no cheaper \
+                             than the solve at {sigma}) on the way back down; that solve is kept"
+                        ),
+                        (None, _) => format!(
+                            "no contact felt even at sigma {:.4} ({}x the task's): nothing the controls \
+                             do reaches a contact within the horizon; the solve at the task's is kept",
+                            sigma * (1 << library::CONTINUATION_DOUBLINGS) as f64,
+                            1 << library::CONTINUATION_DOUBLINGS
+                        ),
+                    },
+                    (None, _, _) => "no contact felt: no pull found a cheaper solve that feels it, \
+                                     and the hard model has no action at a distance to continue from \
+                                     (--model logistic can feel it)"
+                        .to_string(),
+                });
+                    never_felt = !search.found();
+                    sol = search.solution;
                 }
             }
             if let Some(note) = &note {
@@ -300,9 +319,6 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         solution.cost,
         seconds * 1e3
     );
-    let never_felt = felt_note
-        .as_deref()
-        .is_some_and(|n| !n.starts_with("continued"));
     if never_felt {
         // Converged or not, a solve that never touches has optimised nothing through the contact.
         println!(
@@ -364,4 +380,14 @@ fn task_summary(scene: &dynamics::Scene, task: &library::Task, states: &[Vec<f64
         })
         .collect();
     format!("over the horizon: {}", parts.join("; "))
+}
+
+/// A contact pair as `a-b`, by its bodies' names.
+fn pair_name(scene: &dynamics::Scene, pair: usize) -> String {
+    let side = |s: dynamics::Side| match s {
+        dynamics::Side::Body(i) => scene.bodies[i].name.clone(),
+        other => format!("{other:?}"),
+    };
+    let c = &scene.contacts[pair];
+    format!("{}-{}", side(c.a), side(c.b))
 }

@@ -356,10 +356,11 @@ fn train_defaults_fit_target_tasks_and_small_budgets() {
 
 /// Issue 28: a contact out of reach at the task's noise scale (a pusher 0.45 behind the block, sigma
 /// 0.05) "converged" after one pass with nothing moved. `optimize` now says no contact was felt and
-/// continues in the noise scale (doubling it until the contact is felt and used, then halving it back,
-/// each stage logged), and the block moves; `--no-continuation` only says so, and `--strict` fails then.
+/// reaches for it (the finger and the block pulled together, then the task's own cost solved from
+/// there, each try logged), and the block moves; `--no-continuation` only says so, and `--strict`
+/// fails then.
 #[test]
-fn optimize_says_when_no_contact_is_felt_and_continues_in_the_noise_scale() {
+fn optimize_says_when_no_contact_is_felt_and_reaches_for_it() {
     let text = std::fs::read_to_string(concat!(
         env!("CARGO_MANIFEST_DIR"),
         "/../scenes/pushing.toml"
@@ -389,8 +390,15 @@ fn optimize_says_when_no_contact_is_felt_and_continues_in_the_noise_scale() {
         String::from_utf8_lossy(&out.stderr)
     );
     assert!(stdout.contains("no contact felt"), "{stdout}");
-    assert!(stdout.contains("continuation: sigma 0.1000"), "{stdout}");
-    assert!(stdout.contains("continued in the noise scale"), "{stdout}");
+    assert!(
+        stdout.contains("reach: link2-block pulled together"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("reached the contact by pulling link2-block together"),
+        "{stdout}"
+    );
+    assert!(!stdout.contains("status: no contact felt"), "{stdout}");
     let moved: f64 = stdout
         .split("block.x 0.4500 -> ")
         .nth(1)

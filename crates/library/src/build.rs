@@ -697,8 +697,16 @@ impl<'a> Build<'a> {
                 s.warm_passes
             };
             let mut sol = self.solve(dynamics, &x1, &controls, passes, k)?;
-            if first && k == 0 {
-                sol = self.reach(&x1, sol, passes)?;
+            // The build's first solve, and the first of every chain of a target task (a branch from a
+            // state the policy left off target, perhaps with the contact out of reach).
+            if k == 0 && (first || self.progress.forward.is_none()) {
+                let settings = *dynamics.model().settings();
+                let found;
+                (sol, found) = self.reach(&settings, &x1, sol, passes)?;
+                // A branch that never touches teaches the policy nothing: it already does nothing there.
+                if !found && !first {
+                    break;
+                }
             }
             let p = self.progress;
             let values = local_values(
@@ -733,28 +741,20 @@ impl<'a> Build<'a> {
         Ok(out)
     }
 
-    /// One trajectory from `x1`, warm-started from `controls`; a perturbed state the warm start cannot
-    /// even roll out from starts from zero controls instead.
-    /// The first solve of a build, checked for the contact its task needs ([`crate::contact_felt`]); where
-    /// none is felt and the model is smoothed, continued in the noise scale
-    /// ([`crate::continue_in_noise`]) and replaced by the result if that feels it and costs less. A first solve that
-    /// touches (the finger's, for one) is left as it was.
+    /// A chain's first solve, checked for the contact its task needs ([`crate::contact_felt`]) under
+    /// `settings` (the chain's dynamics). Where none is felt, the contact is reached for: first by
+    /// pulling each needed pair together ([`crate::reach_for_contact`]), then, for a smoothed model
+    /// where no pull found a cheaper solve that feels it, by continuation in the noise scale
+    /// ([`crate::continue_in_noise`]). Either replaces the solve only with one that feels the contact
+    /// and costs less; a first solve that touches (the finger's, for one) is left as it was. Also
+    /// whether the solve returned feels the contact.
     fn reach(
         &self,
+        settings: &StepSettings,
         x1: &[f64],
         sol: ddp::Solution,
         passes: usize,
-    ) -> Result<ddp::Solution, LibraryError> {
-        let cost = &self.cost;
-        let settings = *self.settings.simulator(self.scene)?.settings();
-        if crate::noise_scale(settings.model).is_none() {
-            return Ok(sol);
-        }
-        let mut probe = self.settings.simulator(self.scene)?;
-        if crate::contact_felt(&mut probe, cost, x1, &sol.controls)? {
-            return Ok(sol);
-        }
-        tracing::info!("the first solve felt no contact: continuing in the noise scale");
+    ) -> Result<(ddp::Solution, bool), LibraryError> {
         let ddp = Ddp::new(DdpSettings {
             max_iterations: passes,
             tol_cost: self.settings.tolerance,
@@ -765,13 +765,14 @@ impl<'a> Build<'a> {
             trajectory: 0,
             source,
         })?;
-        let c = crate::continue_in_noise(
+        let search = crate::feel_contact(
             &ddp,
             self.scene,
-            &settings,
-            cost,
+            settings,
+            &self.cost,
             x1,
             sol,
+            true,
             |s, stage, felt| {
                 tracing::info!(
                     sigma = s,
@@ -782,8 +783,11 @@ impl<'a> Build<'a> {
                 );
             },
         )?;
-        // The task's own solve unless the continued one is kept (`continue_in_noise` decides).
-        Ok(c.solution)
+        if let Some(r) = &search.reach {
+            tracing::info!(pair = ?r.pair, tries = ?r.tries, "a first solve felt no contact: reaching for it");
+        }
+        let found = search.found();
+        Ok((search.solution, found))
     }
 
     fn solve(
@@ -950,9 +954,10 @@ fn branched(
 /// less than [`STALL_ADVANCE`] the rewarded way in [`STALL_WINDOW`] seconds), and a branch starts where
 /// the policy stalled; for a target task, not being back within its success tolerance
 /// ([`crate::Success::tolerance`]) [`crate::Success::settle`] seconds after a kick (or at the end of the
-/// first interval, from the start), and a branch starts from the state the kick left, optimised at the
-/// sharpened noise scale ([`LibrarySettings::growth_sharpening`]) when the round's world is not the
-/// library's own.
+/// first interval, from the start), and two branches start, one from the state the kick left and one
+/// from the state the policy is in then (whose first solve reaches for the contact if the policy let go
+/// of it: [`crate::feel_contact`]), optimised at the sharpened noise scale
+/// ([`LibrarySettings::growth_sharpening`]) when the round's world is not the library's own.
 fn grow(
     task: &Build,
     dynamics: &mut SceneDynamics,
@@ -1035,7 +1040,7 @@ fn grow(
         if kicked.is_none() {
             kicked = Some((x.clone(), i));
         }
-        let failed_at = match progress.forward {
+        let failed_at: Vec<(Vec<f64>, usize)> = match progress.forward {
             Some(forward) => {
                 recent.push_back(x[free]);
                 if recent.len() > window {
@@ -1044,14 +1049,22 @@ fn grow(
                 // Stalled: a branch from here, warm-started from the plan of the controller in use.
                 (recent.len() == window && forward * (x[free] - recent[0]) < STALL_ADVANCE)
                     .then(|| (x.clone(), i))
+                    .into_iter()
+                    .collect()
             }
             None if k == judge_at && task.success.distance(&x) > task.success.tolerance => {
-                // Not back within tolerance in time: a branch from the state the kick left.
-                kicked.clone()
+                // Not back within tolerance in time: a branch from the state the kick left, and one
+                // from where the policy left the task (its first solve reaching for the contact if the
+                // policy let go of it there).
+                kicked.clone().into_iter().chain([(x.clone(), i)]).collect()
             }
-            None => None,
+            None => Vec::new(),
         };
-        if let Some((from, i)) = failed_at {
+        let grown_before = grown;
+        for (from, i) in failed_at {
+            if grown == GROWTH_BRANCHES {
+                break;
+            }
             let (trajectory, offset) = (i / s.keep, i % s.keep);
             let plan = ddp::shift_controls(&built.plans[trajectory], offset);
             let branch_dynamics = match sharper.as_mut() {
@@ -1071,6 +1084,8 @@ fn grow(
             policy = policy_of(built)?;
             recent.clear();
             grown += 1;
+        }
+        if grown > grown_before {
             if grown == GROWTH_BRANCHES {
                 break;
             }

@@ -33,7 +33,9 @@ pub use problem::{
     TaskCost, TaskSpec, Term, TermSpec,
 };
 pub use reach::{
-    CONTINUATION_DOUBLINGS, Continuation, contact_felt, continue_in_noise, noise_scale,
+    CONTINUATION_DOUBLINGS, ContactSearch, Continuation, REACH_PULL, REACH_PULL_PASSES, Reach,
+    ReachCost, contact_felt, continue_in_noise, feel_contact, needed_pairs, noise_scale,
+    reach_for_contact,
 };
 pub use task::{SceneDynamics, StepData, TaskError};
 

@@ -1,17 +1,59 @@
 //! A contact out of reach (issue 28): the smoothed contact's action at a distance fades within a few
-//! sigma, so a solve whose start is farther from the contact the task needs has a zero gradient and
-//! "converges" with nothing moved. [`contact_felt`] tells that case apart; [`continue_in_noise`] solves
-//! it by continuation in the noise scale (the paper's section VI scaffolding): sigma doubled, each solve
-//! warm-started from the last, until a solve feels the contact and uses it, then halved back.
+//! sigma (and the hard contact has none), so a solve whose start is farther from the contact the task
+//! needs has a zero gradient and "converges" with nothing moved. [`contact_felt`] tells that case apart;
+//! [`feel_contact`] mends it, first by pulling each needed pair together ([`reach_for_contact`],
+//! [`ReachCost`]: the task's cost plus a penalty on the pair's distance, then the task's own cost from
+//! there), then by continuation in the noise scale ([`continue_in_noise`], the paper's section VI
+//! scaffolding: sigma doubled, each solve warm-started from the last, until a solve feels the contact
+//! and uses it, then halved back).
 
 use crate::error::LibraryError;
 use crate::problem::TaskCost;
 use crate::task::SceneDynamics;
-use ddp::{Ddp, Solution};
-use dynamics::{Complementarity, Scene, Side, Simulator, StepSettings};
+use ddp::{Ddp, DdpSettings, Solution};
+use dynamics::{
+    Complementarity, ConstraintRow, Constraints, Kinematics, Scene, Side, Simulator, StepSettings,
+};
 
 /// Doublings of the noise scale [`continue_in_noise`] tries at most (up to 64 times the task's).
 pub const CONTINUATION_DOUBLINGS: usize = 6;
+
+/// The contact pairs a task needs: each between a body the controls move and a body they do not move
+/// but `cost` weighs (the finger and the ellipse, the pusher and the block; not the block on the ground,
+/// nor the finger on the ground). `None` when the cost weighs no undriven body: no contact is needed.
+pub fn needed_pairs(scene: &Scene, cost: &TaskCost) -> Option<Vec<usize>> {
+    let n = scene.n_dof();
+    let weighed: Vec<usize> = cost
+        .running
+        .iter()
+        .chain(&cost.final_terms)
+        .map(|t| t.index % n)
+        .collect();
+    let is_driven =
+        |i: usize| (0..n).any(|j| scene.coordinates[j].actuator.is_some() && scene.moves(j, i));
+    let is_weighed = |i: usize| !is_driven(i) && weighed.iter().any(|&j| scene.moves(j, i));
+    if !(0..scene.bodies.len()).any(is_weighed) {
+        return None;
+    }
+    let body = |side: Side| match side {
+        Side::Body(i) => Some(i),
+        _ => None,
+    };
+    Some(
+        scene
+            .contacts
+            .iter()
+            .enumerate()
+            .filter(|(_, c)| match (body(c.a), body(c.b)) {
+                (Some(a), Some(b)) => {
+                    (is_driven(a) && is_weighed(b)) || (is_driven(b) && is_weighed(a))
+                }
+                _ => false,
+            })
+            .map(|(p, _)| p)
+            .collect(),
+    )
+}
 
 /// Whether the rollout of `controls` from `x0` in `sim` feels the contact `cost` needs: the total normal
 /// impulse of the pairs between a body the controls move and a body they do not move but the cost weighs
@@ -25,32 +67,11 @@ pub fn contact_felt(
     controls: &[Vec<f64>],
 ) -> Result<bool, LibraryError> {
     let scene = sim.scene().clone();
-    let n = scene.n_dof();
-    let weighed: Vec<usize> = cost
-        .running
-        .iter()
-        .chain(&cost.final_terms)
-        .map(|t| t.index % n)
-        .collect();
-    let is_driven =
-        |i: usize| (0..n).any(|j| scene.coordinates[j].actuator.is_some() && scene.moves(j, i));
-    let is_weighed = |i: usize| !is_driven(i) && weighed.iter().any(|&j| scene.moves(j, i));
-    if !(0..scene.bodies.len()).any(is_weighed) {
+    let Some(needed) = needed_pairs(&scene, cost) else {
         return Ok(true);
-    }
-    let body = |side: Side| match side {
-        Side::Body(i) => Some(i),
-        _ => None,
     };
-    let pairs: Vec<bool> = scene
-        .contacts
-        .iter()
-        .map(|c| match (body(c.a), body(c.b)) {
-            (Some(a), Some(b)) => {
-                (is_driven(a) && is_weighed(b)) || (is_driven(b) && is_weighed(a))
-            }
-            _ => false,
-        })
+    let pairs: Vec<bool> = (0..scene.contacts.len())
+        .map(|p| needed.contains(&p))
         .collect();
     let g = scene.gravity[0].hypot(scene.gravity[1]);
     let weight: f64 = scene.bodies.iter().map(|b| b.mass).sum::<f64>() * g;
@@ -69,6 +90,12 @@ pub fn contact_felt(
         x = s.x_next;
     }
     Ok(total > 1e-6 * scale)
+}
+
+/// Whether a solve of cost `cost` improves on one of cost `untouched` by a percent of its size: what a
+/// solve that reached the contact must do to replace one that felt none.
+fn lowers(untouched: f64, cost: f64) -> bool {
+    untouched - cost > 0.01 * (1.0 + untouched.abs())
 }
 
 /// The noise scale of a smoothed model, `None` for the hard one.
@@ -136,7 +163,7 @@ pub fn continue_in_noise(
         s *= 2.0;
         sol = solve(s, &sol.controls)?;
         let felt = contact_felt(&mut simulator(s)?, cost, x0, &sol.controls)?
-            && untouched - sol.cost > 0.01 * (1.0 + untouched.abs());
+            && lowers(untouched, sol.cost);
         stages.push((s, sol.iterations.len(), sol.status.converged(), sol.cost));
         stage(s, &sol, Some(felt));
         if felt {
@@ -163,5 +190,274 @@ pub fn continue_in_noise(
         felt_at,
         kept,
         stages,
+    })
+}
+
+/// A task's cost plus a pull of one needed contact pair together: `weight / 2 max(d, 0)^2` on the pair's
+/// signed distance `d(q)` at every step and at the end (Gauss-Newton curvature `weight J^T J`, `J` its
+/// normal Jacobian). The scaffold of [`reach_for_contact`]: it gives a solve from a state where the
+/// contact is out of reach the gradient the task's cost lacks there.
+#[derive(Debug, Clone)]
+pub struct ReachCost<'a> {
+    task: &'a TaskCost,
+    scene: &'a Scene,
+    /// The pair's two friction-cone rows (their Jacobians average to the normal one).
+    edges: [usize; 2],
+    weight: f64,
+}
+
+impl<'a> ReachCost<'a> {
+    /// The pull of contact pair `pair` of `scene` with `weight`, added to `task`.
+    pub fn new(
+        task: &'a TaskCost,
+        scene: &'a Scene,
+        pair: usize,
+        weight: f64,
+    ) -> Result<Self, LibraryError> {
+        let row = |positive: bool| {
+            scene
+                .rows()
+                .iter()
+                .position(|r| *r == ConstraintRow::FrictionEdge { pair, positive })
+                .ok_or_else(|| {
+                    LibraryError::Invalid(format!("the scene has no contact pair {pair}"))
+                })
+        };
+        if !(weight.is_finite() && weight >= 0.0) {
+            return Err(LibraryError::Invalid(format!(
+                "a reaching weight must be finite and non-negative, not {weight}"
+            )));
+        }
+        Ok(ReachCost {
+            task,
+            scene,
+            edges: [row(true)?, row(false)?],
+            weight,
+        })
+    }
+
+    /// The pair's distance at `x` and its gradient with respect to `q`, while apart (`None` in touch, or
+    /// where the geometry has no answer).
+    pub fn gap(&self, x: &[f64]) -> Option<(f64, Vec<f64>)> {
+        let n = self.scene.n_dof();
+        let q = &x[..n];
+        let c = Constraints::new(self.scene, &Kinematics::new(self.scene, q), q).ok()?;
+        let d = c.d[self.edges[0]];
+        if !(d > 0.0 && d.is_finite()) {
+            return None;
+        }
+        let [a, b] = self.edges;
+        let grad = (0..n)
+            .map(|j| 0.5 * (c.jacobian[a * n + j] + c.jacobian[b * n + j]))
+            .collect();
+        Some((d, grad))
+    }
+
+    fn pull(&self, x: &[f64]) -> f64 {
+        self.gap(x).map_or(0.0, |(d, _)| 0.5 * self.weight * d * d)
+    }
+
+    fn pull_derivatives(&self, x: &[f64], lx: &mut [f64], lxx: &mut [f64]) {
+        let Some((d, g)) = self.gap(x) else {
+            return;
+        };
+        let ns = x.len();
+        for (a, &ga) in g.iter().enumerate() {
+            lx[a] += self.weight * d * ga;
+            for (b, &gb) in g.iter().enumerate() {
+                lxx[a * ns + b] += self.weight * ga * gb;
+            }
+        }
+    }
+}
+
+impl ddp::Cost for ReachCost<'_> {
+    fn running(&self, i: usize, x: &[f64], u: &[f64]) -> f64 {
+        self.task.running(i, x, u) + self.pull(x)
+    }
+
+    fn terminal(&self, x: &[f64]) -> f64 {
+        self.task.terminal(x) + self.pull(x)
+    }
+
+    fn running_derivatives(&self, i: usize, x: &[f64], u: &[f64], out: &mut ddp::CostDerivatives) {
+        self.task.running_derivatives(i, x, u, out);
+        self.pull_derivatives(x, &mut out.lx, &mut out.lxx);
+    }
+
+    fn terminal_derivatives(&self, x: &[f64], lx: &mut [f64], lxx: &mut [f64]) {
+        self.task.terminal_derivatives(x, lx, lxx);
+        self.pull_derivatives(x, lx, lxx);
+    }
+}
+
+/// What [`reach_for_contact`] found.
+#[derive(Debug, Clone)]
+pub struct Reach {
+    /// The task's solution: the reached one if one is kept, else the start.
+    pub solution: Solution,
+    /// The pair whose pull led to the kept solution, if one did.
+    pub pair: Option<usize>,
+    /// Each pair tried: `(pair, cost of the pulled solve, cost of the task's solve after it, felt)`.
+    pub tries: Vec<(usize, f64, f64, bool)>,
+}
+
+/// Passes at most of [`reach_for_contact`]'s pulled solve: it only has to bring the pair together.
+pub const REACH_PULL_PASSES: usize = 40;
+
+/// How strongly [`reach_for_contact`] pulls, relative to the task: the pull at the start, summed over
+/// the horizon, is this many times the start's cost (plus one).
+pub const REACH_PULL: f64 = 10.0;
+
+/// A solve from `x0` (the start `start`, which felt no contact) that reaches the contact its task needs:
+/// for each needed pair apart at `x0` ([`needed_pairs`]), nearest first, a solve of the task's cost plus
+/// a pull of the pair together ([`ReachCost`], at most [`REACH_PULL_PASSES`] passes), warm-started from
+/// `start`, then a solve of the task's own cost warm-started from that. The first task solve that feels
+/// the contact under `settings` and costs a percent less than `start` replaces it; otherwise `start` is
+/// kept. Works for the hard model as well as the smoothed ones (the pull needs no action at a
+/// distance).
+pub fn reach_for_contact(
+    ddp: &Ddp,
+    scene: &Scene,
+    settings: &StepSettings,
+    cost: &TaskCost,
+    x0: &[f64],
+    start: Solution,
+) -> Result<Reach, LibraryError> {
+    let dynamics = || -> Result<SceneDynamics, LibraryError> {
+        Ok(SceneDynamics::new(Simulator::new(
+            scene.clone(),
+            *settings,
+        )?))
+    };
+    let failed = |source| LibraryError::Optimiser {
+        trajectory: 0,
+        source,
+    };
+    let untouched = start.cost;
+    let mut tries = Vec::new();
+    let mut best: Option<(usize, Solution)> = None;
+    let steps = start.controls.len() as f64 + 1.0;
+    // The needed pairs apart at the start, nearest first.
+    let mut apart = Vec::new();
+    for pair in needed_pairs(scene, cost).unwrap_or_default() {
+        if let Some((d0, _)) = ReachCost::new(cost, scene, pair, 1.0)?.gap(x0) {
+            apart.push((d0, pair));
+        }
+    }
+    apart.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let pulling = Ddp::new(DdpSettings {
+        max_iterations: ddp.settings().max_iterations.min(REACH_PULL_PASSES),
+        ..ddp.settings().clone()
+    })
+    .map_err(failed)?;
+    for (d0, pair) in apart {
+        let weight = REACH_PULL * (1.0 + untouched.abs()) / (0.5 * d0 * d0 * steps);
+        let pull = ReachCost::new(cost, scene, pair, weight)?;
+        let pulled = pulling
+            .solve(&mut dynamics()?, &pull, x0, &start.controls)
+            .map_err(failed)?;
+        let sol = ddp
+            .solve(&mut dynamics()?, cost, x0, &pulled.controls)
+            .map_err(failed)?;
+        let felt = contact_felt(
+            &mut Simulator::new(scene.clone(), *settings)?,
+            cost,
+            x0,
+            &sol.controls,
+        )? && lowers(untouched, sol.cost);
+        tries.push((pair, pulled.cost, sol.cost, felt));
+        if felt {
+            best = Some((pair, sol));
+            break;
+        }
+    }
+    Ok(match best {
+        Some((pair, solution)) => Reach {
+            solution,
+            pair: Some(pair),
+            tries,
+        },
+        None => Reach {
+            solution: start,
+            pair: None,
+            tries,
+        },
+    })
+}
+
+/// What [`feel_contact`] did for a solve.
+#[derive(Debug, Clone)]
+pub struct ContactSearch {
+    /// The solution: the start unless a pull or the continuation found one that feels the contact and
+    /// costs less.
+    pub solution: Solution,
+    /// Whether the start felt the contact already (then nothing else was tried).
+    pub felt: bool,
+    /// The pulls, if the start felt none ([`reach_for_contact`]).
+    pub reach: Option<Reach>,
+    /// The continuation in the noise scale, if no pull found the contact, the model is smoothed and
+    /// continuation was asked for ([`continue_in_noise`]).
+    pub continuation: Option<Continuation>,
+}
+
+impl ContactSearch {
+    /// Whether the solution feels the contact: the start did, or a pull or the continuation replaced it.
+    pub fn found(&self) -> bool {
+        self.felt
+            || self.reach.as_ref().is_some_and(|r| r.pair.is_some())
+            || self.continuation.as_ref().is_some_and(|c| c.kept)
+    }
+}
+
+/// A solve `start` from `x0` checked for the contact its task needs ([`contact_felt`], under
+/// `settings`), and where none is felt, mended: first by pulling each needed pair together
+/// ([`reach_for_contact`]), then, if no pull found a cheaper solve that feels it, `continuation` is
+/// asked for and the model is smoothed, by continuation in the noise scale ([`continue_in_noise`],
+/// each stage reported to `stage`). `optimize`, `train`'s first solve and every first solve of a target
+/// task's chain go through it.
+#[allow(clippy::too_many_arguments)]
+pub fn feel_contact(
+    ddp: &Ddp,
+    scene: &Scene,
+    settings: &StepSettings,
+    cost: &TaskCost,
+    x0: &[f64],
+    start: Solution,
+    continuation: bool,
+    stage: impl FnMut(f64, &Solution, Option<bool>),
+) -> Result<ContactSearch, LibraryError> {
+    let mut probe = Simulator::new(scene.clone(), *settings)?;
+    if contact_felt(&mut probe, cost, x0, &start.controls)? {
+        return Ok(ContactSearch {
+            solution: start,
+            felt: true,
+            reach: None,
+            continuation: None,
+        });
+    }
+    let reach = reach_for_contact(ddp, scene, settings, cost, x0, start)?;
+    if reach.pair.is_some() || !continuation || noise_scale(settings.model).is_none() {
+        return Ok(ContactSearch {
+            solution: reach.solution.clone(),
+            felt: false,
+            reach: Some(reach),
+            continuation: None,
+        });
+    }
+    let c = continue_in_noise(
+        ddp,
+        scene,
+        settings,
+        cost,
+        x0,
+        reach.solution.clone(),
+        stage,
+    )?;
+    Ok(ContactSearch {
+        solution: c.solution.clone(),
+        felt: false,
+        reach: Some(reach),
+        continuation: Some(c),
     })
 }
