@@ -202,7 +202,6 @@ fn from_rest(problem: &ProblemFile, task: &Task) -> anyhow::Result<FromRest> {
         &task.cost,
         &task.x0,
         sol,
-        true,
         |_, _, _| {},
     )?
     .solution;

@@ -226,7 +226,6 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                         &task.cost,
                         &x0,
                         sol,
-                        true,
                         |s, stage, felt| {
                             println!(
                                 "continuation: sigma {s:.4}: {:?} after {} passes, cost {:.6}{}",

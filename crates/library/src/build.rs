@@ -772,7 +772,6 @@ impl<'a> Build<'a> {
             &self.cost,
             x1,
             sol,
-            true,
             |s, stage, felt| {
                 tracing::info!(
                     sigma = s,

@@ -98,6 +98,24 @@ fn lowers(untouched: f64, cost: f64) -> bool {
     untouched - cost > 0.01 * (1.0 + untouched.abs())
 }
 
+/// `ddp`'s solve of `cost` from `x0` on a fresh simulator of `scene` under `settings`, warm-started from
+/// `controls`: every solve of this module.
+fn solve_in<C: ddp::Cost>(
+    ddp: &Ddp,
+    scene: &Scene,
+    settings: StepSettings,
+    cost: &C,
+    x0: &[f64],
+    controls: &[Vec<f64>],
+) -> Result<Solution, LibraryError> {
+    let mut dynamics = SceneDynamics::new(Simulator::new(scene.clone(), settings)?);
+    ddp.solve(&mut dynamics, cost, x0, controls)
+        .map_err(|source| LibraryError::Optimiser {
+            trajectory: 0,
+            source,
+        })
+}
+
 /// The noise scale of a smoothed model, `None` for the hard one.
 pub fn noise_scale(model: Complementarity) -> Option<f64> {
     match model {
@@ -137,23 +155,15 @@ pub fn continue_in_noise(
     let sigma = noise_scale(settings.model).ok_or_else(|| {
         LibraryError::Invalid("the hard model has no noise scale to continue in".into())
     })?;
-    let simulator = |s: f64| -> Result<Simulator, LibraryError> {
-        let model = match settings.model {
+    let at = |s: f64| StepSettings {
+        model: match settings.model {
             Complementarity::Normal { .. } => Complementarity::Normal { sigma: s },
             _ => Complementarity::Logistic { sigma: s },
-        };
-        Ok(Simulator::new(
-            scene.clone(),
-            StepSettings { model, ..*settings },
-        )?)
+        },
+        ..*settings
     };
-    let solve = |s: f64, controls: &[Vec<f64>]| -> Result<Solution, LibraryError> {
-        ddp.solve(&mut SceneDynamics::new(simulator(s)?), cost, x0, controls)
-            .map_err(|source| LibraryError::Optimiser {
-                trajectory: 0,
-                source,
-            })
-    };
+    let simulator = |s: f64| Simulator::new(scene.clone(), at(s));
+    let solve = |s: f64, controls: &[Vec<f64>]| solve_in(ddp, scene, at(s), cost, x0, controls);
     let untouched = start.cost;
     let mut stages = Vec::new();
     let mut sol = start.clone();
@@ -324,19 +334,8 @@ pub fn reach_for_contact(
     x0: &[f64],
     start: Solution,
 ) -> Result<Reach, LibraryError> {
-    let dynamics = || -> Result<SceneDynamics, LibraryError> {
-        Ok(SceneDynamics::new(Simulator::new(
-            scene.clone(),
-            *settings,
-        )?))
-    };
-    let failed = |source| LibraryError::Optimiser {
-        trajectory: 0,
-        source,
-    };
     let untouched = start.cost;
     let mut tries = Vec::new();
-    let mut best: Option<(usize, Solution)> = None;
     let steps = start.controls.len() as f64 + 1.0;
     // The needed pairs apart at the start, nearest first.
     let mut apart = Vec::new();
@@ -350,16 +349,15 @@ pub fn reach_for_contact(
         max_iterations: ddp.settings().max_iterations.min(REACH_PULL_PASSES),
         ..ddp.settings().clone()
     })
-    .map_err(failed)?;
+    .map_err(|source| LibraryError::Optimiser {
+        trajectory: 0,
+        source,
+    })?;
     for (d0, pair) in apart {
         let weight = REACH_PULL * (1.0 + untouched.abs()) / (0.5 * d0 * d0 * steps);
         let pull = ReachCost::new(cost, scene, pair, weight)?;
-        let pulled = pulling
-            .solve(&mut dynamics()?, &pull, x0, &start.controls)
-            .map_err(failed)?;
-        let sol = ddp
-            .solve(&mut dynamics()?, cost, x0, &pulled.controls)
-            .map_err(failed)?;
+        let pulled = solve_in(&pulling, scene, *settings, &pull, x0, &start.controls)?;
+        let sol = solve_in(ddp, scene, *settings, cost, x0, &pulled.controls)?;
         let felt = contact_felt(
             &mut Simulator::new(scene.clone(), *settings)?,
             cost,
@@ -368,21 +366,17 @@ pub fn reach_for_contact(
         )? && lowers(untouched, sol.cost);
         tries.push((pair, pulled.cost, sol.cost, felt));
         if felt {
-            best = Some((pair, sol));
-            break;
+            return Ok(Reach {
+                solution: sol,
+                pair: Some(pair),
+                tries,
+            });
         }
     }
-    Ok(match best {
-        Some((pair, solution)) => Reach {
-            solution,
-            pair: Some(pair),
-            tries,
-        },
-        None => Reach {
-            solution: start,
-            pair: None,
-            tries,
-        },
+    Ok(Reach {
+        solution: start,
+        pair: None,
+        tries,
     })
 }
 
@@ -396,8 +390,8 @@ pub struct ContactSearch {
     pub felt: bool,
     /// The pulls, if the start felt none ([`reach_for_contact`]).
     pub reach: Option<Reach>,
-    /// The continuation in the noise scale, if no pull found the contact, the model is smoothed and
-    /// continuation was asked for ([`continue_in_noise`]).
+    /// The continuation in the noise scale, if no pull found the contact and the model is smoothed
+    /// ([`continue_in_noise`]).
     pub continuation: Option<Continuation>,
 }
 
@@ -412,9 +406,9 @@ impl ContactSearch {
 
 /// A solve `start` from `x0` checked for the contact its task needs ([`contact_felt`], under
 /// `settings`), and where none is felt, mended: first by pulling each needed pair together
-/// ([`reach_for_contact`]), then, if no pull found a cheaper solve that feels it, `continuation` is
-/// asked for and the model is smoothed, by continuation in the noise scale ([`continue_in_noise`],
-/// each stage reported to `stage`). `optimize`, `train`'s first solve and every first solve of a target
+/// ([`reach_for_contact`]), then, if no pull found a cheaper solve that feels it and the model is
+/// smoothed, by continuation in the noise scale ([`continue_in_noise`], each stage reported to
+/// `stage`). `optimize`, `train`'s first solve and every first solve of a target
 /// task's chain go through it.
 #[allow(clippy::too_many_arguments)]
 pub fn feel_contact(
@@ -424,7 +418,6 @@ pub fn feel_contact(
     cost: &TaskCost,
     x0: &[f64],
     start: Solution,
-    continuation: bool,
     stage: impl FnMut(f64, &Solution, Option<bool>),
 ) -> Result<ContactSearch, LibraryError> {
     let mut probe = Simulator::new(scene.clone(), *settings)?;
@@ -437,7 +430,7 @@ pub fn feel_contact(
         });
     }
     let reach = reach_for_contact(ddp, scene, settings, cost, x0, start)?;
-    if reach.pair.is_some() || !continuation || noise_scale(settings.model).is_none() {
+    if reach.pair.is_some() || noise_scale(settings.model).is_none() {
         return Ok(ContactSearch {
             solution: reach.solution.clone(),
             felt: false,
