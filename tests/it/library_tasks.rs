@@ -1174,3 +1174,98 @@ fn growth_sharpening_shapes_a_target_tasks_branches_and_leaves_a_progress_task_a
         assert!(err.to_string().contains("growth_sharpening"), "{err}");
     }
 }
+
+/// A one-link paddle above a hinged wheel whose long end it can reach only when that end is up: a new
+/// user's flicking scene (issue 28). Spinning it needs each flick to leave the wheel turning, or the wheel
+/// stops with its long end out of reach and nothing more can be done.
+const PADDLE: &str = r#"
+gravity = [0.0, -4.0]
+
+[[body]]
+name = "paddle"
+semi_axes = [0.9, 0.15]
+parent = "world"
+anchor = [0.0, 0.0]
+centre = [0.9, 0.0]
+joint = { limits = [-2.8, -0.3], damping = 0.2, actuated = true }
+
+[[body]]
+name = "wheel"
+semi_axes = [0.7, 0.4]
+parent = "world"
+anchor = [0.0, -2.35]
+centre = [0.0, 0.0]
+joint = { damping = 0.3 }
+
+[[contact]]
+a = "paddle"
+b = "wheel"
+friction = 0.6
+
+[task.spin]
+h = 0.05
+horizon = 75
+model = "logistic"
+sigma = 0.1
+x0 = { "paddle.angle" = -0.8, "wheel.angle" = 1.2 }
+control_weight = 0.05
+periods = { "wheel.angle" = 3.141592653589793 }
+running = [{ coordinate = "wheel.angle", linear = -1.0 }]
+final = [{ coordinate = "wheel.angle", linear = -1.0 }]
+"#;
+
+/// Issue 28, item 4: a receding horizon too short to see past the next flick lets the paddle stop the
+/// wheel where its long end is out of reach, and every later solve finds nothing to do. The build sees
+/// its unperturbed chain stall and solves every trajectory over a longer horizon; the policy then keeps
+/// the wheel turning. The finger's chain does not stall, and its horizon stays.
+#[test]
+fn stalled_trunk_lengthens_the_horizon() {
+    let file = ProblemFile::from_toml_str(PADDLE).unwrap();
+    let task = file.task(None).unwrap();
+    let trunk = 80;
+    let settings = library::LibrarySettings {
+        exploration: library::Exploration::Branches {
+            trunk,
+            settle: 5,
+            length: 20,
+        },
+        ..default_recipe(&task, trunk)
+    };
+    assert_eq!(settings.horizon, 90);
+    let lib = library::Library::build(&file, None, &settings, |_, _| {}).unwrap();
+    assert!(
+        lib.settings.horizon > settings.horizon && lib.settings.horizon <= library::LONGEST_HORIZON,
+        "horizon {}",
+        lib.settings.horizon
+    );
+    assert_eq!(lib.entries.len(), trunk * settings.keep);
+    let policy = lib.policy().unwrap();
+    let run = library::evaluate(
+        &lib,
+        &policy,
+        &library::EvaluationSettings {
+            model: task.model,
+            h: task.h,
+            seconds: 30.0,
+            kick_every: 0.0,
+            x0: task.x0.clone(),
+            ..library::EvaluationSettings::default()
+        },
+    )
+    .unwrap();
+    assert!(run.success.passed, "{:?}", run.success);
+    assert!(run.final_spin_rate > 0.5, "{run:?}");
+    // The finger's chain keeps turning the ellipse over the recipe's horizon: not lengthened.
+    let finger = ProblemFile::builtin();
+    let spin = finger.task(None).unwrap();
+    let settings = library::LibrarySettings {
+        exploration: library::Exploration::Branches {
+            trunk: 60,
+            settle: 5,
+            length: 20,
+        },
+        ..default_recipe(&spin, 60)
+    };
+    let lib = library::Library::build(&finger, None, &settings, |_, _| {}).unwrap();
+    assert_eq!(lib.settings.horizon, settings.horizon);
+}

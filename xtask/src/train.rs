@@ -174,6 +174,12 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         library.entries[0].passes,
         passes as f64 / firsts.len() as f64
     );
+    if library.settings.horizon != settings.horizon {
+        println!(
+            "the receding horizon of {} steps let the task stall (the unperturbed chain from the start stopped advancing {watched}): every trajectory was solved over {} steps instead",
+            settings.horizon, library.settings.horizon
+        );
+    }
     library.save(&args.out)?;
     println!("wrote {}", args.out.display());
     Ok(())

@@ -577,7 +577,7 @@ pub fn build_entries(
     task: &Task,
     settings: &LibrarySettings,
     progress: impl FnMut(usize, &Entry) + Send,
-) -> Result<Vec<Entry>, LibraryError> {
+) -> Result<Entries, LibraryError> {
     settings.validate(scene)?;
     let mut resolved;
     let settings = if settings.x0.is_empty() {
@@ -596,7 +596,10 @@ pub fn build_entries(
         *count += 1;
     };
     match settings.exploration {
-        Exploration::Kicks => kicked_chains(&task, &report),
+        Exploration::Kicks => Ok(Entries {
+            entries: kicked_chains(&task, &report)?,
+            horizon: settings.horizon,
+        }),
         Exploration::Branches {
             trunk,
             settle,
@@ -604,6 +607,25 @@ pub fn build_entries(
         } => branched(&task, trunk, settle, length, &report),
     }
 }
+
+/// What [`build_entries`] made: the entries, and the horizon their trajectories were solved over (the
+/// settings' own, or a longer one where the trunk stalled at it: [`HORIZON_DOUBLINGS`]).
+#[derive(Debug, Clone)]
+pub struct Entries {
+    /// The library's controllers.
+    pub entries: Vec<Entry>,
+    /// The horizon every trajectory was solved over.
+    pub horizon: usize,
+}
+
+/// How many times a build doubles its horizon when the trunk of a progress task stalls: a receding
+/// horizon too short to see past the next contact can settle where the task cannot go on (a paddle that
+/// stops a wheel with its long end out of reach, `stalled_trunk_lengthens_the_horizon`), and the
+/// policy then stalls there on every world; growth cannot mend that, because every solve from the
+/// stalled state finds nothing to do within the horizon.
+pub const HORIZON_DOUBLINGS: usize = 2;
+/// The longest horizon a stalled trunk is lengthened to.
+pub const LONGEST_HORIZON: usize = 1000;
 
 /// The start a setting's `x0` names: itself, or the task's when it is empty (the default of
 /// [`LibrarySettings`] and [`crate::EvaluationSettings`]).
@@ -659,6 +681,48 @@ impl<'a> Build<'a> {
             kick: Normal::new(0.0, settings.kick_variance.sqrt())
                 .map_err(|e| LibraryError::Invalid(e.to_string()))?,
         })
+    }
+
+    /// The same build under other settings (a longer horizon).
+    fn with_settings<'b>(&self, settings: &'b LibrarySettings) -> Build<'b>
+    where
+        'a: 'b,
+    {
+        Build {
+            scene: self.scene,
+            settings,
+            cost: self.cost.clone(),
+            progress: self.progress,
+            success: self.success.clone(),
+            control_limits: self.control_limits.clone(),
+            kick: self.kick,
+        }
+    }
+
+    /// How far a trunk of `trunk` trajectories advanced the progress coordinate the rewarded way after
+    /// its first `settle` (the transient from rest); 0 for a target task.
+    fn advance(&self, built: &Built, trunk: usize, settle: usize) -> f64 {
+        let (Some(forward), Some(last)) = (self.progress.forward, trunk.checked_sub(1)) else {
+            return 0.0;
+        };
+        let at = |j: usize| built.entries[j * self.settings.keep].x[self.progress.coordinate];
+        forward * (at(last) - at(settle.min(last)))
+    }
+
+    /// Whether a progress task's trunk stalls: over its last [`STALL_WINDOW`] seconds (when it runs that
+    /// long past its first `settle` trajectories) the progress coordinate advances less than
+    /// [`STALL_ADVANCE`] the rewarded way, the growth rounds' criterion.
+    fn stalls(&self, built: &Built, trunk: usize, settle: usize) -> bool {
+        let Some(forward) = self.progress.forward else {
+            return false;
+        };
+        let s = self.settings;
+        let window = (STALL_WINDOW / (s.shift as f64 * s.h)).ceil() as usize;
+        if trunk < 1 || trunk - 1 < settle + window {
+            return false;
+        }
+        let at = |j: usize| built.entries[j * s.keep].x[self.progress.coordinate];
+        forward * (at(trunk - 1) - at(trunk - 1 - window)) < STALL_ADVANCE
     }
 
     fn dynamics(&self) -> Result<SceneDynamics, LibraryError> {
@@ -895,26 +959,49 @@ fn kicked_chains(
     Ok(built.into_iter().flat_map(|b| b.entries).collect())
 }
 
-/// The cycle-first exploration of [`Exploration::Branches`], then growth.
+/// The cycle-first exploration of [`Exploration::Branches`], then growth. For a task that rewards
+/// progress, a trunk that stalls ([`Build::stalls`]) is built again over twice the horizon, at most
+/// [`HORIZON_DOUBLINGS`] times, and the trunk that advanced furthest is kept with its horizon, which every
+/// branch after it uses.
 fn branched(
     task: &Build,
     trunk: usize,
     settle: usize,
     length: usize,
     report: &(dyn Fn(&Entry) + Sync),
-) -> Result<Vec<Entry>, LibraryError> {
-    let s = task.settings;
-    let zero = vec![vec![0.0; task.scene.n_controls]; s.horizon];
+) -> Result<Entries, LibraryError> {
+    let mut best: Option<(f64, LibrarySettings, Built)> = None;
+    let mut settings = task.settings.clone();
     let mut dynamics = task.dynamics()?;
-    let mut built = task.chain(
-        &mut dynamics,
-        s.x0.clone(),
-        zero,
-        trunk,
-        true,
-        |_, _| {},
-        report,
-    )?;
+    for doubling in 0..=HORIZON_DOUBLINGS {
+        let this = task.with_settings(&settings);
+        let zero = vec![vec![0.0; this.scene.n_controls]; settings.horizon];
+        let built = this.chain(
+            &mut dynamics,
+            settings.x0.clone(),
+            zero,
+            trunk,
+            true,
+            |_, _| {},
+            report,
+        )?;
+        let advance = this.advance(&built, trunk, settle);
+        let stalls = this.stalls(&built, trunk, settle);
+        tracing::info!(horizon = settings.horizon, advance, stalls, "library trunk");
+        if best.as_ref().is_none_or(|(a, ..)| advance > *a) {
+            best = Some((advance, settings.clone(), built));
+        }
+        if !stalls || doubling == HORIZON_DOUBLINGS || settings.horizon * 2 > LONGEST_HORIZON {
+            break;
+        }
+        settings.horizon *= 2;
+    }
+    let Some((_, settings, mut built)) = best else {
+        return Err(LibraryError::Invalid("a build made no trunk".into()));
+    };
+    let task = task.with_settings(&settings);
+    let task = &task;
+    let s = &settings;
     // Branches off the trunk, the budget's remainder split into chains of `length` (the last shorter).
     let rest = s.trajectories - trunk;
     let count = rest.div_ceil(length);
@@ -944,7 +1031,10 @@ fn branched(
         let grown = grow(task, &mut dynamics, &mut built, length, round, report)?;
         tracing::info!(round, grown, "library growth");
     }
-    Ok(built.entries)
+    Ok(Entries {
+        entries: built.entries,
+        horizon: s.horizon,
+    })
 }
 
 /// One growth round (see [`Exploration::Branches`]): the number of branches added.

@@ -147,12 +147,15 @@ impl Library {
     ) -> Result<Self, LibraryError> {
         let task = problem.task(name)?;
         let spec = problem.tasks[&task.name].clone();
-        let entries = build_entries(&problem.scene, &task, settings, progress)?;
+        let built = build_entries(&problem.scene, &task, settings, progress)?;
         Ok(Library {
             scene: problem.scene.clone(),
             task: (task, spec),
-            settings: settings.clone(),
-            entries,
+            settings: LibrarySettings {
+                horizon: built.horizon,
+                ..settings.clone()
+            },
+            entries: built.entries,
         })
     }
 

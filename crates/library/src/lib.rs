@@ -17,9 +17,9 @@ mod task;
 
 pub use anneal::{AnnealStep, anneal};
 pub use build::{
-    Entry, Exploration, GROWTH_BRANCHES, GROWTH_SECONDS, GROWTH_SHARPENING, LibrarySettings,
-    LocalValue, MAX_NEIGHBOURS, Model, Progress, STALL_ADVANCE, STALL_WINDOW, WORLD_TIME_STEP,
-    build_entries,
+    Entries, Entry, Exploration, GROWTH_BRANCHES, GROWTH_SECONDS, GROWTH_SHARPENING,
+    HORIZON_DOUBLINGS, LONGEST_HORIZON, LibrarySettings, LocalValue, MAX_NEIGHBOURS, Model,
+    Progress, STALL_ADVANCE, STALL_WINDOW, WORLD_TIME_STEP, build_entries,
 };
 pub use error::LibraryError;
 pub use evaluate::{
