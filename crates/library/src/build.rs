@@ -699,30 +699,25 @@ impl<'a> Build<'a> {
         }
     }
 
-    /// How far a trunk of `trunk` trajectories advanced the progress coordinate the rewarded way after
-    /// its first `settle` (the transient from rest); 0 for a target task.
-    fn advance(&self, built: &Built, trunk: usize, settle: usize) -> f64 {
+    /// How far a trunk of `trunk` trajectories advanced the progress coordinate the rewarded way from
+    /// trajectory `from` to its last; 0 for a target task.
+    fn advance(&self, built: &Built, trunk: usize, from: usize) -> f64 {
         let (Some(forward), Some(last)) = (self.progress.forward, trunk.checked_sub(1)) else {
             return 0.0;
         };
         let at = |j: usize| built.entries[j * self.settings.keep].x[self.progress.coordinate];
-        forward * (at(last) - at(settle.min(last)))
+        forward * (at(last) - at(from.min(last)))
     }
 
     /// Whether a progress task's trunk stalls: over its last [`STALL_WINDOW`] seconds (when it runs that
     /// long past its first `settle` trajectories) the progress coordinate advances less than
     /// [`STALL_ADVANCE`] the rewarded way, the growth rounds' criterion.
     fn stalls(&self, built: &Built, trunk: usize, settle: usize) -> bool {
-        let Some(forward) = self.progress.forward else {
-            return false;
-        };
         let s = self.settings;
         let window = (STALL_WINDOW / (s.shift as f64 * s.h)).ceil() as usize;
-        if trunk < 1 || trunk - 1 < settle + window {
-            return false;
-        }
-        let at = |j: usize| built.entries[j * s.keep].x[self.progress.coordinate];
-        forward * (at(trunk - 1) - at(trunk - 1 - window)) < STALL_ADVANCE
+        self.progress.forward.is_some()
+            && trunk > settle + window
+            && self.advance(built, trunk, trunk - 1 - window) < STALL_ADVANCE
     }
 
     fn dynamics(&self) -> Result<SceneDynamics, LibraryError> {
