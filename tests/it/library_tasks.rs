@@ -1175,44 +1175,8 @@ fn growth_sharpening_shapes_a_target_tasks_branches_and_leaves_a_progress_task_a
     }
 }
 
-/// A one-link paddle above a hinged wheel whose long end it can reach only when that end is up: a new
-/// user's flicking scene (issue 28). Spinning it needs each flick to leave the wheel turning, or the wheel
-/// stops with its long end out of reach and nothing more can be done.
-const PADDLE: &str = r#"
-gravity = [0.0, -4.0]
-
-[[body]]
-name = "paddle"
-semi_axes = [0.9, 0.15]
-parent = "world"
-anchor = [0.0, 0.0]
-centre = [0.9, 0.0]
-joint = { limits = [-2.8, -0.3], damping = 0.2, actuated = true }
-
-[[body]]
-name = "wheel"
-semi_axes = [0.7, 0.4]
-parent = "world"
-anchor = [0.0, -2.35]
-centre = [0.0, 0.0]
-joint = { damping = 0.3 }
-
-[[contact]]
-a = "paddle"
-b = "wheel"
-friction = 0.6
-
-[task.spin]
-h = 0.05
-horizon = 75
-model = "logistic"
-sigma = 0.1
-x0 = { "paddle.angle" = -0.8, "wheel.angle" = 1.2 }
-control_weight = 0.05
-periods = { "wheel.angle" = 3.141592653589793 }
-running = [{ coordinate = "wheel.angle", linear = -1.0 }]
-final = [{ coordinate = "wheel.angle", linear = -1.0 }]
-"#;
+/// A one-link paddle flicking a hinged wheel (tests/data/paddle.toml: a new user's scene, not the zoo's).
+const PADDLE: &str = include_str!("../data/paddle.toml");
 
 /// Issue 28, item 4: a receding horizon too short to see past the next flick lets the paddle stop the
 /// wheel where its long end is out of reach, and every later solve finds nothing to do. The build sees

@@ -434,3 +434,45 @@ fn optimize_says_when_no_contact_is_felt_and_reaches_for_it() {
     assert!(stderr.contains("--strict: no contact felt"), "{stderr}");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// Issue 28: a receding horizon that lets the task stall is lengthened, and `train` says so. The paddle of
+/// tests/data/paddle.toml stops its wheel out of reach over 90 steps; its library is built over more, and
+/// the file records the horizon it was built over.
+#[test]
+fn train_says_when_it_lengthened_a_stalled_horizon() {
+    let dir = std::env::temp_dir().join(format!("xtask-horizon-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let paddle = concat!(env!("CARGO_MANIFEST_DIR"), "/../tests/data/paddle.toml");
+    let out = xtask()
+        .args([
+            "train",
+            "--scene",
+            paddle,
+            "--trajectories",
+            "80",
+            "--trunk",
+            "80",
+            "--settle",
+            "5",
+            "--growth",
+            "0",
+            "--out",
+        ])
+        .arg(dir.join("paddle.lib"))
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        stdout.contains("the receding horizon of 90 steps let the task stall")
+            && stdout.contains("stopped advancing wheel.angle"),
+        "{stdout}"
+    );
+    let lib = library::Library::load(&dir.join("paddle.lib")).unwrap();
+    assert!(lib.settings.horizon > 90, "{}", lib.settings.horizon);
+    std::fs::remove_dir_all(&dir).ok();
+}
