@@ -1187,14 +1187,7 @@ fn stalled_trunk_lengthens_the_horizon() {
     let file = ProblemFile::from_toml_str(PADDLE).unwrap();
     let task = file.task(None).unwrap();
     let trunk = 80;
-    let settings = library::LibrarySettings {
-        exploration: library::Exploration::Branches {
-            trunk,
-            settle: 5,
-            length: 20,
-        },
-        ..default_recipe(&task, trunk)
-    };
+    let settings = trunk_only(&task, trunk);
     assert_eq!(settings.horizon, 90);
     let lib = library::Library::build(&file, None, &settings, |_, _| {}).unwrap();
     assert!(
@@ -1222,14 +1215,19 @@ fn stalled_trunk_lengthens_the_horizon() {
     // The finger's chain keeps turning the ellipse over the recipe's horizon: not lengthened.
     let finger = ProblemFile::builtin();
     let spin = finger.task(None).unwrap();
-    let settings = library::LibrarySettings {
+    let settings = trunk_only(&spin, 60);
+    let lib = library::Library::build(&finger, None, &settings, |_, _| {}).unwrap();
+    assert_eq!(lib.settings.horizon, settings.horizon);
+}
+
+/// The default recipe on `task` with nothing but its unperturbed chain of `trunk` trajectories.
+fn trunk_only(task: &library::Task, trunk: usize) -> library::LibrarySettings {
+    library::LibrarySettings {
         exploration: library::Exploration::Branches {
-            trunk: 60,
+            trunk,
             settle: 5,
             length: 20,
         },
-        ..default_recipe(&spin, 60)
-    };
-    let lib = library::Library::build(&finger, None, &settings, |_, _| {}).unwrap();
-    assert_eq!(lib.settings.horizon, settings.horizon);
+        ..default_recipe(task, trunk)
+    }
 }
