@@ -814,16 +814,7 @@ impl<'a> Build<'a> {
         sol: ddp::Solution,
         passes: usize,
     ) -> Result<(ddp::Solution, bool), LibraryError> {
-        let ddp = Ddp::new(DdpSettings {
-            max_iterations: passes,
-            tol_cost: self.settings.tolerance,
-            control_limits: self.control_limits.clone(),
-            ..DdpSettings::default()
-        })
-        .map_err(|source| LibraryError::Optimiser {
-            trajectory: 0,
-            source,
-        })?;
+        let ddp = self.optimiser(passes, 0)?;
         let search = crate::feel_contact(
             &ddp,
             self.scene,
@@ -848,6 +839,21 @@ impl<'a> Build<'a> {
         Ok((search.solution, found))
     }
 
+    /// The build's optimiser with `passes` at most: its tolerance and its task's control limits
+    /// (errors name trajectory `k`).
+    fn optimiser(&self, passes: usize, k: usize) -> Result<Ddp, LibraryError> {
+        Ddp::new(DdpSettings {
+            max_iterations: passes,
+            tol_cost: self.settings.tolerance,
+            control_limits: self.control_limits.clone(),
+            ..DdpSettings::default()
+        })
+        .map_err(|source| LibraryError::Optimiser {
+            trajectory: k,
+            source,
+        })
+    }
+
     fn solve(
         &self,
         dynamics: &mut SceneDynamics,
@@ -860,13 +866,7 @@ impl<'a> Build<'a> {
             trajectory: k,
             source,
         };
-        let ddp = Ddp::new(DdpSettings {
-            max_iterations: passes,
-            tol_cost: self.settings.tolerance,
-            control_limits: self.control_limits.clone(),
-            ..DdpSettings::default()
-        })
-        .map_err(failed)?;
+        let ddp = self.optimiser(passes, k)?;
         match ddp.solve(dynamics, &self.cost, x1, controls) {
             Ok(sol) => Ok(sol),
             Err(DdpError::InitialRollout { .. })
