@@ -1,4 +1,4 @@
-//! Slider and free joints: the mass matrix and the bias forces against the Lagrangian computed
+//! Slider, free and weld joints: the mass matrix and the bias forces against the Lagrangian computed
 //! independently (differences of positions and of `M`), energy, a free body on the ground, derivatives
 //! through contacts of free and sliding bodies.
 
@@ -6,7 +6,7 @@ use dynamics::{Complementarity, DynamicsError, Kinematics, Scene, Simulator, Ste
 use ncp::Status;
 
 /// Every joint kind in one chain and beside it, no drag, no contact: a hinged arm carrying a slider
-/// carrying a free puck, and a free block at the root.
+/// carrying a free puck with a tip welded to it, and a free block at the root.
 const MIXED: &str = r#"
 gravity = [0.0, -9.81]
 
@@ -34,6 +34,15 @@ parent = "carriage"
 anchor = [0.2, 0.1]
 centre = [0.1, 0.05]
 joint = { type = "free" }
+
+[[body]]
+name = "tip"
+semi_axes = [0.1, 0.05]
+density = 3.0
+parent = "puck"
+anchor = [0.4, -0.2]
+centre = [0.05, 0.1]
+joint = { type = "weld" }
 
 [[body]]
 name = "block"
@@ -137,6 +146,64 @@ fn coordinates_are_named_and_bad_joints_are_refused() {
         1,
     );
     assert_eq!(Scene::from_toml_str(&actuated).unwrap().n_controls, 3);
+    // A weld adds no coordinate; the tip is carried by the puck's joint.
+    assert_eq!(scene.carrier(3), 2);
+    assert_eq!(scene.carrier(2), 2);
+    assert!(scene.bodies[3].coordinates.is_empty());
+}
+
+#[test]
+fn bad_welds_are_refused_with_the_field_named() {
+    let weld = "parent = \"puck\"\nanchor = [0.4, -0.2]\ncentre = [0.05, 0.1]\njoint = { type = \"weld\" }";
+    assert!(MIXED.contains(weld));
+    for (to, field) in [
+        (
+            weld.replace("parent = \"puck\"", "parent = \"world\""),
+            "body[3].joint.type",
+        ),
+        (
+            weld.replace("\"weld\"", "\"weld\", limits = [-1.0, 1.0]"),
+            "body[3].joint",
+        ),
+        (
+            weld.replace("\"weld\"", "\"weld\", actuated = true"),
+            "body[3].joint",
+        ),
+        (
+            weld.replace("\"weld\"", "\"weld\", damping = 0.5"),
+            "body[3].joint",
+        ),
+        (
+            weld.replace("\"weld\"", "\"weld\", axis = [1.0, 0.0]"),
+            "body[3].joint.axis",
+        ),
+    ] {
+        let text = MIXED.replacen(weld, &to, 1);
+        let Err(DynamicsError::Scene(problems)) = Scene::from_toml_str(&text) else {
+            panic!("accepted {to}")
+        };
+        assert!(
+            problems.iter().any(|p| p.field == field),
+            "{field}: {problems:?}"
+        );
+    }
+    // A pair inside one rigid body (the puck and its tip) never changes: refused, naming the pair.
+    let paired = format!("{MIXED}\n[[contact]]\na = \"tip\"\nb = \"puck\"\nfriction = 0.5\n");
+    let Err(DynamicsError::Scene(problems)) = Scene::from_toml_str(&paired) else {
+        panic!(
+            "accepted a pair inside one rigid body: {:?}",
+            Scene::from_toml_str(&paired)
+        )
+    };
+    assert!(
+        problems
+            .iter()
+            .any(|p| p.field == "contact[0].b" && p.problem.contains("welded")),
+        "{problems:?}"
+    );
+    // The tip against the carriage (a joint apart) is a pair like any other.
+    let apart = format!("{MIXED}\n[[contact]]\na = \"tip\"\nb = \"carriage\"\nfriction = 0.5\n");
+    assert!(Scene::from_toml_str(&apart).is_ok());
 }
 
 /// `v^T M v / 2` against the kinetic energy from differences of the centres and angles along `v`.
@@ -380,5 +447,104 @@ fn derivatives_of_pushing_match_differences() {
     };
     for x in states {
         crate::dynamics_hard_cases::first_derivatives_match_differences(&scene, settings, &x, &u);
+    }
+}
+
+/// A fork: the pusher of [`PUSHING`] with a second prong welded 2 to its right, which pushes the block
+/// back (to the left) where the first prong pushes it on.
+fn fork() -> Scene {
+    let prong = r#"
+[[body]]
+name = "prong"
+semi_axes = [0.15, 0.15]
+parent = "pusher"
+anchor = [2.0, 0.0]
+centre = [0.0, 0.0]
+joint = { type = "weld" }
+
+[[contact]]
+a = "prong"
+b = "block"
+friction = 0.3
+"#;
+    let text = PUSHING.replacen(
+        "\n[[body]]\nname = \"block\"",
+        &format!("{prong}\n[[body]]\nname = \"block\""),
+        1,
+    );
+    Scene::from_toml_str(&text).unwrap()
+}
+
+#[test]
+fn a_welded_prong_moves_with_its_carrier_and_pushes_back() {
+    let scene = fork();
+    // The prong adds mass to the pusher's coordinate and no coordinate of its own.
+    assert_eq!(
+        scene.coordinate_names(),
+        ["pusher.position", "block.x", "block.y", "block.angle"]
+    );
+    let q = [0.3_f64, 0.0, 0.25, 0.0];
+    let kin = Kinematics::new(&scene, &q);
+    assert!((kin.centre[1][0] - (1.0 + 0.3)).abs() < 1e-15);
+    let m = kin.mass_matrix(&scene);
+    let disc = std::f64::consts::PI * 0.15 * 0.15;
+    assert!((m[0] - 2.0 * disc).abs() < 1e-12, "{}", m[0]);
+    // The fork is mirror symmetric about x = 0 when the pusher is at 0: the prong driven left into the
+    // block's right end from 0.05 away moves it as the first prong driven right into its left end moves the
+    // mirrored block (the block tips against the ground's friction and wedges).
+    let mut sim = Simulator::new(
+        scene,
+        StepSettings {
+            model: Complementarity::Hard,
+            h: 0.01,
+            ..StepSettings::default()
+        },
+    )
+    .unwrap();
+    let (mut left, mut right) = (
+        vec![-0.4_f64, 0.0, 0.25, 0.0, 0.0, 0.0, 0.0, 0.0],
+        vec![0.4_f64, 0.0, 0.25, 0.0, 0.0, 0.0, 0.0, 0.0],
+    );
+    for _ in 0..200 {
+        left = sim.step(&left, &[-1.0]).unwrap().x_next;
+        right = sim.step(&right, &[1.0]).unwrap().x_next;
+        let mirrored = [-1.0, -1.0, 1.0, -1.0];
+        for k in 0..8 {
+            assert!(
+                (left[k] - mirrored[k % 4] * right[k]).abs() < 1e-9,
+                "{left:?} against {right:?}"
+            );
+        }
+    }
+    assert!(left[1] < -0.05, "the block moved to {}", left[1]);
+}
+
+#[test]
+fn derivatives_through_a_welded_prong_match_differences() {
+    let scene = fork();
+    // The prong touching the block's right end (the first prong far behind its left), both moving.
+    let states: Vec<Vec<f64>> = (0..3)
+        .map(|i| {
+            let t = i as f64 * 0.1;
+            vec![t, 0.44 + t, 0.25, -0.02, -0.5, -0.3, -0.1, 0.2]
+        })
+        .collect();
+    let u = [-0.7];
+    for model in [
+        Complementarity::Logistic { sigma: 0.2 },
+        Complementarity::Normal { sigma: 0.2 },
+    ] {
+        let touching =
+            crate::dynamics_hard_cases::hessians_match_differences(&scene, model, &states, &u);
+        assert!(touching >= 2, "{model:?}: {touching}");
+        let settings = StepSettings {
+            model,
+            ..StepSettings::default()
+        };
+        for x in &states {
+            crate::dynamics_hard_cases::first_derivatives_match_differences(
+                &scene, settings, x, &u,
+            );
+        }
     }
 }

@@ -29,6 +29,10 @@ pub enum JointKind {
     /// Moves freely in the plane: `<body>.x` and `<body>.y` (its frame's origin from the anchor, along the
     /// parent frame's axes), then `<body>.angle` (about that origin).
     Free,
+    /// Welded to its parent (a body, not the world): no coordinate; the body is one more ellipse of its
+    /// parent's rigid body (its frame is the parent's, moved to the anchor), for compound shapes such as a
+    /// fork.
+    Weld,
 }
 
 /// A body's joint to its parent.
@@ -442,6 +446,20 @@ impl Scene {
                     "a free joint takes no limits (bound it with planes)",
                 );
             }
+            if b.joint.kind == JointKind::Weld {
+                if b.parent == "world" {
+                    bad(
+                        f("joint.type"),
+                        "a weld joins a body to another body; an ellipse welded to the world is a [[fixed]] ellipse",
+                    );
+                }
+                if b.joint.limits.is_some() || b.joint.actuated || b.joint.damping != 0.0 {
+                    bad(
+                        f("joint"),
+                        "a weld has no coordinate: it takes no limits, damping or actuation",
+                    );
+                }
+            }
             let kinds = match b.joint.kind {
                 JointKind::Hinge => vec![CoordinateKind::Angle],
                 JointKind::Slider => vec![CoordinateKind::Slide { axis }],
@@ -450,6 +468,7 @@ impl Scene {
                     CoordinateKind::Slide { axis: [0.0, 1.0] },
                     CoordinateKind::Angle,
                 ],
+                JointKind::Weld => Vec::new(),
             };
             let first = coordinates.len();
             for kind in kinds {
@@ -560,6 +579,19 @@ impl Scene {
                     .map(Side::Plane)
             }
         };
+        // The body whose joint carries body `i`: itself, or for a weld its parent's carrier.
+        let welded_to = |mut i: usize| {
+            while spec.bodies[i].joint.kind == JointKind::Weld {
+                match spec.bodies[..i]
+                    .iter()
+                    .position(|o| o.name == spec.bodies[i].parent)
+                {
+                    Some(p) => i = p,
+                    None => break,
+                }
+            }
+            i
+        };
         let mut contacts = Vec::new();
         for (k, c) in spec.contacts.iter().enumerate() {
             let f = |name: &str| format!("contact[{k}].{name}");
@@ -580,6 +612,15 @@ impl Scene {
                 bad(
                     f("b"),
                     "a pair needs a moving body on one side (both are fixed parts of the world)",
+                );
+            }
+            if let (Some(Side::Body(a)), Some(Side::Body(b))) = (a, b)
+                && a != b
+                && welded_to(a) == welded_to(b)
+            {
+                bad(
+                    f("b"),
+                    "the two sides are welded into one rigid body: their distance never changes",
                 );
             }
             if !(c.friction.is_finite() && c.friction >= 0.0 && c.friction <= MAX_FRICTION) {
@@ -794,7 +835,20 @@ impl Scene {
         turns
     }
 
-    /// Number of generalised coordinates (one per hinge or slider, three per free joint).
+    /// The body whose joint carries `body`: `body` itself, or for a body welded to its parent the parent's
+    /// carrier (a weld has no coordinate of its own).
+    pub fn carrier(&self, body: usize) -> usize {
+        let mut i = body;
+        while self.bodies[i].joint == JointKind::Weld {
+            match self.bodies[i].parent {
+                Some(p) => i = p,
+                None => break,
+            }
+        }
+        i
+    }
+
+    /// Number of generalised coordinates (one per hinge or slider, three per free joint, none for a weld).
     pub fn n_dof(&self) -> usize {
         self.coordinates.len()
     }

@@ -365,12 +365,14 @@ impl World {
                 .scene
                 .bodies
                 .iter()
-                .map(|b| BodyShape {
+                .enumerate()
+                .map(|(i, b)| BodyShape {
                     name: b.name.clone(),
                     semi_axes: [b.shape.a(), b.shape.b()],
-                    actuated: self.scene().coordinates[b.coordinates.clone()]
-                        .iter()
-                        .any(|c| c.actuator.is_some()),
+                    actuated: self.scene().coordinates
+                        [self.scene.bodies[self.scene.carrier(i)].coordinates.clone()]
+                    .iter()
+                    .any(|c| c.actuator.is_some()),
                 })
                 .collect(),
             h: self.settings.h,
