@@ -127,7 +127,7 @@ fn examples() -> Vec<Example> {
             "scenes/slider_push.toml",
             include_str!("../../scenes/slider_push.toml"),
             "push",
-            "a contact out of reach: a slider starting 0.45 behind a block pushes it 0.5 along the ground (no periodic coordinate)",
+            "a contact out of reach: a fork on a slider, both prongs starting 0.45 from a block, pushes it 0.5 along the ground and can push it back (one actuator, no periodic coordinate)",
         ),
         ex(
             "roll_block",
