@@ -740,15 +740,14 @@ fn a_continuation_that_finds_no_contact_keeps_the_tasks_own_solve() {
             &zero,
         )
         .unwrap();
-    let c = library::continue_in_noise(
-        &ddp,
-        &file.scene,
-        &step,
-        &task.cost,
-        &x0,
-        start.clone(),
-        |_, _, _| {},
-    )
+    let c = library::ContactProblem {
+        ddp: &ddp,
+        scene: &file.scene,
+        settings: &step,
+        cost: &task.cost,
+        x0: &x0,
+    }
+    .continue_in_noise(start.clone(), |_, _, _| {})
     .unwrap();
     assert_eq!((c.felt_at, c.kept), (None, false), "{:?}", c.stages);
     let last = c.stages.last().unwrap();
@@ -828,14 +827,14 @@ fn a_contact_out_of_reach_is_reached_by_pulling_the_pair_together() {
             "{:?}",
             step.model
         );
-        let r = library::reach_for_contact(
-            &ddp,
-            &file.scene,
-            &step,
-            &task.cost,
-            &task.x0,
-            start.clone(),
-        )
+        let r = library::ContactProblem {
+            ddp: &ddp,
+            scene: &file.scene,
+            settings: &step,
+            cost: &task.cost,
+            x0: &task.x0,
+        }
+        .reach_for_contact(start.clone())
         .unwrap();
         assert_eq!(r.pair, Some(1), "{:?}: {:?}", step.model, r.tries);
         assert!(felt(&file, &task, step, &task.x0, &r.solution));
@@ -878,9 +877,15 @@ fn reaching_replaces_the_start_only_where_touching_pays() {
         .unwrap();
         let start = solve_from(&file, &task, step, &ddp, &x0);
         assert!(!felt(&file, &task, step, &x0, &start));
-        let r =
-            library::reach_for_contact(&ddp, &file.scene, &step, &task.cost, &x0, start.clone())
-                .unwrap();
+        let r = library::ContactProblem {
+            ddp: &ddp,
+            scene: &file.scene,
+            settings: &step,
+            cost: &task.cost,
+            x0: &x0,
+        }
+        .reach_for_contact(start.clone())
+        .unwrap();
         if pays {
             assert!(r.pair.is_some(), "{:?}", r.tries);
             let end = r.solution.states.last().unwrap()[4];

@@ -195,15 +195,14 @@ fn from_rest(problem: &ProblemFile, task: &Task) -> anyhow::Result<FromRest> {
     let probe = LibrarySettings::default()
         .for_task(task)
         .simulator(&problem.scene)?;
-    let sol = library::feel_contact(
-        &ddp,
-        &problem.scene,
-        probe.settings(),
-        &task.cost,
-        &task.x0,
-        sol,
-        |_, _, _| {},
-    )?
+    let sol = library::ContactProblem {
+        ddp: &ddp,
+        scene: &problem.scene,
+        settings: probe.settings(),
+        cost: &task.cost,
+        x0: &task.x0,
+    }
+    .feel_contact(sol, |_, _, _| {})?
     .solution;
     let seconds = start.elapsed().as_secs_f64();
     let names = problem.scene.state_names();

@@ -219,27 +219,26 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                     never_felt = true;
                     note = Some("no contact felt (--no-continuation)".to_string());
                 } else {
-                    let search = library::feel_contact(
-                        &ddp,
-                        &file.scene,
-                        &base,
-                        &task.cost,
-                        &x0,
-                        sol,
-                        |s, stage, felt| {
-                            println!(
-                                "continuation: sigma {s:.4}: {:?} after {} passes, cost {:.6}{}",
-                                stage.status,
-                                stage.iterations.len(),
-                                stage.cost,
-                                match felt {
-                                    Some(true) => ", contact felt",
-                                    Some(false) => ", contact not felt",
-                                    None => "",
-                                }
-                            );
-                        },
-                    )?;
+                    let problem = library::ContactProblem {
+                        ddp: &ddp,
+                        scene: &file.scene,
+                        settings: &base,
+                        cost: &task.cost,
+                        x0: &x0,
+                    };
+                    let search = problem.feel_contact(sol, |s, stage, felt| {
+                        println!(
+                            "continuation: sigma {s:.4}: {:?} after {} passes, cost {:.6}{}",
+                            stage.status,
+                            stage.iterations.len(),
+                            stage.cost,
+                            match felt {
+                                Some(true) => ", contact felt",
+                                Some(false) => ", contact not felt",
+                                None => "",
+                            }
+                        );
+                    })?;
                     let reach = search.reach.as_ref();
                     for (pair, pulled, cost, felt) in reach.map_or(&[][..], |r| &r.tries[..]) {
                         println!(

@@ -802,9 +802,9 @@ impl<'a> Build<'a> {
 
     /// A chain's first solve, checked for the contact its task needs ([`crate::contact_felt`]) under
     /// `settings` (the chain's dynamics). Where none is felt, the contact is reached for: first by
-    /// pulling each needed pair together ([`crate::reach_for_contact`]), then, for a smoothed model
+    /// pulling each needed pair together ([`crate::ContactProblem::reach_for_contact`]), then, for a smoothed model
     /// where no pull found a cheaper solve that feels it, by continuation in the noise scale
-    /// ([`crate::continue_in_noise`]). Either replaces the solve only with one that feels the contact
+    /// ([`crate::ContactProblem::continue_in_noise`]). Either replaces the solve only with one that feels the contact
     /// and costs less; a first solve that touches (the finger's, for one) is left as it was. Also
     /// whether the solve returned feels the contact.
     fn reach(
@@ -815,23 +815,22 @@ impl<'a> Build<'a> {
         passes: usize,
     ) -> Result<(ddp::Solution, bool), LibraryError> {
         let ddp = self.optimiser(passes, 0)?;
-        let search = crate::feel_contact(
-            &ddp,
-            self.scene,
+        let problem = crate::ContactProblem {
+            ddp: &ddp,
+            scene: self.scene,
             settings,
-            &self.cost,
-            x1,
-            sol,
-            |s, stage, felt| {
-                tracing::info!(
-                    sigma = s,
-                    passes = stage.iterations.len(),
-                    cost = stage.cost,
-                    ?felt,
-                    "continuation"
-                );
-            },
-        )?;
+            cost: &self.cost,
+            x0: x1,
+        };
+        let search = problem.feel_contact(sol, |s, stage, felt| {
+            tracing::info!(
+                sigma = s,
+                passes = stage.iterations.len(),
+                cost = stage.cost,
+                ?felt,
+                "continuation"
+            );
+        })?;
         if let Some(r) = &search.reach {
             tracing::info!(pair = ?r.pair, tries = ?r.tries, "a first solve felt no contact: reaching for it");
         }
@@ -1040,7 +1039,7 @@ fn branched(
 /// ([`crate::Success::tolerance`]) [`crate::Success::settle`] seconds after a kick (or at the end of the
 /// first interval, from the start), and two branches start, one from the state the kick left and one
 /// from the state the policy is in then (whose first solve reaches for the contact if the policy let go
-/// of it: [`crate::feel_contact`]), optimised at the sharpened noise scale
+/// of it: [`crate::ContactProblem::feel_contact`]), optimised at the sharpened noise scale
 /// ([`LibrarySettings::growth_sharpening`]) when the round's world is not the library's own.
 fn grow(
     task: &Build,

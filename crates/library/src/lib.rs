@@ -33,9 +33,8 @@ pub use problem::{
     TaskCost, TaskSpec, Term, TermSpec,
 };
 pub use reach::{
-    CONTINUATION_DOUBLINGS, ContactSearch, Continuation, REACH_PULL, REACH_PULL_PASSES, Reach,
-    ReachCost, contact_felt, continue_in_noise, feel_contact, needed_pairs, noise_scale,
-    reach_for_contact,
+    CONTINUATION_DOUBLINGS, ContactProblem, ContactSearch, Continuation, REACH_PULL,
+    REACH_PULL_PASSES, Reach, ReachCost, contact_felt, needed_pairs, noise_scale,
 };
 pub use task::{SceneDynamics, StepData, TaskError};
 

@@ -1,9 +1,9 @@
 //! A contact out of reach (issue 28): the smoothed contact's action at a distance fades within a few
 //! sigma (and the hard contact has none), so a solve whose start is farther from the contact the task
 //! needs has a zero gradient and "converges" with nothing moved. [`contact_felt`] tells that case apart;
-//! [`feel_contact`] mends it, first by pulling each needed pair together ([`reach_for_contact`],
+//! [`ContactProblem::feel_contact`] mends it, first by pulling each needed pair together ([`ContactProblem::reach_for_contact`],
 //! [`ReachCost`]: the task's cost plus a penalty on the pair's distance, then the task's own cost from
-//! there), then by continuation in the noise scale ([`continue_in_noise`], the paper's section VI
+//! there), then by continuation in the noise scale ([`ContactProblem::continue_in_noise`], the paper's section VI
 //! scaffolding: sigma doubled, each solve warm-started from the last, until a solve feels the contact
 //! and uses it, then halved back).
 
@@ -15,7 +15,7 @@ use dynamics::{
     Complementarity, ConstraintRow, Constraints, Kinematics, Scene, Side, Simulator, StepSettings,
 };
 
-/// Doublings of the noise scale [`continue_in_noise`] tries at most (up to 64 times the task's).
+/// Doublings of the noise scale [`ContactProblem::continue_in_noise`] tries at most (up to 64 times the task's).
 pub const CONTINUATION_DOUBLINGS: usize = 6;
 
 /// The contact pairs a task needs: each between a body the controls move and a body they do not move
@@ -124,7 +124,7 @@ pub fn noise_scale(model: Complementarity) -> Option<f64> {
     }
 }
 
-/// What [`continue_in_noise`] found.
+/// What [`ContactProblem::continue_in_noise`] found.
 #[derive(Debug, Clone)]
 pub struct Continuation {
     /// The solution at the task's noise scale: the continued one if it is kept, else the start.
@@ -138,74 +138,9 @@ pub struct Continuation {
     pub stages: Vec<(f64, usize, bool, f64)>,
 }
 
-/// Continuation in the noise scale from `start`, a solve under `settings` (a smoothed model) whose
-/// trajectory felt no contact: sigma doubled, each solve warm-started from the last, until a solve feels
-/// the contact and lowers the cost by a percent of its size, then halved back to the task's, each stage
-/// reported to `stage` as it ends. `Err` for the hard model, which has no noise scale.
-#[allow(clippy::too_many_arguments)]
-pub fn continue_in_noise(
-    ddp: &Ddp,
-    scene: &Scene,
-    settings: &StepSettings,
-    cost: &TaskCost,
-    x0: &[f64],
-    start: Solution,
-    mut stage: impl FnMut(f64, &Solution, Option<bool>),
-) -> Result<Continuation, LibraryError> {
-    let sigma = noise_scale(settings.model).ok_or_else(|| {
-        LibraryError::Invalid("the hard model has no noise scale to continue in".into())
-    })?;
-    let at = |s: f64| StepSettings {
-        model: match settings.model {
-            Complementarity::Normal { .. } => Complementarity::Normal { sigma: s },
-            _ => Complementarity::Logistic { sigma: s },
-        },
-        ..*settings
-    };
-    let simulator = |s: f64| Simulator::new(scene.clone(), at(s));
-    let solve = |s: f64, controls: &[Vec<f64>]| solve_in(ddp, scene, at(s), cost, x0, controls);
-    let untouched = start.cost;
-    let mut stages = Vec::new();
-    let mut sol = start.clone();
-    let mut felt_at = None;
-    let mut s = sigma;
-    for _ in 0..CONTINUATION_DOUBLINGS {
-        s *= 2.0;
-        sol = solve(s, &sol.controls)?;
-        let felt = contact_felt(&mut simulator(s)?, cost, x0, &sol.controls)?
-            && lowers(untouched, sol.cost);
-        stages.push((s, sol.iterations.len(), sol.status.converged(), sol.cost));
-        stage(s, &sol, Some(felt));
-        if felt {
-            felt_at = Some(s);
-            break;
-        }
-    }
-    if felt_at.is_some() {
-        while s > sigma * 1.000_001 {
-            s = (s / 2.0).max(sigma);
-            sol = solve(s, &sol.controls)?;
-            stages.push((s, sol.iterations.len(), sol.status.converged(), sol.cost));
-            stage(s, &sol, None);
-        }
-    }
-    // The continued solve replaces the start only where it ends at the task's noise scale, feeling the
-    // contact, at a lower cost: a continuation that never felt it ended at a larger noise scale, and one
-    // that lost it on the way down may have ended in a worse local minimum than the start's.
-    let kept = felt_at.is_some()
-        && sol.cost < untouched
-        && contact_felt(&mut simulator(sigma)?, cost, x0, &sol.controls)?;
-    Ok(Continuation {
-        solution: if kept { sol } else { start },
-        felt_at,
-        kept,
-        stages,
-    })
-}
-
 /// A task's cost plus a pull of one needed contact pair together: `weight / 2 max(d, 0)^2` on the pair's
 /// signed distance `d(q)` at every step and at the end (Gauss-Newton curvature `weight J^T J`, `J` its
-/// normal Jacobian). The scaffold of [`reach_for_contact`]: it gives a solve from a state where the
+/// normal Jacobian). The scaffold of [`ContactProblem::reach_for_contact`]: it gives a solve from a state where the
 /// contact is out of reach the gradient the task's cost lacks there.
 #[derive(Debug, Clone)]
 pub struct ReachCost<'a> {
@@ -301,7 +236,7 @@ impl ddp::Cost for ReachCost<'_> {
     }
 }
 
-/// What [`reach_for_contact`] found.
+/// What [`ContactProblem::reach_for_contact`] found.
 #[derive(Debug, Clone)]
 pub struct Reach {
     /// The task's solution: the reached one if one is kept, else the start.
@@ -312,75 +247,14 @@ pub struct Reach {
     pub tries: Vec<(usize, f64, f64, bool)>,
 }
 
-/// Passes at most of [`reach_for_contact`]'s pulled solve: it only has to bring the pair together.
+/// Passes at most of [`ContactProblem::reach_for_contact`]'s pulled solve: it only has to bring the pair together.
 pub const REACH_PULL_PASSES: usize = 40;
 
-/// How strongly [`reach_for_contact`] pulls, relative to the task: the pull at the start, summed over
+/// How strongly [`ContactProblem::reach_for_contact`] pulls, relative to the task: the pull at the start, summed over
 /// the horizon, is this many times the start's cost (plus one).
 pub const REACH_PULL: f64 = 10.0;
 
-/// A solve from `x0` (the start `start`, which felt no contact) that reaches the contact its task needs:
-/// for each needed pair apart at `x0` ([`needed_pairs`]), nearest first, a solve of the task's cost plus
-/// a pull of the pair together ([`ReachCost`], at most [`REACH_PULL_PASSES`] passes), warm-started from
-/// `start`, then a solve of the task's own cost warm-started from that. The first task solve that feels
-/// the contact under `settings` and costs a percent less than `start` replaces it; otherwise `start` is
-/// kept. Works for the hard model as well as the smoothed ones (the pull needs no action at a
-/// distance).
-pub fn reach_for_contact(
-    ddp: &Ddp,
-    scene: &Scene,
-    settings: &StepSettings,
-    cost: &TaskCost,
-    x0: &[f64],
-    start: Solution,
-) -> Result<Reach, LibraryError> {
-    let untouched = start.cost;
-    let mut tries = Vec::new();
-    let steps = start.controls.len() as f64 + 1.0;
-    // The needed pairs apart at the start, nearest first.
-    let mut apart = Vec::new();
-    for pair in needed_pairs(scene, cost).unwrap_or_default() {
-        if let Some((d0, _)) = ReachCost::new(cost, scene, pair, 1.0)?.gap(x0) {
-            apart.push((d0, pair));
-        }
-    }
-    apart.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let pulling = Ddp::new(DdpSettings {
-        max_iterations: ddp.settings().max_iterations.min(REACH_PULL_PASSES),
-        ..ddp.settings().clone()
-    })
-    .map_err(|source| LibraryError::Optimiser {
-        trajectory: 0,
-        source,
-    })?;
-    for (d0, pair) in apart {
-        let weight = REACH_PULL * (1.0 + untouched.abs()) / (0.5 * d0 * d0 * steps);
-        let pull = ReachCost::new(cost, scene, pair, weight)?;
-        let pulled = solve_in(&pulling, scene, *settings, &pull, x0, &start.controls)?;
-        let sol = solve_in(ddp, scene, *settings, cost, x0, &pulled.controls)?;
-        let felt = contact_felt(
-            &mut Simulator::new(scene.clone(), *settings)?,
-            cost,
-            x0,
-            &sol.controls,
-        )? && lowers(untouched, sol.cost);
-        tries.push((pair, pulled.cost, sol.cost, felt));
-        if felt {
-            return Ok(Reach {
-                solution: sol,
-                pair: Some(pair),
-                tries,
-            });
-        }
-    }
-    Ok(Reach {
-        solution: start,
-        pair: None,
-        tries,
-    })
-}
-
-/// What [`feel_contact`] did for a solve.
+/// What [`ContactProblem::feel_contact`] did for a solve.
 #[derive(Debug, Clone)]
 pub struct ContactSearch {
     /// The solution: the start unless a pull or the continuation found one that feels the contact and
@@ -388,10 +262,10 @@ pub struct ContactSearch {
     pub solution: Solution,
     /// Whether the start felt the contact already (then nothing else was tried).
     pub felt: bool,
-    /// The pulls, if the start felt none ([`reach_for_contact`]).
+    /// The pulls, if the start felt none ([`ContactProblem::reach_for_contact`]).
     pub reach: Option<Reach>,
     /// The continuation in the noise scale, if no pull found the contact and the model is smoothed
-    /// ([`continue_in_noise`]).
+    /// ([`ContactProblem::continue_in_noise`]).
     pub continuation: Option<Continuation>,
 }
 
@@ -404,53 +278,188 @@ impl ContactSearch {
     }
 }
 
-/// A solve `start` from `x0` checked for the contact its task needs ([`contact_felt`], under
-/// `settings`), and where none is felt, mended: first by pulling each needed pair together
-/// ([`reach_for_contact`]), then, if no pull found a cheaper solve that feels it and the model is
-/// smoothed, by continuation in the noise scale ([`continue_in_noise`], each stage reported to
-/// `stage`). `optimize`, `train`'s first solve and every first solve of a target
-/// task's chain go through it.
-#[allow(clippy::too_many_arguments)]
-pub fn feel_contact(
-    ddp: &Ddp,
-    scene: &Scene,
-    settings: &StepSettings,
-    cost: &TaskCost,
-    x0: &[f64],
-    start: Solution,
-    stage: impl FnMut(f64, &Solution, Option<bool>),
-) -> Result<ContactSearch, LibraryError> {
-    let mut probe = Simulator::new(scene.clone(), *settings)?;
-    if contact_felt(&mut probe, cost, x0, &start.controls)? {
-        return Ok(ContactSearch {
-            solution: start,
-            felt: true,
-            reach: None,
-            continuation: None,
-        });
-    }
-    let reach = reach_for_contact(ddp, scene, settings, cost, x0, start)?;
-    if reach.pair.is_some() || noise_scale(settings.model).is_none() {
-        return Ok(ContactSearch {
-            solution: reach.solution.clone(),
+/// A solve's problem for the contact searches: the optimiser, the scene under a step setting (its
+/// model and time step), the task's cost and the start. [`ContactProblem::feel_contact`] checks a solve
+/// for the contact the task needs and mends it by [`ContactProblem::reach_for_contact`] and
+/// [`ContactProblem::continue_in_noise`].
+#[derive(Debug, Clone, Copy)]
+pub struct ContactProblem<'a> {
+    /// The optimiser of every solve (its pass budget, tolerance and control limits).
+    pub ddp: &'a Ddp,
+    /// The scene.
+    pub scene: &'a Scene,
+    /// The step setting the solves run under (the task's model, noise scale and time step).
+    pub settings: &'a StepSettings,
+    /// The task's cost.
+    pub cost: &'a TaskCost,
+    /// The start.
+    pub x0: &'a [f64],
+}
+
+impl ContactProblem<'_> {
+    /// A solve `start` from `x0` checked for the contact its task needs ([`contact_felt`], under
+    /// `settings`), and where none is felt, mended: first by pulling each needed pair together
+    /// ([`ContactProblem::reach_for_contact`]), then, if no pull found a cheaper solve that feels it and the model is
+    /// smoothed, by continuation in the noise scale ([`ContactProblem::continue_in_noise`], each stage reported to
+    /// `stage`). `optimize`, `train`'s first solve and every first solve of a target
+    /// task's chain go through it.
+    pub fn feel_contact(
+        &self,
+        start: Solution,
+        stage: impl FnMut(f64, &Solution, Option<bool>),
+    ) -> Result<ContactSearch, LibraryError> {
+        let mut probe = Simulator::new(self.scene.clone(), *self.settings)?;
+        if contact_felt(&mut probe, self.cost, self.x0, &start.controls)? {
+            return Ok(ContactSearch {
+                solution: start,
+                felt: true,
+                reach: None,
+                continuation: None,
+            });
+        }
+        let reach = self.reach_for_contact(start)?;
+        if reach.pair.is_some() || noise_scale(self.settings.model).is_none() {
+            return Ok(ContactSearch {
+                solution: reach.solution.clone(),
+                felt: false,
+                reach: Some(reach),
+                continuation: None,
+            });
+        }
+        let c = self.continue_in_noise(reach.solution.clone(), stage)?;
+        Ok(ContactSearch {
+            solution: c.solution.clone(),
             felt: false,
             reach: Some(reach),
-            continuation: None,
-        });
+            continuation: Some(c),
+        })
     }
-    let c = continue_in_noise(
-        ddp,
-        scene,
-        settings,
-        cost,
-        x0,
-        reach.solution.clone(),
-        stage,
-    )?;
-    Ok(ContactSearch {
-        solution: c.solution.clone(),
-        felt: false,
-        reach: Some(reach),
-        continuation: Some(c),
-    })
+
+    /// A solve from `x0` (the start `start`, which felt no contact) that reaches the contact its task needs:
+    /// for each needed pair apart at `x0` ([`needed_pairs`]), nearest first, a solve of the task's cost plus
+    /// a pull of the pair together ([`ReachCost`], at most [`REACH_PULL_PASSES`] passes), warm-started from
+    /// `start`, then a solve of the task's own cost warm-started from that. The first task solve that feels
+    /// the contact under `settings` and costs a percent less than `start` replaces it; otherwise `start` is
+    /// kept. Works for the hard model as well as the smoothed ones (the pull needs no action at a
+    /// distance).
+    pub fn reach_for_contact(&self, start: Solution) -> Result<Reach, LibraryError> {
+        let ContactProblem {
+            ddp,
+            scene,
+            settings,
+            cost,
+            x0,
+        } = *self;
+        let untouched = start.cost;
+        let mut tries = Vec::new();
+        let steps = start.controls.len() as f64 + 1.0;
+        // The needed pairs apart at the start, nearest first.
+        let mut apart = Vec::new();
+        for pair in needed_pairs(scene, cost).unwrap_or_default() {
+            if let Some((d0, _)) = ReachCost::new(cost, scene, pair, 1.0)?.gap(x0) {
+                apart.push((d0, pair));
+            }
+        }
+        apart.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let pulling = Ddp::new(DdpSettings {
+            max_iterations: ddp.settings().max_iterations.min(REACH_PULL_PASSES),
+            ..ddp.settings().clone()
+        })
+        .map_err(|source| LibraryError::Optimiser {
+            trajectory: 0,
+            source,
+        })?;
+        for (d0, pair) in apart {
+            let weight = REACH_PULL * (1.0 + untouched.abs()) / (0.5 * d0 * d0 * steps);
+            let pull = ReachCost::new(cost, scene, pair, weight)?;
+            let pulled = solve_in(&pulling, scene, *settings, &pull, x0, &start.controls)?;
+            let sol = solve_in(ddp, scene, *settings, cost, x0, &pulled.controls)?;
+            let felt = contact_felt(
+                &mut Simulator::new(scene.clone(), *settings)?,
+                cost,
+                x0,
+                &sol.controls,
+            )? && lowers(untouched, sol.cost);
+            tries.push((pair, pulled.cost, sol.cost, felt));
+            if felt {
+                return Ok(Reach {
+                    solution: sol,
+                    pair: Some(pair),
+                    tries,
+                });
+            }
+        }
+        Ok(Reach {
+            solution: start,
+            pair: None,
+            tries,
+        })
+    }
+
+    /// Continuation in the noise scale from `start`, a solve under `settings` (a smoothed model) whose
+    /// trajectory felt no contact: sigma doubled, each solve warm-started from the last, until a solve feels
+    /// the contact and lowers the cost by a percent of its size, then halved back to the task's, each stage
+    /// reported to `stage` as it ends. `Err` for the hard model, which has no noise scale.
+    pub fn continue_in_noise(
+        &self,
+        start: Solution,
+        mut stage: impl FnMut(f64, &Solution, Option<bool>),
+    ) -> Result<Continuation, LibraryError> {
+        let ContactProblem {
+            ddp,
+            scene,
+            settings,
+            cost,
+            x0,
+        } = *self;
+        let sigma = noise_scale(settings.model).ok_or_else(|| {
+            LibraryError::Invalid("the hard model has no noise scale to continue in".into())
+        })?;
+        let at = |s: f64| StepSettings {
+            model: match settings.model {
+                Complementarity::Normal { .. } => Complementarity::Normal { sigma: s },
+                _ => Complementarity::Logistic { sigma: s },
+            },
+            ..*settings
+        };
+        let simulator = |s: f64| Simulator::new(scene.clone(), at(s));
+        let solve = |s: f64, controls: &[Vec<f64>]| solve_in(ddp, scene, at(s), cost, x0, controls);
+        let untouched = start.cost;
+        let mut stages = Vec::new();
+        let mut sol = start.clone();
+        let mut felt_at = None;
+        let mut s = sigma;
+        for _ in 0..CONTINUATION_DOUBLINGS {
+            s *= 2.0;
+            sol = solve(s, &sol.controls)?;
+            let felt = contact_felt(&mut simulator(s)?, cost, x0, &sol.controls)?
+                && lowers(untouched, sol.cost);
+            stages.push((s, sol.iterations.len(), sol.status.converged(), sol.cost));
+            stage(s, &sol, Some(felt));
+            if felt {
+                felt_at = Some(s);
+                break;
+            }
+        }
+        if felt_at.is_some() {
+            while s > sigma * 1.000_001 {
+                s = (s / 2.0).max(sigma);
+                sol = solve(s, &sol.controls)?;
+                stages.push((s, sol.iterations.len(), sol.status.converged(), sol.cost));
+                stage(s, &sol, None);
+            }
+        }
+        // The continued solve replaces the start only where it ends at the task's noise scale, feeling the
+        // contact, at a lower cost: a continuation that never felt it ended at a larger noise scale, and one
+        // that lost it on the way down may have ended in a worse local minimum than the start's.
+        let kept = felt_at.is_some()
+            && sol.cost < untouched
+            && contact_felt(&mut simulator(sigma)?, cost, x0, &sol.controls)?;
+        Ok(Continuation {
+            solution: if kept { sol } else { start },
+            felt_at,
+            kept,
+            stages,
+        })
+    }
 }
