@@ -786,18 +786,19 @@ fn felt(
     library::contact_felt(&mut probe, &task.cost, x0, &sol.controls).unwrap()
 }
 
-/// A contact out of reach is reached by pulling the pair together: the slider starts 0.45 behind its
-/// block, where the task's solve feels nothing (a zero gradient) on the smoothed model and on the hard
-/// one, which has no noise scale to continue in; the pull of the pusher-block pair (and not of the
-/// block on the ground, which the controls do not move) gives a solve that pushes the block most of the
-/// way to its target at a fraction of doing nothing's cost.
+/// A contact out of reach is reached by pulling the pair together: the slider's fork starts with both
+/// prongs 0.45 from its block, where the task's solve feels nothing (a zero gradient) on the smoothed
+/// model and on the hard one, which has no noise scale to continue in; both prongs' pairs are needed (and
+/// not the block on the ground, which the controls do not move), and the pull of the first prong's, the
+/// one behind the block, gives a solve that pushes the block most of the way to its target at a
+/// fraction of doing nothing's cost.
 #[test]
 fn a_contact_out_of_reach_is_reached_by_pulling_the_pair_together() {
     let file = ProblemFile::from_toml_str(include_str!("../../scenes/slider_push.toml")).unwrap();
     let task = file.task(Some("push")).unwrap();
     assert_eq!(
         library::needed_pairs(&file.scene, &task.cost),
-        Some(vec![1])
+        Some(vec![1, 2])
     );
     let ddp = ddp::Ddp::new(ddp::DdpSettings {
         max_iterations: 100,
