@@ -1195,13 +1195,16 @@ fn stalled_trunk_lengthens_the_horizon() {
     let trunk = 80;
     let settings = trunk_only(&task, trunk);
     assert_eq!(settings.horizon, 90);
-    let lib = library::Library::build(&file, None, &settings, |_, _| {}).unwrap();
+    let mut reported = 0;
+    let lib = library::Library::build(&file, None, &settings, |_, _| reported += 1).unwrap();
     assert!(
         lib.settings.horizon > settings.horizon && lib.settings.horizon <= library::LONGEST_HORIZON,
         "horizon {}",
         lib.settings.horizon
     );
     assert_eq!(lib.entries.len(), trunk * settings.keep);
+    // Progress (train's bar) counts the kept trunk's trajectories once, not the trunk it replaced.
+    assert_eq!(reported, trunk);
     let policy = lib.policy().unwrap();
     let run = library::evaluate(
         &lib,

@@ -970,6 +970,8 @@ fn branched(
     for doubling in 0..=HORIZON_DOUBLINGS {
         let this = task.with_settings(&settings);
         let zero = vec![vec![0.0; this.scene.n_controls]; settings.horizon];
+        // Progress counts the trunk once: a lengthened trunk, which replaces the first, is not reported.
+        let silent = |_: &Entry| {};
         let built = this.chain(
             &mut dynamics,
             settings.x0.clone(),
@@ -977,7 +979,7 @@ fn branched(
             trunk,
             true,
             |_, _| {},
-            report,
+            if doubling == 0 { report } else { &silent },
         )?;
         let advance = this.advance(&built, trunk, settle);
         let stalls = this.stalls(&built, trunk, settle);
