@@ -98,24 +98,6 @@ fn lowers(untouched: f64, cost: f64) -> bool {
     untouched - cost > 0.01 * (1.0 + untouched.abs())
 }
 
-/// `ddp`'s solve of `cost` from `x0` on a fresh simulator of `scene` under `settings`, warm-started from
-/// `controls`: every solve of this module.
-fn solve_in<C: ddp::Cost>(
-    ddp: &Ddp,
-    scene: &Scene,
-    settings: StepSettings,
-    cost: &C,
-    x0: &[f64],
-    controls: &[Vec<f64>],
-) -> Result<Solution, LibraryError> {
-    let mut dynamics = SceneDynamics::new(Simulator::new(scene.clone(), settings)?);
-    ddp.solve(&mut dynamics, cost, x0, controls)
-        .map_err(|source| LibraryError::Optimiser {
-            trajectory: 0,
-            source,
-        })
-}
-
 /// The noise scale of a smoothed model, `None` for the hard one.
 pub fn noise_scale(model: Complementarity) -> Option<f64> {
     match model {
@@ -297,6 +279,23 @@ pub struct ContactProblem<'a> {
 }
 
 impl ContactProblem<'_> {
+    /// `ddp`'s solve of `cost` from the start on a fresh simulator of the scene under `settings`,
+    /// warm-started from `controls`: every solve of the searches.
+    fn solve<C: ddp::Cost>(
+        &self,
+        ddp: &Ddp,
+        settings: StepSettings,
+        cost: &C,
+        controls: &[Vec<f64>],
+    ) -> Result<Solution, LibraryError> {
+        let mut dynamics = SceneDynamics::new(Simulator::new(self.scene.clone(), settings)?);
+        ddp.solve(&mut dynamics, cost, self.x0, controls)
+            .map_err(|source| LibraryError::Optimiser {
+                trajectory: 0,
+                source,
+            })
+    }
+
     /// A solve `start` from `x0` checked for the contact its task needs ([`contact_felt`], under
     /// `settings`), and where none is felt, mended: first by pulling each needed pair together
     /// ([`ContactProblem::reach_for_contact`]), then, if no pull found a cheaper solve that feels it and the model is
@@ -343,27 +342,20 @@ impl ContactProblem<'_> {
     /// kept. Works for the hard model as well as the smoothed ones (the pull needs no action at a
     /// distance).
     pub fn reach_for_contact(&self, start: Solution) -> Result<Reach, LibraryError> {
-        let ContactProblem {
-            ddp,
-            scene,
-            settings,
-            cost,
-            x0,
-        } = *self;
         let untouched = start.cost;
         let mut tries = Vec::new();
         let steps = start.controls.len() as f64 + 1.0;
         // The needed pairs apart at the start, nearest first.
         let mut apart = Vec::new();
-        for pair in needed_pairs(scene, cost).unwrap_or_default() {
-            if let Some((d0, _)) = ReachCost::new(cost, scene, pair, 1.0)?.gap(x0) {
+        for pair in needed_pairs(self.scene, self.cost).unwrap_or_default() {
+            if let Some((d0, _)) = ReachCost::new(self.cost, self.scene, pair, 1.0)?.gap(self.x0) {
                 apart.push((d0, pair));
             }
         }
         apart.sort_by(|a, b| a.0.total_cmp(&b.0));
         let pulling = Ddp::new(DdpSettings {
-            max_iterations: ddp.settings().max_iterations.min(REACH_PULL_PASSES),
-            ..ddp.settings().clone()
+            max_iterations: self.ddp.settings().max_iterations.min(REACH_PULL_PASSES),
+            ..self.ddp.settings().clone()
         })
         .map_err(|source| LibraryError::Optimiser {
             trajectory: 0,
@@ -371,13 +363,13 @@ impl ContactProblem<'_> {
         })?;
         for (d0, pair) in apart {
             let weight = REACH_PULL * (1.0 + untouched.abs()) / (0.5 * d0 * d0 * steps);
-            let pull = ReachCost::new(cost, scene, pair, weight)?;
-            let pulled = solve_in(&pulling, scene, *settings, &pull, x0, &start.controls)?;
-            let sol = solve_in(ddp, scene, *settings, cost, x0, &pulled.controls)?;
+            let pull = ReachCost::new(self.cost, self.scene, pair, weight)?;
+            let pulled = self.solve(&pulling, *self.settings, &pull, &start.controls)?;
+            let sol = self.solve(self.ddp, *self.settings, self.cost, &pulled.controls)?;
             let felt = contact_felt(
-                &mut Simulator::new(scene.clone(), *settings)?,
-                cost,
-                x0,
+                &mut Simulator::new(self.scene.clone(), *self.settings)?,
+                self.cost,
+                self.x0,
                 &sol.controls,
             )? && lowers(untouched, sol.cost);
             tries.push((pair, pulled.cost, sol.cost, felt));
@@ -405,25 +397,19 @@ impl ContactProblem<'_> {
         start: Solution,
         mut stage: impl FnMut(f64, &Solution, Option<bool>),
     ) -> Result<Continuation, LibraryError> {
-        let ContactProblem {
-            ddp,
-            scene,
-            settings,
-            cost,
-            x0,
-        } = *self;
-        let sigma = noise_scale(settings.model).ok_or_else(|| {
+        let sigma = noise_scale(self.settings.model).ok_or_else(|| {
             LibraryError::Invalid("the hard model has no noise scale to continue in".into())
         })?;
         let at = |s: f64| StepSettings {
-            model: match settings.model {
+            model: match self.settings.model {
                 Complementarity::Normal { .. } => Complementarity::Normal { sigma: s },
                 _ => Complementarity::Logistic { sigma: s },
             },
-            ..*settings
+            ..*self.settings
         };
-        let simulator = |s: f64| Simulator::new(scene.clone(), at(s));
-        let solve = |s: f64, controls: &[Vec<f64>]| solve_in(ddp, scene, at(s), cost, x0, controls);
+        let simulator = |s: f64| Simulator::new(self.scene.clone(), at(s));
+        let solve =
+            |s: f64, controls: &[Vec<f64>]| self.solve(self.ddp, at(s), self.cost, controls);
         let untouched = start.cost;
         let mut stages = Vec::new();
         let mut sol = start.clone();
@@ -432,7 +418,7 @@ impl ContactProblem<'_> {
         for _ in 0..CONTINUATION_DOUBLINGS {
             s *= 2.0;
             sol = solve(s, &sol.controls)?;
-            let felt = contact_felt(&mut simulator(s)?, cost, x0, &sol.controls)?
+            let felt = contact_felt(&mut simulator(s)?, self.cost, self.x0, &sol.controls)?
                 && lowers(untouched, sol.cost);
             stages.push((s, sol.iterations.len(), sol.status.converged(), sol.cost));
             stage(s, &sol, Some(felt));
@@ -454,7 +440,7 @@ impl ContactProblem<'_> {
         // that lost it on the way down may have ended in a worse local minimum than the start's.
         let kept = felt_at.is_some()
             && sol.cost < untouched
-            && contact_felt(&mut simulator(sigma)?, cost, x0, &sol.controls)?;
+            && contact_felt(&mut simulator(sigma)?, self.cost, self.x0, &sol.controls)?;
         Ok(Continuation {
             solution: if kept { sol } else { start },
             felt_at,
