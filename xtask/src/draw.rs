@@ -27,9 +27,7 @@ pub(crate) fn ellipse_outline(c: [f64; 2], phi: f64, a: f64, b: f64) -> Vec<(f64
 
 /// Whether a body moves on its own (no actuated coordinate): the free object of a task.
 pub(crate) fn is_passive(scene: &Scene, body: usize) -> bool {
-    scene.coordinates[scene.bodies[scene.carrier(body)].coordinates.clone()]
-        .iter()
-        .all(|c| c.actuator.is_none())
+    !scene.actuated(body)
 }
 
 /// A square-ish window `(x range, y range)` holding every body over `states`, the fixed ellipses and a

@@ -848,6 +848,14 @@ impl Scene {
         i
     }
 
+    /// Whether a control acts on `body`'s own joint (its carrier's, for a welded body): a driven body, not
+    /// a free object of a task.
+    pub fn actuated(&self, body: usize) -> bool {
+        self.coordinates[self.bodies[self.carrier(body)].coordinates.clone()]
+            .iter()
+            .any(|c| c.actuator.is_some())
+    }
+
     /// Number of generalised coordinates (one per hinge or slider, three per free joint, none for a weld).
     pub fn n_dof(&self) -> usize {
         self.coordinates.len()

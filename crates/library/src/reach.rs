@@ -296,6 +296,13 @@ impl ContactProblem<'_> {
             })
     }
 
+    /// Whether the rollout of `controls` from the start, under `settings`, feels the contact the task
+    /// needs ([`contact_felt`] on a fresh simulator of the scene).
+    fn felt(&self, settings: StepSettings, controls: &[Vec<f64>]) -> Result<bool, LibraryError> {
+        let mut probe = Simulator::new(self.scene.clone(), settings)?;
+        contact_felt(&mut probe, self.cost, self.x0, controls)
+    }
+
     /// A solve `start` from `x0` checked for the contact its task needs ([`contact_felt`], under
     /// `settings`), and where none is felt, mended: first by pulling each needed pair together
     /// ([`ContactProblem::reach_for_contact`]), then, if no pull found a cheaper solve that feels it and the model is
@@ -307,8 +314,7 @@ impl ContactProblem<'_> {
         start: Solution,
         stage: impl FnMut(f64, &Solution, Option<bool>),
     ) -> Result<ContactSearch, LibraryError> {
-        let mut probe = Simulator::new(self.scene.clone(), *self.settings)?;
-        if contact_felt(&mut probe, self.cost, self.x0, &start.controls)? {
+        if self.felt(*self.settings, &start.controls)? {
             return Ok(ContactSearch {
                 solution: start,
                 felt: true,
@@ -366,12 +372,7 @@ impl ContactProblem<'_> {
             let pull = ReachCost::new(self.cost, self.scene, pair, weight)?;
             let pulled = self.solve(&pulling, *self.settings, &pull, &start.controls)?;
             let sol = self.solve(self.ddp, *self.settings, self.cost, &pulled.controls)?;
-            let felt = contact_felt(
-                &mut Simulator::new(self.scene.clone(), *self.settings)?,
-                self.cost,
-                self.x0,
-                &sol.controls,
-            )? && lowers(untouched, sol.cost);
+            let felt = self.felt(*self.settings, &sol.controls)? && lowers(untouched, sol.cost);
             tries.push((pair, pulled.cost, sol.cost, felt));
             if felt {
                 return Ok(Reach {
@@ -407,7 +408,6 @@ impl ContactProblem<'_> {
             },
             ..*self.settings
         };
-        let simulator = |s: f64| Simulator::new(self.scene.clone(), at(s));
         let solve =
             |s: f64, controls: &[Vec<f64>]| self.solve(self.ddp, at(s), self.cost, controls);
         let untouched = start.cost;
@@ -418,8 +418,7 @@ impl ContactProblem<'_> {
         for _ in 0..CONTINUATION_DOUBLINGS {
             s *= 2.0;
             sol = solve(s, &sol.controls)?;
-            let felt = contact_felt(&mut simulator(s)?, self.cost, self.x0, &sol.controls)?
-                && lowers(untouched, sol.cost);
+            let felt = self.felt(at(s), &sol.controls)? && lowers(untouched, sol.cost);
             stages.push((s, sol.iterations.len(), sol.status.converged(), sol.cost));
             stage(s, &sol, Some(felt));
             if felt {
@@ -438,9 +437,8 @@ impl ContactProblem<'_> {
         // The continued solve replaces the start only where it ends at the task's noise scale, feeling the
         // contact, at a lower cost: a continuation that never felt it ended at a larger noise scale, and one
         // that lost it on the way down may have ended in a worse local minimum than the start's.
-        let kept = felt_at.is_some()
-            && sol.cost < untouched
-            && contact_felt(&mut simulator(sigma)?, self.cost, self.x0, &sol.controls)?;
+        let kept =
+            felt_at.is_some() && sol.cost < untouched && self.felt(at(sigma), &sol.controls)?;
         Ok(Continuation {
             solution: if kept { sol } else { start },
             felt_at,

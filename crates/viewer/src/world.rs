@@ -369,10 +369,7 @@ impl World {
                 .map(|(i, b)| BodyShape {
                     name: b.name.clone(),
                     semi_axes: [b.shape.a(), b.shape.b()],
-                    actuated: self.scene().coordinates
-                        [self.scene.bodies[self.scene.carrier(i)].coordinates.clone()]
-                    .iter()
-                    .any(|c| c.actuator.is_some()),
+                    actuated: self.scene.actuated(i),
                 })
                 .collect(),
             h: self.settings.h,
