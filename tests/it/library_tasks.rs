@@ -560,6 +560,45 @@ fn a_task_starting_with_bodies_inside_each_other_is_refused_with_the_pair_named(
     assert!(library::ProblemFile::from_toml_str(&touching).is_ok());
 }
 
+/// Issue 28, why `pushing` recovers from no kick (docs/results.md): its finger flicks the block to a
+/// target it cannot reach. Over its joints' whole range (a grid of 61 x 101 angles) the finger comes no
+/// nearer than 0.2 to the block resting at the target, 0.6; it touches the block only while the block's
+/// centre is at 0.35 or less, so a kick that leaves the block between 0.35 and the target's tolerance
+/// band, or past it, cannot be corrected by any controller.
+#[test]
+fn pushing_target_is_beyond_the_fingers_reach() {
+    let file = ProblemFile::from_toml_str(include_str!("../../scenes/pushing.toml")).unwrap();
+    let task = file.task(Some("push")).unwrap();
+    let scene = &file.scene;
+    let body = |name: &str| scene.bodies.iter().position(|b| b.name == name);
+    let (block, link2) = (body("block"), body("link2"));
+    let pair = scene
+        .contacts
+        .iter()
+        .position(|c| {
+            let sides = [c.a.body(), c.b.body()];
+            sides.contains(&block) && sides.contains(&link2)
+        })
+        .unwrap();
+    let reach = library::ReachCost::new(&task.cost, scene, pair, 1.0).unwrap();
+    // The nearest the finger comes to the block resting with its centre at `x`: negative in touch.
+    let nearest = |x: f64| {
+        let mut best = f64::INFINITY;
+        for i in 0..=60 {
+            for j in 0..=100 {
+                let q1 = -2.5 + 3.0 * i as f64 / 60.0;
+                let q2 = -2.5 + 5.0 * j as f64 / 100.0;
+                let state = [q1, q2, x, 0.2, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+                best = best.min(reach.gap(&state).map_or(-1.0, |(d, _)| d));
+            }
+        }
+        best
+    };
+    assert!(nearest(0.6) > 0.2, "{}", nearest(0.6));
+    assert!(nearest(0.35) < 0.0, "{}", nearest(0.35));
+    assert!(nearest(0.45) > 0.0, "{}", nearest(0.45));
+}
+
 /// Issue 28: `Scene::overlaps` names every broken constraint, deepest first, and refuses a bad `q`.
 #[test]
 fn overlaps_are_named_deepest_first() {
