@@ -57,6 +57,9 @@ const SECONDS: f64 = 40.0;
 const KICK_STD: f64 = 1.0;
 /// Seconds between kicks in the kicked runs.
 const KICK_EVERY: f64 = 10.0;
+/// The kicked runs of library seed S draw their kicks from seed `KICK_SEED_BASE + S`: one kick sequence
+/// per library seed and world rather than one for all, none of them a sequence the library grew on.
+const KICK_SEED_BASE: u64 = 100;
 
 /// One example: a scene file of this repository and its task. Its library is `train`'s defaults for the
 /// task, and its success the task's own criterion ([`library::Success`]).
@@ -149,7 +152,7 @@ pub(crate) fn stamp() -> String {
         // Not the library file's format version: it changes how a library is written, not its numbers.
         "seeds": SEEDS,
         "seconds": SECONDS,
-        "kicks": [KICK_STD, KICK_EVERY],
+        "kicks": [KICK_STD, KICK_EVERY, KICK_SEED_BASE],
         // The step itself (how penetration is recovered, issue 27): new physics, new numbers.
         "step": dynamics::StepSettings::default(),
     });
@@ -296,7 +299,7 @@ fn evaluated(
     task: &Task,
     (model, h): (Model, f64),
     seconds: f64,
-    kick_every: f64,
+    (kick_every, kick_seed): (f64, u64),
 ) -> anyhow::Result<Evaluation> {
     Ok(evaluate(
         lib,
@@ -307,8 +310,8 @@ fn evaluated(
             seconds,
             kick_every,
             kick_std: KICK_STD,
+            seed: kick_seed,
             x0: task.x0.clone(),
-            ..EvaluationSettings::default()
         },
     )?)
 }
@@ -361,8 +364,9 @@ fn run_example(
         };
         let policy = lib.policy()?;
         for (w, (name, model, h)) in crate::evaluate::worlds(&lib).into_iter().enumerate() {
-            let calm = evaluated(&lib, &policy, &task, (model, h), seconds, 0.0)?;
-            let kicked = evaluated(&lib, &policy, &task, (model, h), seconds, KICK_EVERY)?;
+            let calm = evaluated(&lib, &policy, &task, (model, h), seconds, (0.0, 0))?;
+            let kicks = (KICK_EVERY, KICK_SEED_BASE + seed);
+            let kicked = evaluated(&lib, &policy, &task, (model, h), seconds, kicks)?;
             if w < 2 {
                 let steps = (seconds / h).round() as usize;
                 let trace =
@@ -629,7 +633,8 @@ fn report(results: &[ExampleResult], seconds: f64) -> String {
     let mut t = String::new();
     let _ = writeln!(
         t,
-        "# Other scenes and tasks (`cargo xtask examples`)\n\nThe zoo: every task in scenes/, each solved by full second-order DDP from rest (zero controls, the task's x0 and horizon, 300 passes at most), then a library per seed with `train`'s defaults for the task (`cargo xtask train --scene FILE --task NAME --seed S`: the default recipe on the task's model, time step, horizon and start, growth on the policy's own failures), and its policy run in closed loop from x0 for {seconds} s on four worlds (the task's smoothed model and hard contact, at the task's time step and at 0.03 s), once without kicks and once with velocity kicks (normal, standard deviation {KICK_STD}, every {KICK_EVERY} s, none in the last {KICK_EVERY} s). A run succeeds by the task's own criterion (`[task.NAME.success]`, docs/tasks.md): a progress task's rewarded coordinate advancing at least its minimum rate over the last quarter; a target task's judged targets within tolerance throughout the last quarter (with kicks: at the end). Seeds are 1 to {}; every seed run is reported. Build times are single-thread, two libraries at a time on the 2-core machine.\n",
+        "# Other scenes and tasks (`cargo xtask examples`)\n\nThe zoo: every task in scenes/, each solved by full second-order DDP from rest (zero controls, the task's x0 and horizon, 300 passes at most), then a library per seed with `train`'s defaults for the task (`cargo xtask train --scene FILE --task NAME --seed S`: the default recipe on the task's model, time step, horizon and start, growth on the policy's own failures), and its policy run in closed loop from x0 for {seconds} s on four worlds (the task's smoothed model and hard contact, at the task's time step and at 0.03 s), once without kicks and once with velocity kicks (normal, standard deviation {KICK_STD}, every {KICK_EVERY} s, none in the last {KICK_EVERY} s; library seed S's runs kicked by the draws of kick seed {KICK_SEED_BASE} + S, so that the kicked runs sample {} kick sequences per world, none of them the library's own). A run succeeds by the task's own criterion (`[task.NAME.success]`, docs/tasks.md): a progress task's rewarded coordinate advancing at least its minimum rate over the last quarter; a target task's judged targets within tolerance throughout the last quarter (with kicks: at the end). Seeds are 1 to {}; every seed run is reported. Build times are single-thread, two libraries at a time on the 2-core machine.\n",
+        results.first().map_or(0, |r| r.seeds.len()),
         results.first().map_or(0, |r| r.seeds.len())
     );
     let _ = writeln!(
