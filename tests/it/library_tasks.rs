@@ -560,7 +560,7 @@ fn a_task_starting_with_bodies_inside_each_other_is_refused_with_the_pair_named(
     assert!(library::ProblemFile::from_toml_str(&touching).is_ok());
 }
 
-/// Issue 28, why `pushing` recovers from no kick (docs/results.md): its finger flicks the block to a
+/// Issue 28, why `pushing` recovers from few kicks (docs/results.md): its finger flicks the block to a
 /// target it cannot reach. Over its joints' whole range (a grid of 61 x 101 angles) the finger comes no
 /// nearer than 0.2 to the block resting at the target, 0.6; it touches the block only while the block's
 /// centre is at 0.35 or less, so a kick that leaves the block between 0.35 and the target's tolerance
