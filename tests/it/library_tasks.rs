@@ -570,24 +570,23 @@ fn pushing_target_is_beyond_the_fingers_reach() {
     let file = ProblemFile::from_toml_str(include_str!("../../scenes/pushing.toml")).unwrap();
     let task = file.task(Some("push")).unwrap();
     let scene = &file.scene;
-    let body = |name: &str| scene.bodies.iter().position(|b| b.name == name);
-    let (block, link2) = (body("block"), body("link2"));
-    let pair = scene
-        .contacts
-        .iter()
-        .position(|c| {
-            let sides = [c.a.body(), c.b.body()];
-            sides.contains(&block) && sides.contains(&link2)
-        })
-        .unwrap();
+    // The one pair the task needs: the finger's second link against the block.
+    let pairs = library::needed_pairs(scene, &task.cost).unwrap();
+    let &[pair] = pairs.as_slice() else {
+        panic!("one needed pair, not {pairs:?}")
+    };
     let reach = library::ReachCost::new(&task.cost, scene, pair, 1.0).unwrap();
+    // Angle `k` of `steps` across joint `j`'s limits.
+    let angle = |j: usize, k: usize, steps: usize| {
+        let [lo, hi] = scene.coordinates[j].limits.unwrap();
+        lo + (hi - lo) * k as f64 / steps as f64
+    };
     // The nearest the finger comes to the block resting with its centre at `x`: negative in touch.
     let nearest = |x: f64| {
         let mut best = f64::INFINITY;
         for i in 0..=60 {
             for j in 0..=100 {
-                let q1 = -2.5 + 3.0 * i as f64 / 60.0;
-                let q2 = -2.5 + 5.0 * j as f64 / 100.0;
+                let (q1, q2) = (angle(0, i, 60), angle(1, j, 100));
                 let state = [q1, q2, x, 0.2, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
                 best = best.min(reach.gap(&state).map_or(-1.0, |(d, _)| d));
             }

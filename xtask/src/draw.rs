@@ -25,11 +25,6 @@ pub(crate) fn ellipse_outline(c: [f64; 2], phi: f64, a: f64, b: f64) -> Vec<(f64
         .collect()
 }
 
-/// Whether a body moves on its own (no actuated coordinate): the free object of a task.
-pub(crate) fn is_passive(scene: &Scene, body: usize) -> bool {
-    !scene.actuated(body)
-}
-
 /// A square-ish window `(x range, y range)` holding every body over `states`, the fixed ellipses and a
 /// strip of each half-plane, with a margin, stretched to the aspect `width / height`.
 pub(crate) fn bounds(
@@ -183,7 +178,7 @@ pub(crate) fn draw_body<DB: DrawingBackend>(
     let (a, b) = (shape.a(), shape.b());
     let (c, phi) = (kin.centre[i], kin.phi[i]);
     draw_ellipse(chart, (c, phi), (a, b), fill)?;
-    if is_passive(scene, i) {
+    if !scene.actuated(i) {
         let tip = (c[0] + a * phi.cos(), c[1] + a * phi.sin());
         chart
             .draw_series(LineSeries::new(
@@ -207,7 +202,7 @@ pub(crate) fn draw_bodies<DB: DrawingBackend>(
 ) -> anyhow::Result<()> {
     let kin = Kinematics::new(scene, &x[..scene.n_dof()]);
     for i in 0..scene.bodies.len() {
-        let fill = if is_passive(scene, i) {
+        let fill = if !scene.actuated(i) {
             RGBColor(240, 150, 40).mix(0.35)
         } else {
             BLUE.mix(0.25)
