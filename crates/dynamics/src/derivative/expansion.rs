@@ -268,6 +268,71 @@ impl Expansion {
         }
     }
 
+    /// The ingredients' values: `M`, `r + B u` and the constraints (true distances) at the step's start.
+    pub(super) fn values(&self) -> (Vec<f64>, Vec<f64>, Constraints) {
+        let (n, m, geo) = (self.n, self.m, &self.geometry);
+        let cons = Constraints {
+            d: self.distance.clone(),
+            jacobian: (0..m * n).map(|e| geo.re(self.jac(e / n, e % n))).collect(),
+            contacts: self.contacts.clone(),
+        };
+        let mass = (0..n * n)
+            .map(|e| geo.re(self.mass(e / n, e % n)))
+            .collect();
+        (mass, (0..n).map(|i| self.forces.re(i)).collect(), cons)
+    }
+
+    /// `-K_y`, the derivatives in `y = (x, u)` of the logistic and hard models' equations ([`system`](
+    /// super::linearise::system)) with a constant noise at their solution `p = [v'; lambda]`, into `out`
+    /// (row-major `(n + m) x (2n + n_u)`), read off the ingredients' gradients: with `v` the step's
+    /// velocities and `slope_k` row `k`'s `d phi / d w` (0 for a row held fixed),
+    /// `K_i = sum_j M_ij (v'_j - v_j) - h r_i - sum_k J_ki lambda_k` and
+    /// `K_(n + k) = phi(lambda_k, w_k)`, `w_k = d_k / h + sum_j J_kj v'_j`.
+    pub(super) fn equations_y(&self, h: f64, v: &[f64], p: &[f64], slope: &[f64], out: &mut [f64]) {
+        let (n, m, geo, forces) = (self.n, self.m, &self.geometry, &self.forces);
+        let cols = out.len() / (n + m);
+        out.fill(0.0);
+        for i in 0..n {
+            let row = &mut out[i * cols..(i + 1) * cols];
+            for (e, g) in row.iter_mut().zip(forces.g(i)) {
+                *e = h * g;
+            }
+            for j in 0..n {
+                let f = self.mass(i, j);
+                let s = p[j] - v[j];
+                for (e, g) in row.iter_mut().zip(geo.g(f)) {
+                    *e -= s * g;
+                }
+                row[n + j] += geo.re(f);
+            }
+            for k in 0..m {
+                let l = p[n + k];
+                for (e, g) in row.iter_mut().zip(geo.g(self.jac(k, i))) {
+                    *e += l * g;
+                }
+            }
+        }
+        for &(j, y) in &self.actuated {
+            out[j * cols + y] += h;
+        }
+        for k in 0..m {
+            let s = slope[k];
+            if s == 0.0 {
+                continue;
+            }
+            let row = &mut out[(n + k) * cols..(n + k + 1) * cols];
+            for (e, g) in row.iter_mut().zip(geo.g(self.dist(k))) {
+                *e = -s * g / h;
+            }
+            for j in 0..n {
+                let sv = s * p[j];
+                for (e, g) in row.iter_mut().zip(geo.g(self.jac(k, j))) {
+                    *e -= sv * g;
+                }
+            }
+        }
+    }
+
     /// The first-order ingredients over `y[first..first + 8]`.
     pub(super) fn first_order(&self, first: usize, cols: usize) -> Ingredients<D1> {
         let dirs: Vec<usize> = (first..(first + DIRECTIONS).min(cols)).collect();

@@ -13,8 +13,9 @@ use ncp::{
     DenseLu, LinearSolver, Mcp, NcpFunction, normal_expected_squared, normal_expected_squared_third,
 };
 
-/// The unknowns at the solution, the Jacobian of the equations in them (and its factors), each row's kind.
-pub(super) type Equations = (Vec<f64>, Vec<f64>, DenseLu, Vec<RowKind>);
+/// The unknowns at the solution, the Jacobian of the equations in them (and its factors), each row's kind
+/// and each complementarity row's slope in `w` (logistic and hard models; empty for the normal model).
+pub(super) type Equations = (Vec<f64>, Vec<f64>, DenseLu, Vec<RowKind>, Vec<f64>);
 
 /// What a complementarity row of the linearised step is.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -154,27 +155,39 @@ impl Model {
             ));
         }
         let (n, nu) = (self.scene().n_dof(), self.scene().n_controls);
-        // The ingredients in duals first: their values make the step's problem (the geometry runs once).
         let cols = 2 * n + nu;
-        let mut passes = Vec::with_capacity(cols.div_ceil(DIRECTIONS));
-        for first in (0..cols).step_by(DIRECTIONS) {
-            passes.push(match second {
-                Some(so) => so.first_order(first, cols),
-                _ => self.first_order_ingredients(x, u, first)?,
-            });
+        // With the second-order expansion of a logistic or hard step with a constant noise, the
+        // equations' derivatives in y are read off the ingredients' gradients directly; otherwise the
+        // ingredients run in first-order duals, eight directions of y per pass.
+        let direct = second.filter(|_| {
+            !self.has_state_covariance() && !matches!(model, Complementarity::Normal { .. })
+        });
+        let mut passes = Vec::new();
+        if direct.is_none() {
+            for first in (0..cols).step_by(DIRECTIONS) {
+                passes.push(match second {
+                    Some(so) => so.first_order(first, cols),
+                    _ => self.first_order_ingredients(x, u, first)?,
+                });
+            }
         }
-        let values = |v: &[D1]| v.iter().map(|e| e.re).collect::<Vec<f64>>();
-        let ing = &passes[0];
-        let M = values(&ing.M);
-        let mut r = values(&ing.r);
+        // The ingredients' values make the step's problem (the geometry runs once).
+        let (M, mut r, cons) = match direct {
+            Some(ex) => ex.values(),
+            None => {
+                let values = |v: &[D1]| v.iter().map(|e| e.re).collect::<Vec<f64>>();
+                let ing = &passes[0];
+                let cons = Constraints {
+                    d: ing.distance.clone(),
+                    jacobian: values(&ing.jac),
+                    contacts: ing.contacts.clone(),
+                };
+                (values(&ing.M), values(&ing.r), cons)
+            }
+        };
         for (r, f) in r.iter_mut().zip(source.data().forces()) {
             *r += f;
         }
-        let cons = Constraints {
-            d: ing.distance.clone(),
-            jacobian: values(&ing.jac),
-            contacts: ing.contacts.clone(),
-        };
         let problem = self.assemble_problem(&x[n..], &M, &r, cons)?;
         let problem = match source {
             Source::Stored(_) => problem.0,
@@ -198,15 +211,19 @@ impl Model {
         let mut jac = vec![0.0; dim * dim];
         problem.evaluate(&z, &mut f, Some(&mut jac));
         let normal = matches!(model, Complementarity::Normal { .. });
-        let (p, _, mut lu, kinds) = if normal {
+        let (p, _, mut lu, kinds, slope) = if normal {
             self.normal_system(&z, &f, &jac, n)?
         } else {
             self.complementarity_system(&z, &f, &jac, n)?
         };
         let np = p.len();
-        // The equations' derivatives in y = (x, u), eight directions per pass (one pass for the finger).
-        let pc: Vec<D1> = p.iter().map(|&e| D1::from_re(e)).collect();
         let mut dp = vec![0.0; np * cols];
+        if let Some(ex) = direct {
+            ex.equations_y(h, &x[n..], &p, &slope, &mut dp);
+        }
+        // Otherwise the equations' derivatives in y = (x, u) in duals, eight directions per pass (one
+        // pass for the finger).
+        let pc: Vec<D1> = p.iter().map(|&e| D1::from_re(e)).collect();
         for (ing, first) in passes.iter().zip((0..cols).step_by(DIRECTIONS)) {
             let v: Vec<D1> = (0..n)
                 .map(|j| {
@@ -228,6 +245,12 @@ impl Model {
         lu.solve_many(&mut dp, cols);
         // The position-level correction's derivatives: a function of q alone, read off its duals.
         let mut dcorrection = vec![0.0; n * cols];
+        if let Some(ex) = direct {
+            let geo = &ex.geometry;
+            for i in 0..n {
+                dcorrection[i * cols..i * cols + n].copy_from_slice(geo.g(ex.correction(i)));
+            }
+        }
         for (ing, first) in passes.iter().zip((0..cols).step_by(DIRECTIONS)) {
             for (i, e) in ing.correction.iter().enumerate() {
                 if let Some(g) = e.eps.0.as_ref() {
@@ -319,7 +342,8 @@ impl Model {
                 }
             }
         }
-        Ok((z.to_vec(), H, lu, kinds))
+        let slope = dphi.iter().map(|d| d.1).collect();
+        Ok((z.to_vec(), H, lu, kinds, slope))
     }
 
     /// Normal model: `p = [v'; lambda; nu]` with `nu = -M^-1 J^T e_b` and the first-order conditions'
@@ -393,7 +417,7 @@ impl Model {
             what: "the step's Jacobian",
             cause,
         })?;
-        Ok((p, H, lu, kinds))
+        Ok((p, H, lu, kinds, Vec::new()))
     }
 }
 
