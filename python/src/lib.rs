@@ -451,7 +451,7 @@ fn optimize<'py>(
     let cost = task.cost.clone();
     let sol = py.allow_threads(move || {
         shielded(|| {
-            ddp.solve(&mut SceneDynamics::new(sim), &cost, &x0, &us)
+            ddp.solve(&SceneDynamics::new(sim), &cost, &x0, &us)
                 .map_err(error)
         })
     })?;

@@ -102,7 +102,7 @@ fn riccati(sys: &Linear, c: &QuadraticCost, x0: &[f64], horizon: usize) -> (f64,
     // Roll out the optimal policy for its cost.
     let mut x = x0.to_vec();
     let mut total = 0.0;
-    let mut sys = sys.clone();
+    let sys = sys.clone();
     for i in 0..horizon {
         let u: Vec<f64> = (0..m)
             .map(|r| kff[i][r] + (0..n).map(|l| ks[i][r * n + l] * x[l]).sum::<f64>())
@@ -118,7 +118,7 @@ fn riccati(sys: &Linear, c: &QuadraticCost, x0: &[f64], horizon: usize) -> (f64,
 
 #[test]
 fn a_linear_quadratic_problem_converges_in_one_pass_to_the_riccati_solution() {
-    let (mut sys, cost) = lq_problem();
+    let (sys, cost) = lq_problem();
     let x0 = [1.0, -0.5, 0.3, 0.8];
     let horizon = 40;
     let (optimum, gains) = riccati(&sys, &cost, &x0, horizon);
@@ -130,7 +130,7 @@ fn a_linear_quadratic_problem_converges_in_one_pass_to_the_riccati_solution() {
         };
         let sol = Ddp::new(settings)
             .unwrap()
-            .solve(&mut sys, &cost, &x0, &vec![vec![0.0; 2]; horizon])
+            .solve(&sys, &cost, &x0, &vec![vec![0.0; 2]; horizon])
             .unwrap();
         assert!(sol.status.converged(), "{:?}", sol.status);
         let first = sol.iterations[0];
@@ -163,7 +163,7 @@ fn unicycle(method: Method, limits: Option<f64>) -> ddp::Solution {
     Ddp::new(settings)
         .unwrap()
         .solve(
-            &mut Unicycle { dt: 0.1 },
+            &Unicycle { dt: 0.1 },
             &Unicycle::benchmark_cost(),
             &Unicycle::X0,
             &vec![vec![0.0; 2]; Unicycle::HORIZON],
@@ -224,7 +224,7 @@ fn unicycle_second_derivatives_match_differences_of_its_first() {
         g
     };
     let (mut fx, mut fu, mut hess) = (vec![0.0; 9], vec![0.0; 6], vec![0.0; 25]);
-    u.calc_diff_second(&mut (), &y0[..3], &y0[3..], &c, &mut fx, &mut fu, &mut hess)
+    u.calc_diff2(&mut (), &y0[..3], &y0[3..], &c, &mut fx, &mut fu, &mut hess)
         .unwrap();
     for k in 0..5 {
         let (mut yp, mut ym) = (y0.to_vec(), y0.to_vec());
@@ -261,7 +261,7 @@ impl Dynamics for Fragile {
     }
     fn create_data(&self) {}
     fn calc(
-        &mut self,
+        &self,
         _: &mut (),
         _: Option<&()>,
         x: &[f64],
@@ -278,7 +278,7 @@ impl Dynamics for Fragile {
         Ok(())
     }
     fn calc_diff(
-        &mut self,
+        &self,
         _: &mut (),
         x: &[f64],
         u: &[f64],
@@ -299,7 +299,7 @@ fn failing_and_nan_dynamics_are_rejected_trials_never_results() {
     let sol = Ddp::new(settings)
         .unwrap()
         .solve(
-            &mut Fragile(Unicycle { dt: 0.1 }),
+            &Fragile(Unicycle { dt: 0.1 }),
             &Unicycle::benchmark_cost(),
             &Unicycle::X0,
             &vec![vec![0.0; 2]; Unicycle::HORIZON],
@@ -314,7 +314,7 @@ fn failing_and_nan_dynamics_are_rejected_trials_never_results() {
     assert!(costs.windows(2).all(|w| w[1] <= w[0]), "{costs:?}");
     // Full DDP on dynamics without second derivatives is refused up front.
     let err = Ddp::new(DdpSettings::default()).unwrap().solve(
-        &mut Fragile(Unicycle { dt: 0.1 }),
+        &Fragile(Unicycle { dt: 0.1 }),
         &Unicycle::benchmark_cost(),
         &Unicycle::X0,
         &vec![vec![0.0; 2]; 10],
@@ -329,7 +329,7 @@ fn failing_and_nan_dynamics_are_rejected_trials_never_results() {
     })
     .unwrap()
     .solve(
-        &mut Fragile(Unicycle { dt: 0.1 }),
+        &Fragile(Unicycle { dt: 0.1 }),
         &Unicycle::benchmark_cost(),
         &Unicycle::X0,
         &bad,
@@ -353,7 +353,7 @@ fn an_indefinite_problem_is_regularised_not_followed_uphill() {
     })
     .unwrap()
     .solve(
-        &mut Unicycle { dt: 0.1 },
+        &Unicycle { dt: 0.1 },
         &cost,
         &Unicycle::X0,
         &vec![vec![0.0; 2]; Unicycle::HORIZON],
@@ -370,7 +370,7 @@ fn a_thousand_step_horizon_converges() {
     let sol = Ddp::new(DdpSettings::default())
         .unwrap()
         .solve(
-            &mut Unicycle { dt: 0.01 },
+            &Unicycle { dt: 0.01 },
             &QuadraticCost::diagonal(&[1.0; 3], &[0.1; 2], &[1000.0; 3]),
             &Unicycle::X0,
             &vec![vec![0.0; 2]; 1000],
@@ -405,21 +405,33 @@ fn bad_settings_and_inputs_are_typed_errors() {
     ] {
         assert!(Ddp::new(s).is_err());
     }
+    for threads in [0, ddp::MAX_THREADS + 1, usize::MAX] {
+        assert!(matches!(
+            Ddp::new(DdpSettings {
+                threads,
+                ..DdpSettings::default()
+            }),
+            Err(DdpError::Setting {
+                name: "threads",
+                ..
+            })
+        ));
+    }
     let ddp = Ddp::new(DdpSettings::default()).unwrap();
     let cost = Unicycle::benchmark_cost();
-    let mut u = Unicycle { dt: 0.1 };
+    let u = Unicycle { dt: 0.1 };
     assert!(matches!(
-        ddp.solve(&mut u, &cost, &[0.0, f64::NAN, 0.0], &vec![vec![0.0; 2]; 5]),
+        ddp.solve(&u, &cost, &[0.0, f64::NAN, 0.0], &vec![vec![0.0; 2]; 5]),
         Err(DdpError::Input { what: "x0", .. })
     ));
     assert!(matches!(
-        ddp.solve(&mut u, &cost, &Unicycle::X0, &[vec![0.0; 3]]),
+        ddp.solve(&u, &cost, &Unicycle::X0, &[vec![0.0; 3]]),
         Err(DdpError::Input {
             what: "controls",
             ..
         })
     ));
-    assert!(ddp.solve(&mut u, &cost, &Unicycle::X0, &[]).is_err());
+    assert!(ddp.solve(&u, &cost, &Unicycle::X0, &[]).is_err());
 }
 
 #[test]
@@ -456,7 +468,7 @@ impl Dynamics for Rounded {
     }
     fn create_data(&self) {}
     fn calc(
-        &mut self,
+        &self,
         _: &mut (),
         _: Option<&()>,
         x: &[f64],
@@ -475,7 +487,7 @@ impl Dynamics for Rounded {
         Ok(())
     }
     fn calc_diff(
-        &mut self,
+        &self,
         _: &mut (),
         x: &[f64],
         u: &[f64],
@@ -484,15 +496,15 @@ impl Dynamics for Rounded {
     ) -> Result<(), Self::Error> {
         self.0.calc_diff(&mut (), x, u, fx, fu)
     }
-    fn second_order(&mut self) -> Option<&mut dyn SecondOrder<(), Error = Self::Error>> {
+    fn second_order(&self) -> Option<&dyn SecondOrder<(), Error = Self::Error>> {
         Some(self)
     }
 }
 
 impl SecondOrder<()> for Rounded {
     type Error = std::convert::Infallible;
-    fn calc_diff_second(
-        &mut self,
+    fn calc_diff2(
+        &self,
         _: &mut (),
         x: &[f64],
         u: &[f64],
@@ -501,7 +513,7 @@ impl SecondOrder<()> for Rounded {
         fu: &mut [f64],
         hess: &mut [f64],
     ) -> Result<(), Self::Error> {
-        self.0.calc_diff_second(&mut (), x, u, c, fx, fu, hess)
+        self.0.calc_diff2(&mut (), x, u, c, fx, fu, hess)
     }
 }
 
@@ -518,7 +530,7 @@ fn rounding_noise_in_the_steps_ends_in_convergence_not_in_a_failed_search() {
     let sol = Ddp::new(settings)
         .unwrap()
         .solve(
-            &mut Rounded(Unicycle { dt: 0.1 }),
+            &Rounded(Unicycle { dt: 0.1 }),
             &Unicycle::benchmark_cost(),
             &Unicycle::X0,
             &vec![vec![0.0; 2]; Unicycle::HORIZON],
@@ -540,7 +552,7 @@ fn rounding_noise_in_the_steps_ends_in_convergence_not_in_a_failed_search() {
 fn the_value_model_of_a_linear_quadratic_problem_predicts_the_optimal_cost_from_other_states() {
     // For LQ problems the backward pass's value is exact: the optimum from any other start is the
     // quadratic model's prediction, at every knot.
-    let (mut sys, cost) = lq_problem();
+    let (sys, cost) = lq_problem();
     let x0 = [1.0, -0.5, 0.3, 0.8];
     let horizon = 40;
     for method in [Method::Full, Method::GaussNewton] {
@@ -551,7 +563,7 @@ fn the_value_model_of_a_linear_quadratic_problem_predicts_the_optimal_cost_from_
         };
         let ddp = Ddp::new(settings).unwrap();
         let sol = ddp
-            .solve(&mut sys, &cost, &x0, &vec![vec![0.0; 2]; horizon])
+            .solve(&sys, &cost, &x0, &vec![vec![0.0; 2]; horizon])
             .unwrap();
         assert_eq!(sol.values.len(), horizon + 1);
         assert!((sol.values[0].cost_to_go - sol.cost).abs() < 1e-12 * sol.cost.abs());

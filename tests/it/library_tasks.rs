@@ -360,7 +360,7 @@ fn the_example_scenes_tasks_are_solved_from_rest() {
         })
         .unwrap()
         .solve(
-            &mut library::SceneDynamics::new(sim),
+            &library::SceneDynamics::new(sim),
             &task.cost,
             &task.x0,
             &vec![vec![0.0; m]; task.horizon],
@@ -771,12 +771,7 @@ fn a_continuation_that_finds_no_contact_keeps_the_tasks_own_solve() {
     .unwrap();
     let zero = vec![vec![0.0; 4]; task.horizon];
     let start = ddp
-        .solve(
-            &mut library::SceneDynamics::new(sim),
-            &task.cost,
-            &x0,
-            &zero,
-        )
+        .solve(&library::SceneDynamics::new(sim), &task.cost, &x0, &zero)
         .unwrap();
     let c = library::ContactProblem {
         ddp: &ddp,
@@ -809,7 +804,7 @@ fn solve_from(
 ) -> ddp::Solution {
     let sim = dynamics::Simulator::new(file.scene.clone(), step).unwrap();
     let zero = vec![vec![0.0; file.scene.n_controls]; task.horizon];
-    ddp.solve(&mut library::SceneDynamics::new(sim), &task.cost, x0, &zero)
+    ddp.solve(&library::SceneDynamics::new(sim), &task.cost, x0, &zero)
         .unwrap()
 }
 

@@ -265,14 +265,12 @@ fn full_ddp_past_its_memory_limit_is_refused_with_the_estimate_and_ilqr_runs() {
     let model = dynamics::Model::new(scene, dynamics::StepSettings::default()).unwrap();
     let per_knot = model.second_order_bytes();
     assert!(per_knot > 100 << 20, "{per_knot}");
-    let mut dynamics = library::SceneDynamics::from_model(model);
+    let dynamics = library::SceneDynamics::from_model(model);
     let cost = ddp::QuadraticCost::diagonal(&vec![1.0; n], &vec![0.1; nu], &vec![1.0; n]);
     let x0 = vec![0.0; n];
     let controls = vec![vec![0.0; nu]; 60];
     let full = ddp::Ddp::new(ddp::DdpSettings::default()).unwrap();
-    let err = full
-        .solve(&mut dynamics, &cost, &x0, &controls)
-        .unwrap_err();
+    let err = full.solve(&dynamics, &cost, &x0, &controls).unwrap_err();
     assert!(matches!(err, ddp::DdpError::TooLarge { .. }), "{err}");
     let message = err.to_string();
     assert!(
@@ -285,7 +283,7 @@ fn full_ddp_past_its_memory_limit_is_refused_with_the_estimate_and_ilqr_runs() {
         ..ddp::DdpSettings::default()
     })
     .unwrap();
-    ilqr.solve(&mut dynamics, &cost, &x0, &controls).unwrap();
+    ilqr.solve(&dynamics, &cost, &x0, &controls).unwrap();
 }
 
 /// Issue 27: a task's `control_limits` with three entries said `invalid length 3` without the field.

@@ -7,15 +7,41 @@ use ddp::{
 };
 use dynamics::{Complementarity, Scene, Simulator, StepSettings};
 use library::{ProblemFile, SceneDynamics};
-use std::time::{Duration, Instant};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Instant;
 
-/// Dynamics that time every call of the wrapped ones.
+/// Dynamics that time every call of the wrapped ones (nanoseconds, summed over threads).
 struct Timed<D> {
     inner: D,
-    step: Duration,
-    first: Duration,
-    second: Duration,
-    second_calls: usize,
+    step: AtomicU64,
+    first: AtomicU64,
+    second: AtomicU64,
+    second_calls: AtomicU64,
+}
+
+impl<D> Timed<D> {
+    fn new(inner: D) -> Self {
+        Timed {
+            inner,
+            step: AtomicU64::new(0),
+            first: AtomicU64::new(0),
+            second: AtomicU64::new(0),
+            second_calls: AtomicU64::new(0),
+        }
+    }
+
+    /// `f`, its time added to `clock`.
+    fn timed<R>(clock: &AtomicU64, f: impl FnOnce() -> R) -> R {
+        let t = Instant::now();
+        let r = f();
+        clock.fetch_add(t.elapsed().as_nanos() as u64, Ordering::Relaxed);
+        r
+    }
+
+    /// The time `clock` summed, in milliseconds.
+    fn ms(clock: &AtomicU64) -> f64 {
+        clock.load(Ordering::Relaxed) as f64 * 1e-6
+    }
 }
 
 impl<D: Dynamics> Dynamics for Timed<D> {
@@ -31,41 +57,48 @@ impl<D: Dynamics> Dynamics for Timed<D> {
         self.inner.create_data()
     }
     fn calc(
-        &mut self,
+        &self,
         data: &mut D::Data,
         near: Option<&D::Data>,
         x: &[f64],
         u: &[f64],
         next: &mut [f64],
     ) -> Result<(), D::Error> {
-        let t = Instant::now();
-        let r = self.inner.calc(data, near, x, u, next);
-        self.step += t.elapsed();
-        r
+        Self::timed(&self.step, || self.inner.calc(data, near, x, u, next))
     }
     fn calc_diff(
-        &mut self,
+        &self,
         data: &mut D::Data,
         x: &[f64],
         u: &[f64],
         fx: &mut [f64],
         fu: &mut [f64],
     ) -> Result<(), D::Error> {
-        let t = Instant::now();
-        let r = self.inner.calc_diff(data, x, u, fx, fu);
-        self.first += t.elapsed();
-        r
+        Self::timed(&self.first, || self.inner.calc_diff(data, x, u, fx, fu))
     }
-    fn second_order(&mut self) -> Option<&mut dyn SecondOrder<D::Data, Error = D::Error>> {
+    fn second_order(&self) -> Option<&dyn SecondOrder<D::Data, Error = D::Error>> {
         self.inner.second_order()?;
         Some(self)
     }
 }
 
+impl<D: Dynamics> Timed<D> {
+    fn inner_second(&self) -> &dyn SecondOrder<D::Data, Error = D::Error> {
+        self.inner
+            .second_order()
+            .expect("asked only through Timed::second_order, which checked it")
+    }
+}
+
 impl<D: Dynamics> SecondOrder<D::Data> for Timed<D> {
     type Error = D::Error;
-    fn calc_diff_second(
-        &mut self,
+    fn calc_diff2_prepare(&self, data: &mut D::Data, x: &[f64], u: &[f64]) -> Result<(), D::Error> {
+        Self::timed(&self.second, || {
+            self.inner_second().calc_diff2_prepare(data, x, u)
+        })
+    }
+    fn calc_diff2(
+        &self,
         data: &mut D::Data,
         x: &[f64],
         u: &[f64],
@@ -74,15 +107,10 @@ impl<D: Dynamics> SecondOrder<D::Data> for Timed<D> {
         fu: &mut [f64],
         hess: &mut [f64],
     ) -> Result<(), D::Error> {
-        let t = Instant::now();
-        let inner = self
-            .inner
-            .second_order()
-            .expect("asked only through Timed::second_order, which checked it");
-        let r = inner.calc_diff_second(data, x, u, c, fx, fu, hess);
-        self.second += t.elapsed();
-        self.second_calls += 1;
-        r
+        self.second_calls.fetch_add(1, Ordering::Relaxed);
+        Self::timed(&self.second, || {
+            self.inner_second().calc_diff2(data, x, u, c, fx, fu, hess)
+        })
     }
 }
 
@@ -113,16 +141,10 @@ fn solve_finger(
     sigma: f64,
     s: DdpSettings,
 ) -> anyhow::Result<(Solution, f64, Timed<SceneDynamics>)> {
-    let mut d = Timed {
-        inner: finger(sigma),
-        step: Duration::ZERO,
-        first: Duration::ZERO,
-        second: Duration::ZERO,
-        second_calls: 0,
-    };
+    let d = Timed::new(finger(sigma));
     let task = ProblemFile::builtin_task().1;
     let t = Instant::now();
-    let sol = Ddp::new(s)?.solve(&mut d, &task.cost, &task.x0, &vec![vec![0.0; 2]; 75])?;
+    let sol = Ddp::new(s)?.solve(&d, &task.cost, &task.x0, &vec![vec![0.0; 2]; 75])?;
     Ok((sol, t.elapsed().as_secs_f64(), d))
 }
 
@@ -204,7 +226,7 @@ pub fn section() -> anyhow::Result<String> {
             for _ in 0..5 {
                 let t = Instant::now();
                 let sol = ddp.solve(
-                    &mut Unicycle { dt: 0.1 },
+                    &Unicycle { dt: 0.1 },
                     &Unicycle::benchmark_cost(),
                     &Unicycle::X0,
                     &vec![vec![0.0; 2]; Unicycle::HORIZON],
@@ -276,7 +298,7 @@ pub fn section() -> anyhow::Result<String> {
         x0[5] += 0.02 * (k % 3) as f64;
         let t = Instant::now();
         let sol = Ddp::new(settings(Method::Full, Regularisation::State))?.solve(
-            &mut finger(0.1),
+            &finger(0.1),
             &task.cost,
             &x0,
             &vec![vec![0.0; 2]; 75],
@@ -305,7 +327,7 @@ pub fn section() -> anyhow::Result<String> {
         max_iterations: 30,
         ..DdpSettings::default()
     })?
-    .solve(&mut finger(0.1), &cost, &x0, &vec![vec![0.0; 2]; 75])?
+    .solve(&finger(0.1), &cost, &x0, &vec![vec![0.0; 2]; 75])?
     .controls;
     let median_ms = |f: &mut dyn FnMut()| {
         let mut t: Vec<f64> = (0..21)
@@ -319,7 +341,7 @@ pub fn section() -> anyhow::Result<String> {
         t[10]
     };
     let rollout = median_ms(&mut || {
-        ddp::rollout(&mut finger(0.1), &cost, &x0, &midway).expect("the midway controls run");
+        ddp::rollout(&finger(0.1), &cost, &x0, &midway).expect("the midway controls run");
     });
     out.push_str(&format!(
         "
@@ -338,7 +360,7 @@ One pass (backward pass with the steps' derivatives, then the forward pass with 
         let mut alpha = 0.0;
         let pass = median_ms(&mut || {
             let sol = ddp
-                .solve(&mut finger(0.1), &cost, &x0, &midway)
+                .solve(&finger(0.1), &cost, &x0, &midway)
                 .expect("one pass");
             alpha = sol.iterations[0].alpha;
         }) - rollout;
@@ -356,12 +378,12 @@ One pass (backward pass with the steps' derivatives, then the forward pass with 
     out.push_str(&scenes_pass_table()?);
     if let Some((passes, secs, t)) = profile {
         let total = secs * 1e3;
-        let second = t.second.as_secs_f64() * 1e3;
-        let step = t.step.as_secs_f64() * 1e3;
-        let rest = total - second - step - t.first.as_secs_f64() * 1e3;
+        let second = Timed::<SceneDynamics>::ms(&t.second);
+        let step = Timed::<SceneDynamics>::ms(&t.step);
+        let rest = total - second - step - Timed::<SceneDynamics>::ms(&t.first);
         out.push_str(&format!(
-            "\nWhere the time of the full-DDP solve at sigma = 0.1 goes ({passes} passes, {total:.0} ms): second derivatives of the steps (`SceneDynamics`'s `calc_diff_second`: one `Model::second_order` per step and trajectory (of the step the forward pass stored in the knot's data, not solved again), kept in the knot's data, then a cheap contraction per backward attempt; {} calls) {second:.0} ms ({:.0}%), steps of the forward passes and line searches {step:.0} ms ({:.0}%), the optimiser's own backward-pass algebra, box QP and bookkeeping {rest:.0} ms ({:.0}%).\n",
-            t.second_calls,
+            "\nWhere the time of the full-DDP solve at sigma = 0.1 goes ({passes} passes, {total:.0} ms): second derivatives of the steps (`SceneDynamics`'s `calc_diff2_prepare` and `calc_diff2`: one `Model::second_order` per step and trajectory (of the step the forward pass stored in the knot's data, not solved again), kept in the knot's data, then a cheap contraction per backward attempt; {} calls) {second:.0} ms ({:.0}%), steps of the forward passes and line searches {step:.0} ms ({:.0}%), the optimiser's own backward-pass algebra, box QP and bookkeeping {rest:.0} ms ({:.0}%).\n",
+            t.second_calls.load(Ordering::Relaxed),
             100.0 * second / total,
             100.0 * step / total,
             100.0 * rest / total
@@ -435,22 +457,22 @@ fn pass_row<C: ddp::Cost>(
         max_iterations: 30,
         ..DdpSettings::default()
     })?
-    .solve(&mut make()?, cost, x0, &vec![vec![0.0; m]; 75])?;
+    .solve(&make()?, cost, x0, &vec![vec![0.0; m]; 75])?;
     let midway = before.controls;
     let time = |max_iterations: usize| -> anyhow::Result<f64> {
         let mut t = Vec::new();
         for _ in 0..21 {
-            let mut d = make()?;
+            let d = make()?;
             let s = Instant::now();
             if max_iterations == 0 {
-                ddp::rollout(&mut d, cost, x0, &midway)
+                ddp::rollout(&d, cost, x0, &midway)
                     .map_err(|(i, e)| anyhow::anyhow!("step {i}: {e}"))?;
             } else {
                 Ddp::new(DdpSettings {
                     max_iterations,
                     ..DdpSettings::default()
                 })?
-                .solve(&mut d, cost, x0, &midway)?;
+                .solve(&d, cost, x0, &midway)?;
             }
             t.push(s.elapsed().as_secs_f64() * 1e3);
         }

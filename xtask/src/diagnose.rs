@@ -108,7 +108,7 @@ fn receding(horizon: usize, shift: usize, hard: bool, seconds: f64) -> anyhow::R
         horizon,
         ..LibrarySettings::default().for_task(&task)
     };
-    let mut dynamics = SceneDynamics::new(settings.simulator(&scene)?);
+    let dynamics = SceneDynamics::new(settings.simulator(&scene)?);
     let cost = task.cost;
     let mut sim = world(hard)?;
     let mut x = settings.x0.clone();
@@ -131,7 +131,7 @@ fn receding(horizon: usize, shift: usize, hard: bool, seconds: f64) -> anyhow::R
             ..DdpSettings::default()
         })?;
         first = false;
-        let sol = ddp.solve(&mut dynamics, &cost, &x, &plan)?;
+        let sol = ddp.solve(&dynamics, &cost, &x, &plan)?;
         for t in 0..shift {
             // The plan's time-varying law (its feedback acts after the first step).
             let mut u = sol.controls[t].clone();

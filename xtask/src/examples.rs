@@ -189,7 +189,7 @@ fn from_rest(problem: &ProblemFile, task: &Task) -> anyhow::Result<FromRest> {
     })?;
     let start = Instant::now();
     let sol = ddp.solve(
-        &mut SceneDynamics::new(sim),
+        &SceneDynamics::new(sim),
         &task.cost,
         &task.x0,
         &vec![vec![0.0; m]; task.horizon],

@@ -74,6 +74,10 @@ pub struct Args {
     /// Start each line search near the last accepted step size.
     #[arg(long)]
     adaptive_line_search: bool,
+    /// Threads the knots of each pass are differentiated on (1 to 256; the same solution on any number).
+    #[arg(long, default_value_t = 1,
+          value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=256))]
+    threads: usize,
     /// Box every control to [-L, L].
     #[arg(long)]
     limit: Option<f64>,
@@ -147,6 +151,7 @@ fn settings(args: &Args, m: usize, task: Option<&library::Task>) -> DdpSettings 
             }),
             None => task.and_then(|t| t.control_limits.clone()),
         },
+        threads: args.threads,
         ..DdpSettings::default()
     }
 }
@@ -201,7 +206,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             let base = *sim.settings();
             let mut probe = dynamics::Simulator::new(file.scene.clone(), base)?;
             let mut sol = ddp.solve_observed(
-                &mut SceneDynamics::new(sim),
+                &SceneDynamics::new(sim),
                 &task.cost,
                 &x0,
                 &vec![vec![0.0; m]; horizon],
@@ -298,7 +303,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             let x0 = args.x0.clone().unwrap_or_else(|| Unicycle::X0.to_vec());
             let ddp = Ddp::new(settings(args, 2, None))?;
             let sol = ddp.solve_observed(
-                &mut Unicycle { dt: 0.1 },
+                &Unicycle { dt: 0.1 },
                 &Unicycle::benchmark_cost(),
                 &x0,
                 &vec![vec![0.0; 2]; horizon],

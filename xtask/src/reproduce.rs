@@ -226,7 +226,7 @@ fn optimise(sigma: f64) -> anyhow::Result<Optimised> {
     )?;
     let t = Instant::now();
     let sol = Ddp::new(DdpSettings::default())?.solve(
-        &mut SceneDynamics::new(sim),
+        &SceneDynamics::new(sim),
         &task.cost,
         &task.x0,
         &vec![vec![0.0; 2]; task.horizon],

@@ -33,6 +33,11 @@ pub struct Args {
     /// c). The paper's library is one chain.
     #[arg(long, default_value_t = 1)]
     chains: usize,
+    /// Threads each solve differentiates its knots on (1 to 256; the same library on any number). They
+    /// multiply with --chains' threads: on two cores, use one or the other.
+    #[arg(long, default_value_t = 1,
+          value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=256))]
+    threads: usize,
     /// Optimiser passes at most per warm-started re-solve.
     #[arg(long, default_value_t = 100)]
     warm_passes: usize,
@@ -128,6 +133,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         trajectories: args.trajectories,
         seed: args.seed,
         chains: args.chains,
+        knot_threads: args.threads,
         keep: args.keep.unwrap_or(base.keep),
         horizon: args.horizon.unwrap_or(base.horizon),
         neighbours: args.neighbours.unwrap_or(base.neighbours),

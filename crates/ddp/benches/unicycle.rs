@@ -26,7 +26,7 @@ fn unicycle(c: &mut Criterion) {
             b.iter(|| {
                 let sol = ddp
                     .solve(
-                        &mut Unicycle { dt: 0.1 },
+                        &Unicycle { dt: 0.1 },
                         &Unicycle::benchmark_cost(),
                         &Unicycle::X0,
                         &vec![vec![0.0; 2]; Unicycle::HORIZON],

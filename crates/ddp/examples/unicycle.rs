@@ -21,7 +21,7 @@ fn main() -> Result<(), ddp::DdpError> {
             };
             let start = Instant::now();
             let solution = Ddp::new(settings)?.solve(
-                &mut Unicycle { dt: 0.1 },
+                &Unicycle { dt: 0.1 },
                 &Unicycle::benchmark_cost(),
                 &Unicycle::X0,
                 &vec![vec![0.0; 2]; Unicycle::HORIZON],

@@ -13,12 +13,12 @@
 //!     fn state_dim(&self) -> usize { 2 }
 //!     fn control_dim(&self) -> usize { 1 }
 //!     fn create_data(&self) {}
-//!     fn calc(&mut self, _: &mut (), _: Option<&()>, x: &[f64], u: &[f64], next: &mut [f64]) -> Result<(), Self::Error> {
+//!     fn calc(&self, _: &mut (), _: Option<&()>, x: &[f64], u: &[f64], next: &mut [f64]) -> Result<(), Self::Error> {
 //!         next[0] = x[0] + 0.1 * x[1];
 //!         next[1] = x[1] + 0.1 * u[0];
 //!         Ok(())
 //!     }
-//!     fn calc_diff(&mut self, _: &mut (), _x: &[f64], _u: &[f64], fx: &mut [f64], fu: &mut [f64]) -> Result<(), Self::Error> {
+//!     fn calc_diff(&self, _: &mut (), _x: &[f64], _u: &[f64], fx: &mut [f64], fu: &mut [f64]) -> Result<(), Self::Error> {
 //!         fx.copy_from_slice(&[1.0, 0.1, 0.0, 1.0]);
 //!         fu.copy_from_slice(&[0.0, 0.1]);
 //!         Ok(())
@@ -27,7 +27,7 @@
 //!
 //! let cost = QuadraticCost::diagonal(&[1.0, 0.1], &[0.01], &[100.0, 10.0]);
 //! let settings = DdpSettings { method: Method::GaussNewton, ..DdpSettings::default() };
-//! let solution = Ddp::new(settings)?.solve(&mut Integrator, &cost, &[1.0, 0.0], &vec![vec![0.0]; 50])?;
+//! let solution = Ddp::new(settings)?.solve(&Integrator, &cost, &[1.0, 0.0], &vec![vec![0.0]; 50])?;
 //! assert!(solution.status.converged());
 //! assert!(solution.states[50][0].abs() < 0.05);
 //! # Ok::<(), ddp::DdpError>(())
@@ -46,8 +46,8 @@ mod work;
 pub use error::DdpError;
 pub use model::{Cost, CostDerivatives, Dynamics, QuadraticCost, SecondOrder};
 pub use solver::{
-    ControlLimits, Ddp, DdpSettings, FULL_DDP_MAX_BYTES, Iteration, Method, RESOLUTION,
-    Regularisation, Solution, Status, ValueModel, rollout, shift_controls,
+    ControlLimits, Ddp, DdpSettings, FULL_DDP_MAX_BYTES, Iteration, MAX_THREADS, Method,
+    RESOLUTION, Regularisation, Solution, Status, ValueModel, rollout, shift_controls,
 };
 
 /// `Err` unless `v` has `len` finite entries.

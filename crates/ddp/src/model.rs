@@ -4,10 +4,13 @@
 /// Discrete dynamics `x' = f(x, u)` with first derivatives, computed in two stages per knot (as action
 /// models and their data are in crocoddyl): [`Dynamics::calc`] computes the step and keeps in the knot's
 /// [`Dynamics::Data`] what its linearisation needs; [`Dynamics::calc_diff`] linearises the step `calc`
-/// stored there. The optimiser creates one data per knot once per solve (and one per knot for its line
-/// search's trial trajectory, swapped in on acceptance), so nothing is looked up by the values of `x` and
-/// `u`. Full second-order DDP needs the capability [`SecondOrder`] as well ([`Dynamics::second_order`]).
-pub trait Dynamics {
+/// stored there. The model is immutable (`&self`) and everything a knot computes lives in its data, so the
+/// optimiser may differentiate the knots of a trajectory on several threads
+/// ([`DdpSettings::threads`](crate::DdpSettings::threads)). The optimiser creates one data per knot once per
+/// solve (and one per knot for its line search's trial trajectory, swapped in on acceptance), so nothing
+/// is looked up by the values of `x` and `u`. Full second-order DDP needs the capability [`SecondOrder`]
+/// as well ([`Dynamics::second_order`]).
+pub trait Dynamics: Sync {
     /// What a failed step reports (a failed step in a line search is a rejected trial, never propagated).
     type Error: std::error::Error + Send + Sync + 'static;
 
@@ -25,12 +28,12 @@ pub trait Dynamics {
     fn create_data(&self) -> Self::Data;
 
     /// Write `f(x, u)` into `next` (length `n`) and keep in `data` what [`Dynamics::calc_diff`] and
-    /// [`SecondOrder::calc_diff_second`] need. `near`, when given, is the same knot's data from the
+    /// [`SecondOrder::calc_diff2`] need. `near`, when given, is the same knot's data from the
     /// trajectory the optimiser is improving (the line search steps near it): dynamics whose step is an
     /// iterative solve may start from the solution it holds. The result must not depend on `near` or on
     /// what `data` held before beyond the solver's tolerance.
     fn calc(
-        &mut self,
+        &self,
         data: &mut Self::Data,
         near: Option<&Self::Data>,
         x: &[f64],
@@ -41,7 +44,7 @@ pub trait Dynamics {
     /// Write `fx` (`n x n`) and `fu` (`n x m`) of the step [`Dynamics::calc`] last computed in `data`
     /// (at these `x` and `u`).
     fn calc_diff(
-        &mut self,
+        &self,
         data: &mut Self::Data,
         x: &[f64],
         u: &[f64],
@@ -51,20 +54,20 @@ pub trait Dynamics {
 
     /// The second-order capability, if these dynamics have it (full second-order DDP needs it; without
     /// it only Gauss-Newton iLQR runs). The default: none.
-    fn second_order(&mut self) -> Option<&mut dyn SecondOrder<Self::Data, Error = Self::Error>> {
+    fn second_order(&self) -> Option<&dyn SecondOrder<Self::Data, Error = Self::Error>> {
         None
     }
 }
 
-/// The second-order terms of DDP: the Hessian of `c^T f(x, u)` for the value gradient `c`.
-pub trait SecondOrder<Data> {
+/// The second-order terms of DDP: the Hessian of `c^T f(x, u)` for the value gradient `c`, in two stages
+/// per knot: [`SecondOrder::calc_diff2_prepare`] computes everything that does not depend on `c` once per
+/// trajectory (the knots independently, on several threads when asked), and [`SecondOrder::calc_diff2`]
+/// contracts it with the `c` of each backward pass (a pass retried with more regularisation at the same
+/// trajectory costs the contraction alone).
+pub trait SecondOrder<Data>: Sync {
     /// As [`Dynamics::Error`].
     type Error;
 
-    /// Write `fx`, `fu` and the Hessian of `c^T f(x, u)` with respect to `(x, u)` into `hess`
-    /// (`(n + m) x (n + m)`), for the step [`Dynamics::calc`] last computed in `data` (at these `x` and
-    /// `u`). Called again with another `c` at the same data (a backward pass retried with more
-    /// regularisation), it may reuse what it kept there.
     /// The bytes the second-order derivatives keep in one knot's data, estimated before anything is
     /// allocated (0, the default: nothing worth counting). The solver multiplies it by the horizon and
     /// refuses full DDP past [`crate::FULL_DDP_MAX_BYTES`].
@@ -72,9 +75,21 @@ pub trait SecondOrder<Data> {
         0
     }
 
+    /// Keep in `data` everything of the second derivatives of the step [`Dynamics::calc`] last computed
+    /// there (at these `x` and `u`) that does not depend on `c`. The default: nothing (dynamics whose
+    /// Hessians are cheap compute them in [`SecondOrder::calc_diff2`]).
+    fn calc_diff2_prepare(&self, data: &mut Data, x: &[f64], u: &[f64]) -> Result<(), Self::Error> {
+        let _ = (data, x, u);
+        Ok(())
+    }
+
+    /// Write `fx`, `fu` and the Hessian of `c^T f(x, u)` with respect to `(x, u)` into `hess`
+    /// (`(n + m) x (n + m)`), for the step [`Dynamics::calc`] last computed in `data` (at these `x` and
+    /// `u`), from what [`SecondOrder::calc_diff2_prepare`] kept there (computing it first if it did not
+    /// run).
     #[allow(clippy::too_many_arguments)]
-    fn calc_diff_second(
-        &mut self,
+    fn calc_diff2(
+        &self,
         data: &mut Data,
         x: &[f64],
         u: &[f64],

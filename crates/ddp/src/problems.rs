@@ -32,7 +32,7 @@ impl Dynamics for Linear {
     fn create_data(&self) {}
 
     fn calc(
-        &mut self,
+        &self,
         _: &mut (),
         _: Option<&()>,
         x: &[f64],
@@ -51,7 +51,7 @@ impl Dynamics for Linear {
     }
 
     fn calc_diff(
-        &mut self,
+        &self,
         _: &mut (),
         _x: &[f64],
         _u: &[f64],
@@ -63,7 +63,7 @@ impl Dynamics for Linear {
         Ok(())
     }
 
-    fn second_order(&mut self) -> Option<&mut dyn SecondOrder<(), Error = Infallible>> {
+    fn second_order(&self) -> Option<&dyn SecondOrder<(), Error = Infallible>> {
         Some(self)
     }
 }
@@ -72,8 +72,8 @@ impl Dynamics for Linear {
 impl SecondOrder<()> for Linear {
     type Error = Infallible;
 
-    fn calc_diff_second(
-        &mut self,
+    fn calc_diff2(
+        &self,
         data: &mut (),
         x: &[f64],
         u: &[f64],
@@ -123,7 +123,7 @@ impl Dynamics for Unicycle {
     fn create_data(&self) {}
 
     fn calc(
-        &mut self,
+        &self,
         _: &mut (),
         _: Option<&()>,
         x: &[f64],
@@ -138,7 +138,7 @@ impl Dynamics for Unicycle {
     }
 
     fn calc_diff(
-        &mut self,
+        &self,
         _: &mut (),
         x: &[f64],
         u: &[f64],
@@ -162,7 +162,7 @@ impl Dynamics for Unicycle {
         Ok(())
     }
 
-    fn second_order(&mut self) -> Option<&mut dyn SecondOrder<(), Error = Infallible>> {
+    fn second_order(&self) -> Option<&dyn SecondOrder<(), Error = Infallible>> {
         Some(self)
     }
 }
@@ -170,8 +170,8 @@ impl Dynamics for Unicycle {
 impl SecondOrder<()> for Unicycle {
     type Error = Infallible;
 
-    fn calc_diff_second(
-        &mut self,
+    fn calc_diff2(
+        &self,
         data: &mut (),
         x: &[f64],
         u: &[f64],

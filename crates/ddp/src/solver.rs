@@ -7,6 +7,7 @@ use crate::error::DdpError;
 use crate::model::{Cost, Dynamics};
 use crate::work::Workspace;
 use serde::{Deserialize, Serialize};
+use std::sync::{Arc, Mutex};
 
 /// Which second-order terms the backward pass keeps.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -74,6 +75,20 @@ pub struct DdpSettings {
     pub adaptive_line_search: bool,
     /// Optional box limits on the controls.
     pub control_limits: Option<ControlLimits>,
+    /// Threads the knots of a trajectory are differentiated on (1: on the caller's thread; at most
+    /// [`MAX_THREADS`]). Each knot's derivatives depend on its own data alone, so every result is the
+    /// same to the last bit on any number of threads; only the backward pass's linearisation (the
+    /// dynamics' [`Dynamics::calc_diff`] or [`SecondOrder::calc_diff2_prepare`](crate::SecondOrder)) is
+    /// shared out, the rollouts and the backward recursion stay sequential.
+    #[serde(default = "one_thread")]
+    pub threads: usize,
+}
+
+/// The most threads [`DdpSettings::threads`] accepts.
+pub const MAX_THREADS: usize = 256;
+
+fn one_thread() -> usize {
+    1
 }
 
 impl Default for DdpSettings {
@@ -92,6 +107,7 @@ impl Default for DdpSettings {
             line_search_steps: 11,
             adaptive_line_search: false,
             control_limits: None,
+            threads: 1,
         }
     }
 }
@@ -133,6 +149,13 @@ impl DdpSettings {
                 name: "accept_ratio",
                 value: self.accept_ratio,
                 expected: "in [0, 1)",
+            });
+        }
+        if !(1..=MAX_THREADS).contains(&self.threads) {
+            return Err(DdpError::Setting {
+                name: "threads",
+                value: self.threads as f64,
+                expected: "from 1 to 256",
             });
         }
         if self.max_iterations == 0 || self.line_search_steps == 0 {
@@ -251,17 +274,46 @@ pub struct ValueModel {
     pub hessian: Vec<f64>,
 }
 
+/// The process's pool of `threads` threads, started on first use and shared by every optimiser asking for
+/// that many (a library builds thousands of optimisers, each solve a few milliseconds long).
+fn shared_pool(threads: usize) -> Result<Arc<rayon::ThreadPool>, DdpError> {
+    static POOLS: Mutex<Vec<(usize, Arc<rayon::ThreadPool>)>> = Mutex::new(Vec::new());
+    let mut pools = POOLS
+        .lock()
+        .unwrap_or_else(|poisoned| poisoned.into_inner());
+    if let Some((_, pool)) = pools.iter().find(|(t, _)| *t == threads) {
+        return Ok(pool.clone());
+    }
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .thread_name(|i| format!("ddp-knots-{i}"))
+        .build()
+        .map_err(|e| DdpError::Input {
+            what: "threads",
+            problem: format!("could not be started: {e}"),
+        })?;
+    let pool = Arc::new(pool);
+    pools.push((threads, pool.clone()));
+    Ok(pool)
+}
+
 /// The optimiser. See the module documentation.
 #[derive(Debug, Clone)]
 pub struct Ddp {
     settings: DdpSettings,
+    /// The threads the knots are differentiated on, when [`DdpSettings::threads`] is above 1.
+    pool: Option<Arc<rayon::ThreadPool>>,
 }
 
 impl Ddp {
-    /// An optimiser with checked settings.
+    /// An optimiser with checked settings (and its threads, when it has more than one).
     pub fn new(settings: DdpSettings) -> Result<Self, DdpError> {
         settings.validate()?;
-        Ok(Ddp { settings })
+        let pool = match settings.threads {
+            1 => None,
+            threads => Some(shared_pool(threads)?),
+        };
+        Ok(Ddp { settings, pool })
     }
 
     /// The settings.
@@ -272,7 +324,7 @@ impl Ddp {
     /// Minimise the cost from `x0` over `controls.len()` steps, starting from `controls`.
     pub fn solve<D: Dynamics, C: Cost>(
         &self,
-        dynamics: &mut D,
+        dynamics: &D,
         cost: &C,
         x0: &[f64],
         controls: &[Vec<f64>],
@@ -283,7 +335,7 @@ impl Ddp {
     /// As [`Ddp::solve`], calling `observe` after every pass (for progress reports).
     pub fn solve_observed<D: Dynamics, C: Cost>(
         &self,
-        dynamics: &mut D,
+        dynamics: &D,
         cost: &C,
         x0: &[f64],
         controls: &[Vec<f64>],
@@ -549,7 +601,7 @@ impl Ddp {
     #[allow(clippy::too_many_arguments)]
     fn backward<D: Dynamics, C: Cost>(
         &self,
-        dynamics: &mut D,
+        dynamics: &D,
         data: &mut [D::Data],
         cost: &C,
         (x, u): (&[Vec<f64>], &[Vec<f64>]),
@@ -561,26 +613,15 @@ impl Ddp {
         let (n, m) = (dynamics.state_dim(), dynamics.control_dim());
         let horizon = u.len();
         let full = self.settings.method == Method::Full;
-        if !full && !work.lin_current {
-            // Gauss-Newton: the linearisation of this trajectory, kept across regularisation retries.
-            if work.lin_fx.is_empty() {
+        if !work.lin_current {
+            // The trajectory's linearisation, kept across regularisation retries: everything of full DDP's
+            // second derivatives that does not depend on the value gradient, or Gauss-Newton's first
+            // derivatives.
+            if !full && work.lin_fx.is_empty() {
                 work.lin_fx = vec![vec![0.0; n * n]; horizon];
                 work.lin_fu = vec![vec![0.0; n * m]; horizon];
             }
-            for i in 0..horizon {
-                dynamics
-                    .calc_diff(
-                        &mut data[i],
-                        &x[i],
-                        &u[i],
-                        &mut work.lin_fx[i],
-                        &mut work.lin_fu[i],
-                    )
-                    .map_err(|e| DdpError::Derivatives {
-                        step: i,
-                        source: Box::new(e),
-                    })?;
-            }
+            self.linearise(dynamics, data, (x, u), full, work)?;
             work.lin_current = true;
         }
         cost.terminal_derivatives(&x[horizon], &mut work.vx, &mut work.vxx);
@@ -594,7 +635,7 @@ impl Ddp {
                 dynamics
                     .second_order()
                     .ok_or(DdpError::NoSecondDerivatives)?
-                    .calc_diff_second(
+                    .calc_diff2(
                         &mut data[i],
                         &x[i],
                         &u[i],
@@ -625,13 +666,76 @@ impl Ddp {
         Ok(true)
     }
 
+    /// Each knot's linearisation along `(x, u)` in its data (full DDP: [`SecondOrder::calc_diff2_prepare`](
+    /// crate::SecondOrder); Gauss-Newton: [`Dynamics::calc_diff`] into the workspace), on the pool when
+    /// there is one. A failure names the first knot that failed, as a sequential pass would.
+    fn linearise<D: Dynamics>(
+        &self,
+        dynamics: &D,
+        data: &mut [D::Data],
+        (x, u): (&[Vec<f64>], &[Vec<f64>]),
+        full: bool,
+        work: &mut Workspace,
+    ) -> Result<(), DdpError> {
+        let fail = |step: usize, e: D::Error| DdpError::Derivatives {
+            step,
+            source: Box::new(e),
+        };
+        let second = match full {
+            true => Some(
+                dynamics
+                    .second_order()
+                    .ok_or(DdpError::NoSecondDerivatives)?,
+            ),
+            false => None,
+        };
+        let knot = |i: usize, data: &mut D::Data, fx: &mut [f64], fu: &mut [f64]| match second {
+            Some(second) => second.calc_diff2_prepare(data, &x[i], &u[i]),
+            None => dynamics.calc_diff(data, &x[i], &u[i], fx, fu),
+        };
+        let (lin_fx, lin_fu) = (&mut work.lin_fx, &mut work.lin_fu);
+        let Some(pool) = &self.pool else {
+            for (i, d) in data.iter_mut().enumerate() {
+                let (fx, fu) = match full {
+                    true => (&mut [][..], &mut [][..]),
+                    false => (&mut lin_fx[i][..], &mut lin_fu[i][..]),
+                };
+                knot(i, d, fx, fu).map_err(|e| fail(i, e))?;
+            }
+            return Ok(());
+        };
+        use rayon::prelude::*;
+        let failures: Vec<(usize, D::Error)> = pool.install(|| {
+            let run = |(i, d): (usize, &mut D::Data), fx: &mut [f64], fu: &mut [f64]| {
+                knot(i, d, fx, fu).err().map(|e| (i, e))
+            };
+            match full {
+                true => data
+                    .par_iter_mut()
+                    .enumerate()
+                    .filter_map(|k| run(k, &mut [], &mut []))
+                    .collect(),
+                false => data
+                    .par_iter_mut()
+                    .enumerate()
+                    .zip(lin_fx.par_iter_mut().zip(lin_fu.par_iter_mut()))
+                    .filter_map(|(k, (fx, fu))| run(k, fx, fu))
+                    .collect(),
+            }
+        });
+        match failures.into_iter().min_by_key(|f| f.0) {
+            Some((i, e)) => Err(fail(i, e)),
+            None => Ok(()),
+        }
+    }
+
     /// The forward pass at step size `alpha` into the workspace's trial trajectory: at each knot, try
     /// the step `u = u_i + alpha k_i + K_i (x - x_i)` (clamped to the limits), then roll it out; the
     /// trial's total cost, or `Err` where a step fails or a cost is not finite.
     #[allow(clippy::too_many_arguments)]
     fn forward<D: Dynamics, C: Cost>(
         &self,
-        dynamics: &mut D,
+        dynamics: &D,
         (data, trial): (&[D::Data], &mut [D::Data]),
         cost: &C,
         (x, u): (&[Vec<f64>], &[Vec<f64>]),
@@ -681,7 +785,7 @@ pub type Rollout = (Vec<Vec<f64>>, f64);
 
 /// Roll out `u` from `x0`: the states and the total cost, or the step and reason of the first failure.
 pub fn rollout<D: Dynamics, C: Cost>(
-    dynamics: &mut D,
+    dynamics: &D,
     cost: &C,
     x0: &[f64],
     u: &[Vec<f64>],
@@ -692,7 +796,7 @@ pub fn rollout<D: Dynamics, C: Cost>(
 
 /// [`rollout`], each knot's step computed in `data[i]`.
 fn rollout_into<D: Dynamics, C: Cost>(
-    dynamics: &mut D,
+    dynamics: &D,
     cost: &C,
     x0: &[f64],
     u: &[Vec<f64>],

@@ -25,7 +25,7 @@ fn optimise(c: &mut Criterion) {
         ..DdpSettings::default()
     })
     .unwrap()
-    .solve(&mut finger(), &cost, &x0, &vec![vec![0.0; 2]; 75])
+    .solve(&finger(), &cost, &x0, &vec![vec![0.0; 2]; 75])
     .unwrap()
     .controls;
     let mut group = c.benchmark_group("finger");
@@ -42,8 +42,8 @@ fn optimise(c: &mut Criterion) {
         .unwrap();
         group.bench_function(name, |b| {
             b.iter(|| {
-                let mut d = finger();
-                black_box(ddp.solve(&mut d, &cost, &x0, &midway).unwrap().cost)
+                let d = finger();
+                black_box(ddp.solve(&d, &cost, &x0, &midway).unwrap().cost)
             })
         });
     }
@@ -51,10 +51,8 @@ fn optimise(c: &mut Criterion) {
     let ddp = Ddp::new(DdpSettings::default()).unwrap();
     group.bench_function("full_ddp_solve_from_zero", |b| {
         b.iter(|| {
-            let mut d = finger();
-            let sol = ddp
-                .solve(&mut d, &cost, &x0, &vec![vec![0.0; 2]; 75])
-                .unwrap();
+            let d = finger();
+            let sol = ddp.solve(&d, &cost, &x0, &vec![vec![0.0; 2]; 75]).unwrap();
             black_box(sol.cost)
         })
     });

@@ -56,7 +56,7 @@ pub fn anneal(
             control_limits: task.control_limits.clone(),
             ..DdpSettings::default()
         })
-        .and_then(|d| d.solve(&mut SceneDynamics::new(sim), cost, x0, &controls))
+        .and_then(|d| d.solve(&SceneDynamics::new(sim), cost, x0, &controls))
         .map_err(|source| LibraryError::Optimiser {
             trajectory: k,
             source,

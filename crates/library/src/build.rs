@@ -96,6 +96,16 @@ pub struct LibrarySettings {
     /// at every seed, ends 0.049-0.094 from it with 0.25). A task that rewards progress grows at its own
     /// noise scale.
     pub growth_sharpening: f64,
+    /// Threads each optimiser differentiates its knots on ([`ddp::DdpSettings::threads`]; at most
+    /// [`ddp::MAX_THREADS`]): the same library on any number. They multiply with [`Self::chains`]'
+    /// threads (each chain's solves share one pool of this many), so on two cores use one or the other.
+    /// A property of the build, not of the library: not kept in its file (a loaded library says 1).
+    #[serde(skip, default = "one_thread")]
+    pub knot_threads: usize,
+}
+
+fn one_thread() -> usize {
+    1
 }
 
 /// How a library's trajectories explore the state space.
@@ -189,6 +199,7 @@ impl Default for LibrarySettings {
             growth: 12,
             growth_time_steps: vec![0.05, 0.03],
             growth_sharpening: GROWTH_SHARPENING,
+            knot_threads: 1,
         }
     }
 }
@@ -282,6 +293,9 @@ impl LibrarySettings {
                 self.chains as f64,
                 "between 1 and the number of trajectories",
             );
+        }
+        if !(1..=ddp::MAX_THREADS).contains(&self.knot_threads) {
+            return bad("knot_threads", self.knot_threads as f64, "from 1 to 256");
         }
         if self.kick_every == 0 {
             return bad("kick_every", 0.0, "at least 1");
@@ -845,6 +859,7 @@ impl<'a> Build<'a> {
             max_iterations: passes,
             tol_cost: self.settings.tolerance,
             control_limits: self.control_limits.clone(),
+            threads: self.settings.knot_threads,
             ..DdpSettings::default()
         })
         .map_err(|source| LibraryError::Optimiser {

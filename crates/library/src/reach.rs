@@ -288,8 +288,8 @@ impl ContactProblem<'_> {
         cost: &C,
         controls: &[Vec<f64>],
     ) -> Result<Solution, LibraryError> {
-        let mut dynamics = SceneDynamics::new(Simulator::new(self.scene.clone(), settings)?);
-        ddp.solve(&mut dynamics, cost, self.x0, controls)
+        let dynamics = SceneDynamics::new(Simulator::new(self.scene.clone(), settings)?);
+        ddp.solve(&dynamics, cost, self.x0, controls)
             .map_err(|source| LibraryError::Optimiser {
                 trajectory: 0,
                 source,

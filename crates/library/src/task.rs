@@ -88,7 +88,7 @@ impl Dynamics for SceneDynamics {
     }
 
     fn calc(
-        &mut self,
+        &self,
         data: &mut StepData,
         near: Option<&StepData>,
         x: &[f64],
@@ -108,7 +108,7 @@ impl Dynamics for SceneDynamics {
     }
 
     fn calc_diff(
-        &mut self,
+        &self,
         data: &mut StepData,
         _x: &[f64],
         _u: &[f64],
@@ -126,7 +126,7 @@ impl Dynamics for SceneDynamics {
         Ok(())
     }
 
-    fn second_order(&mut self) -> Option<&mut dyn SecondOrder<StepData, Error = TaskError>> {
+    fn second_order(&self) -> Option<&dyn SecondOrder<StepData, Error = TaskError>> {
         Some(self)
     }
 }
@@ -138,15 +138,11 @@ impl SecondOrder<StepData> for SceneDynamics {
         self.model.second_order_bytes()
     }
 
-    fn calc_diff_second(
-        &mut self,
+    fn calc_diff2_prepare(
+        &self,
         data: &mut StepData,
         _x: &[f64],
         _u: &[f64],
-        c: &[f64],
-        fx: &mut [f64],
-        fu: &mut [f64],
-        hess: &mut [f64],
     ) -> Result<(), TaskError> {
         if data.prepared.is_none() {
             let so = self.model.second_order(&data.data)?;
@@ -155,6 +151,20 @@ impl SecondOrder<StepData> for SceneDynamics {
             }
             data.prepared = Some(so);
         }
+        Ok(())
+    }
+
+    fn calc_diff2(
+        &self,
+        data: &mut StepData,
+        x: &[f64],
+        u: &[f64],
+        c: &[f64],
+        fx: &mut [f64],
+        fu: &mut [f64],
+        hess: &mut [f64],
+    ) -> Result<(), TaskError> {
+        self.calc_diff2_prepare(data, x, u)?;
         let so = data.prepared.as_ref().expect("prepared above");
         fx.copy_from_slice(&so.derivatives.fx);
         fu.copy_from_slice(&so.derivatives.fu);

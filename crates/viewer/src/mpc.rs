@@ -131,7 +131,7 @@ impl OnlineMpc {
         let mut data = ddp::Dynamics::create_data(&self.dynamics);
         for u in &mut self.plan {
             policy.control(&x, u)?;
-            ddp::Dynamics::calc(&mut self.dynamics, &mut data, None, &x, u, &mut next)
+            ddp::Dynamics::calc(&self.dynamics, &mut data, None, &x, u, &mut next)
                 .map_err(|e| ViewerError::Message(format!("seeding the plan: {e}")))?;
             std::mem::swap(&mut x, &mut next);
         }
@@ -177,11 +177,11 @@ impl OnlineMpc {
     /// say) is dropped for one at rest.
     fn solve(&mut self, settings: DdpSettings, x: &[f64]) -> Result<Solution, ViewerError> {
         let ddp = Ddp::new(settings)?;
-        match ddp.solve(&mut self.dynamics, &self.cost, x, &self.plan) {
+        match ddp.solve(&self.dynamics, &self.cost, x, &self.plan) {
             Ok(sol) => Ok(sol),
             Err(DdpError::InitialRollout { .. }) => {
                 self.clear();
-                Ok(ddp.solve(&mut self.dynamics, &self.cost, x, &self.plan)?)
+                Ok(ddp.solve(&self.dynamics, &self.cost, x, &self.plan)?)
             }
             Err(e) => Err(e.into()),
         }
