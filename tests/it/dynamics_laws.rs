@@ -644,3 +644,47 @@ fn a_data_steps_with_the_settings_of_the_model_that_steps_it() {
         .clone();
     assert!(c.info.iterations <= 3, "{c:?}");
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(48))]
+
+    /// The knots' path (the derivatives kept in the step's data: `calc_diff`, `calc_diff2_prepare`, then
+    /// `calc_diff2` with several `c`) gives what the owned path gives (`derivatives`, `second_order`, then
+    /// `hessian`), to the last bit, for every contact model; a new step drops what the data kept.
+    #[test]
+    fn derivatives_kept_in_the_data_are_the_owned_ones(x in state(), model in 0usize..3) {
+        let model = [
+            Complementarity::Logistic { sigma: 0.1 },
+            Complementarity::Hard,
+            Complementarity::Normal { sigma: 0.2 },
+        ][model];
+        let m = Model::new(finger(), StepSettings { model, ..StepSettings::default() }).unwrap();
+        let mut data = m.create_data();
+        let u = [0.4, -0.3];
+        let Ok(step) = m.step(&mut data, &x, &u) else {
+            return Ok(());
+        };
+        if step.info.status != ncp::Status::Converged {
+            return Ok(());
+        }
+        let Ok(owned) = m.second_order(&data) else { return Ok(()) };
+        let first = m.derivatives(&data).unwrap();
+        prop_assert_eq!(m.calc_diff(&mut data).unwrap(), &first);
+        m.calc_diff2_prepare(&mut data).unwrap();
+        for k in 0..3 {
+            let c: Vec<f64> = (0..6).map(|i| ((i + k) % 4) as f64 - 1.5).collect();
+            let mut hess = vec![0.0; 64];
+            let d = m.calc_diff2(&mut data, &c, &mut hess).unwrap().clone();
+            prop_assert_eq!(&d, &owned.derivatives);
+            prop_assert_eq!(hess, owned.hessian(&c).unwrap());
+        }
+        // The next step's derivatives are its own: the kept ones are dropped.
+        let mut x2 = x.clone();
+        x2[3] += 0.5;
+        if m.step(&mut data, &x2, &u).is_ok_and(|s| s.info.status == ncp::Status::Converged)
+            && let Ok(fresh) = m.derivatives(&data)
+        {
+            prop_assert_eq!(m.calc_diff(&mut data).unwrap(), &fresh);
+        }
+    }
+}

@@ -192,6 +192,10 @@ pub struct StepData {
     x: Vec<f64>,
     u: Vec<f64>,
     step: Option<Step>,
+    /// The derivatives of `step` once computed ([`Model::calc_diff`], [`Model::calc_diff2_prepare`]).
+    pub(crate) derivatives: Option<crate::derivative::StepDerivatives>,
+    /// What the second derivatives of `step` keep besides its first ([`Model::calc_diff2_prepare`]).
+    pub(crate) second: Option<crate::derivative::SecondOrderParts>,
 }
 
 impl StepData {
@@ -327,6 +331,8 @@ impl Model {
             x: Vec::new(),
             u: Vec::new(),
             step: None,
+            derivatives: None,
+            second: None,
         }
     }
 
@@ -769,6 +775,8 @@ impl Model {
         let n = self.scene.n_dof();
         let m = cons.d.len();
         data.step = None;
+        data.derivatives = None;
+        data.second = None;
         let mut z = match &data.warm {
             Some(w) if w.len() == n + m => w.clone(),
             _ => {

@@ -36,7 +36,7 @@ pub use reach::{
     CONTINUATION_DOUBLINGS, ContactProblem, ContactSearch, Continuation, REACH_PULL,
     REACH_PULL_PASSES, Reach, ReachCost, contact_felt, needed_pairs, noise_scale,
 };
-pub use task::{SceneDynamics, StepData, TaskError};
+pub use task::{SceneDynamics, TaskError};
 
 /// `Err` unless `v` has `len` finite entries.
 pub(crate) fn check(what: &'static str, v: &[f64], len: usize) -> Result<(), LibraryError> {

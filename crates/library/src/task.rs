@@ -1,7 +1,7 @@
 //! The simulator as [`ddp::Dynamics`] for any scene (the task's cost is [`crate::TaskCost`]).
 
 use ddp::{Dynamics, SecondOrder};
-use dynamics::{DynamicsError, Model, SecondOrderStep, Simulator, Step};
+use dynamics::{DynamicsError, Model, Simulator, StepData};
 use thiserror::Error;
 
 /// Why a step of the task failed.
@@ -15,35 +15,20 @@ pub enum TaskError {
     NotConverged(ncp::Status),
 }
 
-/// A step [`Model`] as the optimiser's dynamics: [`Dynamics::calc`] is [`Model::step`] in the knot's data,
-/// [`Dynamics::calc_diff`] [`Model::derivatives`] of the step stored there, and the second-order
-/// capability [`Model::second_order`] of it (any scene).
+/// A step [`Model`] as the optimiser's dynamics: each knot's data is the model's [`StepData`],
+/// [`Dynamics::calc`] is [`Model::step`] in it, [`Dynamics::calc_diff`] [`Model::calc_diff`] of the step
+/// stored there, and the second-order capability [`Model::calc_diff2_prepare`] and [`Model::calc_diff2`]
+/// (any scene).
 ///
-/// Each knot's [`StepData`] holds the model's step data: its step, which the knot's linearisation
-/// differentiates as it is (no second solve), and the warm start of the knot's next solve, which `calc`
-/// takes from the same knot of the trajectory being improved (`near`) when there is one and otherwise from
-/// the knot's own last solution (a fresh knot starts from `[v; 0]`). It also keeps the step's second-order
-/// expansion once computed: a backward pass retried with more regularisation at the same trajectory
-/// changes only the vector the Hessian is contracted with, and costs the contraction alone.
+/// A knot's data holds its step, which the knot's linearisation differentiates as it is (no second solve),
+/// and the warm start of the knot's next solve, which `calc` takes from the same knot of the trajectory
+/// being improved (`near`) when there is one and otherwise from the knot's own last solution (a fresh knot
+/// starts from `[v; 0]`). It also keeps the step's derivatives once computed: a backward pass retried with
+/// more regularisation at the same trajectory changes only the vector the Hessian is contracted with, and
+/// costs the contraction alone.
 #[derive(Debug)]
 pub struct SceneDynamics {
     model: Model,
-}
-
-/// One knot's step, kept by [`SceneDynamics`] (see there).
-#[derive(Debug)]
-pub struct StepData {
-    /// The model's data: the step last computed at the knot, and where the knot's next solve starts.
-    data: dynamics::StepData,
-    /// That step's second-order expansion, once asked for.
-    prepared: Option<SecondOrderStep>,
-}
-
-impl StepData {
-    /// The step last computed at the knot, if any.
-    pub fn step(&self) -> Option<&Step> {
-        self.data.step()
-    }
 }
 
 impl SceneDynamics {
@@ -81,10 +66,7 @@ impl Dynamics for SceneDynamics {
     }
 
     fn create_data(&self) -> StepData {
-        StepData {
-            data: self.model.create_data(),
-            prepared: None,
-        }
+        self.model.create_data()
     }
 
     fn calc(
@@ -96,10 +78,9 @@ impl Dynamics for SceneDynamics {
         next: &mut [f64],
     ) -> Result<(), TaskError> {
         if let Some(near) = near {
-            data.data.warm_start_from(&near.data);
+            data.warm_start_from(near);
         }
-        data.prepared = None;
-        let s = self.model.step(&mut data.data, x, u)?;
+        let s = self.model.step(data, x, u)?;
         if s.info.status != ncp::Status::Converged {
             return Err(TaskError::NotConverged(s.info.status));
         }
@@ -115,12 +96,7 @@ impl Dynamics for SceneDynamics {
         fx: &mut [f64],
         fu: &mut [f64],
     ) -> Result<(), TaskError> {
-        if let Some(so) = &data.prepared {
-            fx.copy_from_slice(&so.derivatives.fx);
-            fu.copy_from_slice(&so.derivatives.fu);
-            return Ok(());
-        }
-        let d = self.model.derivatives(&data.data)?;
+        let d = self.model.calc_diff(data)?;
         fx.copy_from_slice(&d.fx);
         fu.copy_from_slice(&d.fu);
         Ok(())
@@ -144,31 +120,22 @@ impl SecondOrder<StepData> for SceneDynamics {
         _x: &[f64],
         _u: &[f64],
     ) -> Result<(), TaskError> {
-        if data.prepared.is_none() {
-            let so = self.model.second_order(&data.data)?;
-            if so.step.info.status != ncp::Status::Converged {
-                return Err(TaskError::NotConverged(so.step.info.status));
-            }
-            data.prepared = Some(so);
-        }
-        Ok(())
+        Ok(self.model.calc_diff2_prepare(data)?)
     }
 
     fn calc_diff2(
         &self,
         data: &mut StepData,
-        x: &[f64],
-        u: &[f64],
+        _x: &[f64],
+        _u: &[f64],
         c: &[f64],
         fx: &mut [f64],
         fu: &mut [f64],
         hess: &mut [f64],
     ) -> Result<(), TaskError> {
-        self.calc_diff2_prepare(data, x, u)?;
-        let so = data.prepared.as_ref().expect("prepared above");
-        fx.copy_from_slice(&so.derivatives.fx);
-        fu.copy_from_slice(&so.derivatives.fu);
-        so.hessian_into(c, hess)?;
+        let d = self.model.calc_diff2(data, c, hess)?;
+        fx.copy_from_slice(&d.fx);
+        fu.copy_from_slice(&d.fu);
         Ok(())
     }
 }

@@ -239,12 +239,14 @@ impl Structured {
 }
 
 impl Model {
-    pub(super) fn second_order_from(
+    /// The step's first derivatives and what its second derivatives keep besides them, for the step in
+    /// `source` (solved now or stored).
+    pub(super) fn second_order_parts(
         &self,
         x: &[f64],
         u: &[f64],
         mut source: Source<'_>,
-    ) -> Result<SecondOrderStep, DynamicsError> {
+    ) -> Result<(StepDerivatives, SecondOrderParts), DynamicsError> {
         let (n, nu, h) = (
             self.scene().n_dof(),
             self.scene().n_controls,
@@ -286,15 +288,35 @@ impl Model {
             }
             (None, assembled) => Equations::Assembled(assembled.expect("assembled above")),
         };
-        Ok(SecondOrderStep {
-            step: source.data().step().expect("linearised above").clone(),
-            derivatives,
+        let parts = SecondOrderParts {
             n,
             cols,
             h,
-            adjoint: std::cell::RefCell::new(lu),
+            adjoint: lu,
             equations,
             correction,
+        };
+        Ok((derivatives, parts))
+    }
+
+    /// [`Model::second_order_parts`] with a copy of the step, as one owned value.
+    pub(super) fn second_order_from(
+        &self,
+        x: &[f64],
+        u: &[f64],
+        source: Source<'_>,
+    ) -> Result<SecondOrderStep, DynamicsError> {
+        let (data, (derivatives, parts)) = match source {
+            Source::Solve(data) => {
+                let out = self.second_order_parts(x, u, Source::Solve(&mut *data))?;
+                (&*data, out)
+            }
+            Source::Stored(data) => (data, self.second_order_parts(x, u, Source::Stored(data))?),
+        };
+        Ok(SecondOrderStep {
+            step: data.step().expect("linearised above").clone(),
+            derivatives,
+            parts: std::cell::RefCell::new(parts),
         })
     }
 }
@@ -383,25 +405,43 @@ fn general_hessians(
     e
 }
 
-/// A step prepared for its second derivatives ([`Simulator::second_order_step`]): the step, its first
-/// derivatives, and the Hessian of `c^T f` for any `c` by [`SecondOrderStep::hessian`]. Second-order
-/// adjoint: with `K_p^T mu = -g` for the step's equations `K(p; y) = 0` and `g = (dx'/dp)^T c`,
-/// `d^2 (c^T f) / dy^2 = T^T (d^2 (mu^T K) / d(p, y)^2) T`, `T = [dp/dy; I]`, the inner Hessian along the
-/// columns of `T` (stage 3, module documentation).
-pub struct SecondOrderStep {
-    /// The step.
-    pub step: Step,
-    /// Its first derivatives.
-    pub derivatives: StepDerivatives,
+/// What a step's second derivatives keep besides the step and its first derivatives: the factors of
+/// `K_p` (for the adjoint `mu`) and the Hessians of the step's equations along `T`, or what they are made
+/// of (module documentation of stage 3). Kept in the step's data ([`Model::calc_diff2_prepare`]) or in a
+/// [`SecondOrderStep`].
+pub(crate) struct SecondOrderParts {
     n: usize,
     cols: usize,
     h: f64,
-    adjoint: std::cell::RefCell<DenseLu>,
+    adjoint: DenseLu,
     /// The Hessians of the step's equations along `T`, or what they are made of.
     equations: Equations,
     /// The Hessians over `q` of the position-level correction `dq(q)` (`q' = q + dq + h v'`), `n` blocks of
     /// `n x n`; `None` when it is zero.
     correction: Option<Vec<f64>>,
+}
+
+impl std::fmt::Debug for SecondOrderParts {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SecondOrderParts")
+            .field("n", &self.n)
+            .field("cols", &self.cols)
+            .finish_non_exhaustive()
+    }
+}
+
+/// A step prepared for its second derivatives ([`Simulator::second_order_step`]): the step, its first
+/// derivatives, and the Hessian of `c^T f` for any `c` by [`SecondOrderStep::hessian`]. Second-order
+/// adjoint: with `K_p^T mu = -g` for the step's equations `K(p; y) = 0` and `g = (dx'/dp)^T c`,
+/// `d^2 (c^T f) / dy^2 = T^T (d^2 (mu^T K) / d(p, y)^2) T`, `T = [dp/dy; I]`, the inner Hessian along the
+/// columns of `T` (stage 3, module documentation). An owned copy of what [`Model::calc_diff2_prepare`]
+/// keeps in a step's data.
+pub struct SecondOrderStep {
+    /// The step.
+    pub step: Step,
+    /// Its first derivatives.
+    pub derivatives: StepDerivatives,
+    parts: std::cell::RefCell<SecondOrderParts>,
 }
 
 impl std::fmt::Debug for SecondOrderStep {
@@ -416,13 +456,25 @@ impl std::fmt::Debug for SecondOrderStep {
 impl SecondOrderStep {
     /// The Hessian of `c^T f(x, u)` with respect to `(x, u)`, row-major `(2n + n_u)^2`.
     pub fn hessian(&self, c: &[f64]) -> Result<Vec<f64>, DynamicsError> {
-        let mut hess = vec![0.0; self.cols * self.cols];
+        let cols = self.parts.borrow().cols;
+        let mut hess = vec![0.0; cols * cols];
         self.hessian_into(c, &mut hess)?;
         Ok(hess)
     }
 
     /// [`SecondOrderStep::hessian`] written into `hess` (`(2n + n_u)^2` entries), which is overwritten.
     pub fn hessian_into(&self, c: &[f64], hess: &mut [f64]) -> Result<(), DynamicsError> {
+        self.parts.borrow_mut().hessian_into(c, hess)
+    }
+}
+
+impl SecondOrderParts {
+    /// [`SecondOrderStep::hessian_into`].
+    pub(crate) fn hessian_into(
+        &mut self,
+        c: &[f64],
+        hess: &mut [f64],
+    ) -> Result<(), DynamicsError> {
         let (n, cols, h) = (self.n, self.cols, self.h);
         if c.len() != 2 * n || !c.iter().all(|e| e.is_finite()) {
             return Err(DynamicsError::Input {
@@ -445,7 +497,7 @@ impl SecondOrderStep {
         for i in 0..n {
             mu[i] = -(h * c[i] + c[n + i]);
         }
-        self.adjoint.borrow_mut().solve_transposed(&mut mu);
+        self.adjoint.solve_transposed(&mut mu);
         match &self.equations {
             Equations::Structured(s) => s.contract(&mu, hess),
             Equations::Assembled(equations) => {
@@ -501,19 +553,24 @@ mod tests {
             .model()
             .linearise(x, u, Some(&ing), &mut Source::Stored(sim.data()))
             .unwrap();
-        let (n, cols, h) = (structured.n, structured.cols, structured.h);
+        let (n, cols, h) = {
+            let parts = structured.parts.borrow();
+            (parts.n, parts.cols, parts.h)
+        };
         let equations = general_hessians(&ing, h, x, &lin, cols, false);
         let step = sim.data().step().unwrap().clone();
         let lambda = step.lambda.iter().fold(0.0f64, |a, &b| a.max(b));
         let general = SecondOrderStep {
             step,
             derivatives: structured.derivatives.clone(),
-            n,
-            cols,
-            h,
-            adjoint: std::cell::RefCell::new(lin.lu),
-            equations: Equations::Assembled(equations),
-            correction: correction_hessians(&ing),
+            parts: std::cell::RefCell::new(SecondOrderParts {
+                n,
+                cols,
+                h,
+                adjoint: lin.lu,
+                equations: Equations::Assembled(equations),
+                correction: correction_hessians(&ing),
+            }),
         };
         (
             structured.hessian(c).unwrap(),

@@ -23,6 +23,7 @@ mod hessian;
 mod linearise;
 mod residual;
 
+pub(crate) use hessian::SecondOrderParts;
 pub use hessian::SecondOrderStep;
 pub use residual::{step_residual, step_residual_at};
 
@@ -63,6 +64,50 @@ impl Model {
                     .saturating_mul(2),
             );
         doubles.saturating_mul(std::mem::size_of::<f64>())
+    }
+
+    /// The first derivatives of the step `data` holds ([`Model::derivatives`]), kept in `data` (and read
+    /// from it when [`Model::calc_diff2_prepare`] computed them already) until its next step: the
+    /// first-order stage of the optimiser's knots, without copying.
+    pub fn calc_diff<'d>(
+        &self,
+        data: &'d mut StepData,
+    ) -> Result<&'d StepDerivatives, DynamicsError> {
+        if data.derivatives.is_none() {
+            let d = self.derivatives(data)?;
+            data.derivatives = Some(d);
+        }
+        Ok(data.derivatives.as_ref().expect("kept above"))
+    }
+
+    /// Keep in `data` the first derivatives of the step it holds and everything its second derivatives
+    /// need except the vector they are contracted with ([`Model::second_order`], without copying the
+    /// step); nothing when they are kept already. Each [`Model::calc_diff2`] is then the contraction.
+    pub fn calc_diff2_prepare(&self, data: &mut StepData) -> Result<(), DynamicsError> {
+        if data.second.is_none() {
+            let (x, u) = self.stored_point(data)?;
+            let (derivatives, parts) = self.second_order_parts(x, u, Source::Stored(data))?;
+            data.derivatives = Some(derivatives);
+            data.second = Some(parts);
+        }
+        Ok(())
+    }
+
+    /// The Hessian of `c^T f(x, u)` with respect to `y = (x, u)` for the step `data` holds, into `hess`
+    /// (row-major `(2n + n_u)^2`), and its first derivatives: [`Model::calc_diff2_prepare`] (if it has
+    /// not run since the step) and the contraction with `c` ([`SecondOrderStep::hessian`]).
+    pub fn calc_diff2<'d>(
+        &self,
+        data: &'d mut StepData,
+        c: &[f64],
+        hess: &mut [f64],
+    ) -> Result<&'d StepDerivatives, DynamicsError> {
+        self.calc_diff2_prepare(data)?;
+        data.second
+            .as_mut()
+            .expect("prepared above")
+            .hessian_into(c, hess)?;
+        Ok(data.derivatives.as_ref().expect("prepared above"))
     }
 
     /// The exact derivatives of the step `data` holds (the last [`Model::step`] computed with it), at the
