@@ -16,6 +16,8 @@ struct Timed<D> {
     step: AtomicU64,
     first: AtomicU64,
     second: AtomicU64,
+    /// Of `second`, the time in the knots' preparation.
+    prepare: AtomicU64,
     second_calls: AtomicU64,
 }
 
@@ -26,6 +28,7 @@ impl<D> Timed<D> {
             step: AtomicU64::new(0),
             first: AtomicU64::new(0),
             second: AtomicU64::new(0),
+            prepare: AtomicU64::new(0),
             second_calls: AtomicU64::new(0),
         }
     }
@@ -93,9 +96,12 @@ impl<D: Dynamics> Timed<D> {
 impl<D: Dynamics> SecondOrder<D::Data> for Timed<D> {
     type Error = D::Error;
     fn calc_diff2_prepare(&self, data: &mut D::Data, x: &[f64], u: &[f64]) -> Result<(), D::Error> {
-        Self::timed(&self.second, || {
-            self.inner_second().calc_diff2_prepare(data, x, u)
-        })
+        let t = Instant::now();
+        let r = self.inner_second().calc_diff2_prepare(data, x, u);
+        let ns = t.elapsed().as_nanos() as u64;
+        self.second.fetch_add(ns, Ordering::Relaxed);
+        self.prepare.fetch_add(ns, Ordering::Relaxed);
+        r
     }
     fn calc_diff2(
         &self,
@@ -398,7 +404,7 @@ One pass (backward pass with the steps' derivatives, then the forward pass with 
 /// fingers and the pushing scene with their tasks' costs; N = 75, logistic sigma = 0.1; median of 21.
 fn scenes_pass_table() -> anyhow::Result<String> {
     let mut out = String::from(
-        "\nOne full-DDP pass (as above) on scenes of other sizes, N = 75, logistic sigma = 0.1, cost -(angle of the free body) + 0.05 |u|^2 from rest (two fingers and pushing: their tasks' costs and initial states), median of 21:\n\n| scene | states / controls | pass (ms) | per knot (us) | passes to get there |\n|---|---:|---:|---:|---:|\n",
+        "\nOne full-DDP pass (as above) on scenes of other sizes, N = 75, logistic sigma = 0.1, cost -(angle of the free body) + 0.05 |u|^2 from rest (two fingers and pushing: their tasks' costs and initial states), median of 21, with the knots on one thread and on two (`--threads 2`: the same pass to the last bit). Only the knots' second-order preparation is shared out (its share of the one-thread pass in the column before last, the most two threads can halve); the rollouts of the line search and the backward recursion stay sequential, so the speed-up is at most 1 / (1 - share / 2):\n\n| scene | states / controls | pass (ms) | per knot (us) | pass on 2 threads (ms) | speed-up | preparation's share | passes to get there |\n|---|---:|---:|---:|---:|---:|---:|---:|\n",
     );
     // The two spin tasks' costs (-(the ellipse's angle) + 0.05 |u|^2); the three-link finger from a
     // start of its own, bent further than its task's.
@@ -459,10 +465,12 @@ fn pass_row<C: ddp::Cost>(
     })?
     .solve(&make()?, cost, x0, &vec![vec![0.0; m]; 75])?;
     let midway = before.controls;
-    let time = |max_iterations: usize| -> anyhow::Result<f64> {
-        let mut t = Vec::new();
+    // Median of 21 of a solve of at most `max_iterations` passes (0: the rollout alone) with the knots on
+    // `threads` threads, and of the time in the knots' second-order preparation (the stage shared out).
+    let time = |max_iterations: usize, threads: usize| -> anyhow::Result<(f64, f64)> {
+        let (mut t, mut prepare) = (Vec::new(), Vec::new());
         for _ in 0..21 {
-            let d = make()?;
+            let d = Timed::new(make()?);
             let s = Instant::now();
             if max_iterations == 0 {
                 ddp::rollout(&d, cost, x0, &midway)
@@ -470,21 +478,28 @@ fn pass_row<C: ddp::Cost>(
             } else {
                 Ddp::new(DdpSettings {
                     max_iterations,
+                    threads,
                     ..DdpSettings::default()
                 })?
                 .solve(&d, cost, x0, &midway)?;
             }
             t.push(s.elapsed().as_secs_f64() * 1e3);
+            prepare.push(Timed::<SceneDynamics>::ms(&d.prepare));
         }
         t.sort_by(f64::total_cmp);
-        Ok(t[10])
+        prepare.sort_by(f64::total_cmp);
+        Ok((t[10], prepare[10]))
     };
-    let rollout = time(0)?;
-    let pass = time(1)? - rollout;
+    let rollout = time(0, 1)?.0;
+    let (one, prepare) = time(1, 1)?;
+    let pass = one - rollout;
+    let two = time(1, 2)?.0 - rollout;
     Ok(format!(
-        "| {name} | {} / {m} | {pass:.2} | {:.1} | {} |\n",
+        "| {name} | {} / {m} | {pass:.2} | {:.1} | {two:.2} | {:.2} | {:.0}% | {} |\n",
         2 * n,
         pass * 1e3 / 75.0,
+        pass / two,
+        100.0 * prepare / pass,
         before.iterations.len()
     ))
 }
