@@ -370,13 +370,14 @@ fn status(s: ncp::Status) -> String {
 }
 
 /// `optimize(scene=None, task=None, horizon=None, x0=None, us=None, max_iterations=300, method="full",
-/// model=None, sigma=None, h=None) -> dict`: iLQG / DDP on a task of a scene file (the only one when
-/// `task` is None; the finger's `spin` without a scene). Returns the trajectory (`states` (N+1, n),
+/// model=None, sigma=None, h=None, threads=1) -> dict`: iLQG / DDP on a task of a scene file (the only
+/// one when `task` is None; the finger's `spin` without a scene), the knots of each pass differentiated
+/// on `threads` threads (1 to 256; the same result on any number, `cargo xtask optimize --threads`). Returns the trajectory (`states` (N+1, n),
 /// `controls` (N, m)), the feedback gains `gains` (N, m, n) of `u = controls[i] + gains[i] (x -
 /// states[i])`, the local value model (`cost_to_go` (N+1,), `value_gradient` (N+1, n), `value_hessian`
 /// (N+1, n, n)), `cost`, `passes`, `status` and `converged`. The GIL is released while it runs.
 #[pyfunction]
-#[pyo3(signature = (scene=None, task=None, horizon=None, x0=None, us=None, max_iterations=300, method="full", model=None, sigma=None, h=None))]
+#[pyo3(signature = (scene=None, task=None, horizon=None, x0=None, us=None, max_iterations=300, method="full", model=None, sigma=None, h=None, threads=1))]
 #[allow(clippy::too_many_arguments)]
 fn optimize<'py>(
     py: Python<'py>,
@@ -390,6 +391,7 @@ fn optimize<'py>(
     model: Option<&str>,
     sigma: Option<f64>,
     h: Option<f64>,
+    threads: usize,
 ) -> PyResult<Bound<'py, PyDict>> {
     let file = problem_file(scene)?;
     let task = file.task(task).map_err(error)?;
@@ -445,6 +447,7 @@ fn optimize<'py>(
         method,
         max_iterations,
         control_limits: task.control_limits.clone(),
+        threads,
         ..DdpSettings::default()
     })
     .map_err(error)?;
@@ -513,14 +516,15 @@ impl Library {
 #[pymethods]
 impl Library {
     /// `Library.train(scene=None, task=None, trajectories=400, seed=1, paper=False, horizon=None,
-    /// growth=None, trunk=None, settle=None, length=None, chains=1, model=None, sigma=None)`: build a
-    /// library as `cargo xtask train` does (the contact model and sigma the task's unless given) for the
+    /// growth=None, trunk=None, settle=None, length=None, chains=1, model=None, sigma=None, threads=1)`:
+    /// build a library as `cargo xtask train` does (`threads`: each solve's knots on that many threads,
+    /// `train --threads`; the same library on any number) (the contact model and sigma the task's unless given) for the
     /// task `task` of the scene file `scene` (its only task when `task` is None; without a scene the
     /// built-in `scenes/finger.toml`, whose only task is the paper's `spin`), with the default recipe
     /// (`paper=True`: the paper's).
     /// The GIL is released while it builds.
     #[staticmethod]
-    #[pyo3(signature = (scene=None, task=None, trajectories=400, seed=1, paper=false, horizon=None, growth=None, trunk=None, settle=None, length=None, chains=1, model=None, sigma=None))]
+    #[pyo3(signature = (scene=None, task=None, trajectories=400, seed=1, paper=false, horizon=None, growth=None, trunk=None, settle=None, length=None, chains=1, model=None, sigma=None, threads=1))]
     #[allow(clippy::too_many_arguments)]
     fn train(
         py: Python<'_>,
@@ -537,6 +541,7 @@ impl Library {
         chains: usize,
         model: Option<&str>,
         sigma: Option<f64>,
+        threads: usize,
     ) -> PyResult<Self> {
         let file = problem_file(scene)?;
         let chosen: Task = file.task(task).map_err(error)?;
@@ -572,6 +577,7 @@ impl Library {
             trajectories,
             seed,
             chains,
+            knot_threads: threads,
             horizon: horizon.unwrap_or(base.horizon),
             growth: growth.unwrap_or(fitted.growth),
             exploration,

@@ -136,6 +136,18 @@ def test_optimize_returns_the_trajectory_its_gains_and_value_model(root):
     assert abs(sol["cost_to_go"][0] - sol["cost"]) < 1e-9 * (1 + abs(sol["cost"]))
 
 
+def test_knots_on_two_threads_give_the_same_solution_and_library():
+    one = slcp.optimize(max_iterations=20)
+    two = slcp.optimize(max_iterations=20, threads=2)
+    for key in ("states", "controls", "gains", "value_hessian"):
+        np.testing.assert_array_equal(one[key], two[key])
+    assert one["cost"] == two["cost"] and one["passes"] == two["passes"]
+    a = slcp.Library.train(trajectories=8, horizon=40, growth=0, trunk=6, settle=1, length=2, threads=2)
+    np.testing.assert_array_equal(a.states, small_library().states)
+    with pytest.raises(slcp.SlcpError, match="threads"):
+        slcp.optimize(max_iterations=2, threads=0)
+
+
 def small_library():
     return slcp.Library.train(trajectories=8, horizon=40, growth=0, trunk=6, settle=1, length=2)
 

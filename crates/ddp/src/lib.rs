@@ -40,14 +40,17 @@ mod error;
 mod linalg;
 mod model;
 pub mod problems;
+mod settings;
 mod solver;
 mod work;
 
 pub use error::DdpError;
 pub use model::{Cost, CostDerivatives, Dynamics, QuadraticCost, SecondOrder};
+pub use settings::{
+    ControlLimits, DdpSettings, FULL_DDP_MAX_BYTES, MAX_THREADS, Method, Regularisation,
+};
 pub use solver::{
-    ControlLimits, Ddp, DdpSettings, FULL_DDP_MAX_BYTES, Iteration, MAX_THREADS, Method,
-    RESOLUTION, Regularisation, Solution, Status, ValueModel, rollout, shift_controls,
+    Ddp, Iteration, RESOLUTION, Solution, Status, ValueModel, rollout, shift_controls,
 };
 
 /// `Err` unless `v` has `len` finite entries.

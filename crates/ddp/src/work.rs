@@ -8,7 +8,7 @@ use crate::linalg::{
     cholesky_into, cholesky_solve, mul_into, mul_tn_into, mul_tv_into, symmetrize,
 };
 use crate::model::CostDerivatives;
-use crate::solver::{ControlLimits, Regularisation};
+use crate::settings::{ControlLimits, Regularisation};
 
 /// Everything a solve writes as it goes, sized once for `n` states, `m` controls and its horizon.
 pub(crate) struct Workspace {

@@ -39,7 +39,7 @@ mod scene;
 mod simulator;
 mod step;
 
-pub use constraint::{ConstraintRow, Constraints, ContactFrame, ContactImpulse};
+pub use constraint::{Constraints, ContactFrame, ContactImpulse};
 pub use derivative::{
     SECOND_ORDER_MAX_BYTES, SecondOrderStep, StepDerivatives, step_residual, step_residual_at,
 };
@@ -47,9 +47,10 @@ pub use error::{DynamicsError, SceneProblem};
 pub use jet::{Jet, Jet1};
 pub use kinematics::{Kinematics, Ring, Scalar};
 pub use scene::{
-    Body, BodySpec, ContactPair, ContactSpec, Coordinate, CoordinateKind, DENSITY_RANGE, Fixed,
-    FixedSpec, JointKind, JointSpec, MAX_BODIES, MAX_CONTACTS, MAX_DAMPING, MAX_FRICTION,
-    MAX_GRAVITY, MAX_LENGTH, MAX_SCENE_TEXT, Overlap, Plane, PlaneSpec, Scene, SceneSpec, Side,
+    Body, BodySpec, ConstraintRow, ContactPair, ContactSpec, Coordinate, CoordinateKind,
+    DENSITY_RANGE, Fixed, FixedSpec, JointKind, JointSpec, MAX_BODIES, MAX_CONTACTS, MAX_DAMPING,
+    MAX_FRICTION, MAX_GRAVITY, MAX_LENGTH, MAX_SCENE_TEXT, Overlap, Plane, PlaneSpec, Scene,
+    SceneSpec, Side,
 };
 pub use simulator::Simulator;
 pub use step::{

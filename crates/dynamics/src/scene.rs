@@ -11,7 +11,6 @@
 //! coordinates. A body's `anchor` is given in its parent's joint frame (the world frame for a root body) and
 //! its `centre` in its own joint frame; the ellipse's x axis is the joint frame's x axis.
 
-use crate::constraint::ConstraintRow;
 use crate::error::{DynamicsError, SceneProblem};
 use geometry::Ellipse;
 use serde::{Deserialize, Serialize};
@@ -928,4 +927,54 @@ fn strict_pair_option<'de, D: serde::Deserializer<'de>>(
         })
     })
     .transpose()
+}
+
+/// What a complementarity row is and whose it is ([`Scene::rows`]): rows are never decoded by position
+/// outside this crate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum ConstraintRow {
+    /// Coordinate `joint`'s lower limit, `q_j - lo >= 0`.
+    LowerLimit {
+        /// The coordinate (index into `q`; a hinge's is its body's index when every joint is a hinge).
+        joint: usize,
+    },
+    /// Coordinate `joint`'s upper limit, `hi - q_j >= 0`.
+    UpperLimit {
+        /// The coordinate (index into `q`).
+        joint: usize,
+    },
+    /// An edge of contact pair `pair`'s linearised friction cone: the row `J_n + mu J_t` (`positive`) or
+    /// `J_n - mu J_t`, whose constraint value is the pair's signed distance.
+    FrictionEdge {
+        /// The contact pair (index into [`Scene::contacts`]).
+        pair: usize,
+        /// Which edge: `+ mu J_t` or `- mu J_t`.
+        positive: bool,
+    },
+}
+
+impl ConstraintRow {
+    /// The rows of `scene` in the order of [`Constraints`](crate::Constraints): each limited joint's lower then upper row,
+    /// then each contact pair's two friction-cone edges.
+    pub(crate) fn of(scene: &Scene) -> Vec<ConstraintRow> {
+        let mut rows = Vec::new();
+        for (joint, c) in scene.coordinates.iter().enumerate() {
+            if c.limits.is_some() {
+                rows.push(ConstraintRow::LowerLimit { joint });
+                rows.push(ConstraintRow::UpperLimit { joint });
+            }
+        }
+        for pair in 0..scene.contacts.len() {
+            rows.push(ConstraintRow::FrictionEdge {
+                pair,
+                positive: true,
+            });
+            rows.push(ConstraintRow::FrictionEdge {
+                pair,
+                positive: false,
+            });
+        }
+        rows
+    }
 }

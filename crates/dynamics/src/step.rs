@@ -9,9 +9,10 @@
 
 #![allow(non_snake_case)]
 
-use crate::constraint::{ConstraintRow, Constraints, ContactFrame, ContactImpulse};
+use crate::constraint::{Constraints, ContactFrame, ContactImpulse};
 use crate::error::DynamicsError;
 use crate::kinematics::{Kinematics, Ring};
+use crate::scene::ConstraintRow;
 use crate::scene::Scene;
 use ncp::{
     ErmSettings, ErmSolver, Info, LemkeSettings, LinearMcp, NcpFunction, NewtonSettings,

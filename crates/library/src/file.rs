@@ -10,7 +10,8 @@
 //! controllers. Loading checks all of it before anything is decoded, then the decoded
 //! library for consistency; a file that fails any check is refused whole.
 
-use crate::build::{Entry, LibrarySettings, Progress, build_entries};
+use crate::build::{LibrarySettings, Progress, build_entries};
+use crate::entry::Entry;
 use crate::error::LibraryError;
 use crate::policy::Policy;
 use crate::problem::{ProblemFile, Task, TaskSpec};

@@ -7,6 +7,7 @@
 
 mod anneal;
 mod build;
+mod entry;
 mod error;
 mod evaluate;
 mod file;
@@ -17,10 +18,11 @@ mod task;
 
 pub use anneal::{AnnealStep, anneal};
 pub use build::{
-    Entries, Entry, Exploration, GROWTH_BRANCHES, GROWTH_SECONDS, GROWTH_SHARPENING,
-    HORIZON_DOUBLINGS, LONGEST_HORIZON, LibrarySettings, LocalValue, MAX_NEIGHBOURS, Model,
-    Progress, STALL_ADVANCE, STALL_WINDOW, WORLD_TIME_STEP, build_entries,
+    Entries, Exploration, GROWTH_BRANCHES, GROWTH_SECONDS, GROWTH_SHARPENING, HORIZON_DOUBLINGS,
+    LONGEST_HORIZON, LibrarySettings, MAX_NEIGHBOURS, Progress, STALL_ADVANCE, STALL_WINDOW,
+    WORLD_TIME_STEP, build_entries,
 };
+pub use entry::{Entry, LocalValue, Model};
 pub use error::LibraryError;
 pub use evaluate::{
     CONTACT_IMPULSE, ContactEvents, CoordinateRate, Evaluation, EvaluationSettings, TargetDistance,

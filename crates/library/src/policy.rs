@@ -10,7 +10,7 @@
 //! at the finger's 400 controllers the tree answers in 0.25-0.4 us against the scan's 2-3 us, at 1600 in
 //! 0.6 against 9 (docs/benchmarks.md).
 
-use crate::build::{Entry, LocalValue};
+use crate::entry::{Entry, LocalValue};
 use crate::error::LibraryError;
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use std::f64::consts::PI;

@@ -21,7 +21,7 @@
 //! that names the task and the field.
 
 use crate::LibraryError;
-use crate::build::Model;
+use crate::entry::Model;
 use ddp::{ControlLimits, Cost, CostDerivatives};
 use dynamics::Scene;
 use serde::{Deserialize, Serialize};

@@ -443,6 +443,11 @@ fn substitute(lu: &[f64], perm: &[usize], b: &[f64], x: &mut [f64]) {
     }
 }
 
+/// The largest absolute entry of `v` (0 for an empty `v`): the solvers' residual and scale norm.
+pub(crate) fn inf_norm(v: &[f64]) -> f64 {
+    v.iter().fold(0.0f64, |m, x| m.max(x.abs()))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -12,10 +12,9 @@
 //! active-set Newton method takes over from where it stopped, changing the active set one variable at a
 //! time.
 
-use crate::dense::{DenseLu, LinearSolver};
+use crate::dense::{DenseLu, LinearSolver, inf_norm};
 use crate::error::{NcpError, check_finite, check_len};
 use crate::function::normal_expected_squared;
-use crate::newton::inf_norm;
 use crate::problem::{LinearMcp, Mcp, Reduced};
 use crate::solution::{Info, Solution, Status};
 use serde::{Deserialize, Serialize};

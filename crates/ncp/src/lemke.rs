@@ -7,9 +7,8 @@
 //! (a positive row scaling changes neither the solutions nor `z`), and the final basis is refined by one
 //! solve of its linear system with the original data, so the answer is exact to rounding.
 
-use crate::dense::{DenseLu, LinearSolver};
+use crate::dense::{DenseLu, LinearSolver, inf_norm};
 use crate::error::NcpError;
-use crate::newton::inf_norm;
 use crate::problem::{LinearMcp, Mcp};
 use crate::solution::{Info, Solution, Status};
 use serde::{Deserialize, Serialize};

@@ -6,7 +6,7 @@
 //! active constraints (four impulses for three velocities, say) make the smoothed problem's Jacobian nearly
 //! singular, and there the Newton steps are huge and useless while the Levenberg–Marquardt ones converge.
 
-use crate::dense::{DenseLu, LinearSolver};
+use crate::dense::{DenseLu, LinearSolver, inf_norm};
 use crate::error::{NcpError, check_finite, check_len};
 use crate::function::NcpFunction;
 use crate::problem::Mcp;
@@ -524,8 +524,4 @@ fn newton_matrix(n: usize, nf: usize, dphi: &[f64], jac: &[f64], h: &mut [f64]) 
         }
         row[i] += da;
     }
-}
-
-pub(crate) fn inf_norm(v: &[f64]) -> f64 {
-    v.iter().fold(0.0f64, |m, x| m.max(x.abs()))
 }

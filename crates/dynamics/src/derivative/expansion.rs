@@ -12,8 +12,6 @@
 use crate::constraint::{Constraints, ContactFrame};
 use crate::error::DynamicsError;
 use crate::jet::{Jet, Jet1};
-use crate::kinematics::Kinematics;
-use crate::step::Model;
 use nalgebra::{SMatrix, SVector};
 use num_dual::{Derivative, Dual2SVec64, DualSVec64};
 
@@ -23,7 +21,7 @@ pub(super) const DIRECTIONS: usize = 8;
 pub(super) type D1 = DualSVec64<DIRECTIONS>;
 pub(super) type D2 = Dual2SVec64<DIRECTIONS>;
 /// The first derivatives' ingredients, all of one chunk of `y` at once.
-type F1 = Jet1<DIRECTIONS>;
+pub(super) type F1 = Jet1<DIRECTIONS>;
 
 /// The step's ingredients at `(x, u)` in some scalar type: `M`, `r + B u`, `J`, `d` and each row's noise.
 pub(super) struct Ingredients<T> {
@@ -76,7 +74,7 @@ impl Taylor {
     /// blocks takes one pass (its jets carry both blocks' directions), which together cover every
     /// gradient entry and every block of the Hessian. `f` hands its values, in order, to the [`Sink`];
     /// `len` is how many there are (the storage is allocated once).
-    fn expand<const K: usize>(
+    pub(super) fn expand<const K: usize>(
         at: &[f64],
         len: usize,
         mut f: impl FnMut(&[Jet<K>], &mut Sink<'_>) -> Result<(), DynamicsError>,
@@ -148,7 +146,7 @@ pub(super) struct Sink<'a> {
 }
 
 impl<'a> Sink<'a> {
-    fn new(taylor: &'a mut Taylor, dirs: &'a [usize], first: bool) -> Self {
+    pub(super) fn new(taylor: &'a mut Taylor, dirs: &'a [usize], first: bool) -> Self {
         Sink {
             taylor,
             dirs,
@@ -158,7 +156,7 @@ impl<'a> Sink<'a> {
     }
 
     /// The next functions' values in jets.
-    fn emit<const K: usize>(&mut self, values: &[Jet<K>]) {
+    pub(super) fn emit<const K: usize>(&mut self, values: &[Jet<K>]) {
         let t = &mut *self.taylor;
         let dim = t.dim;
         let whole = self.dirs.len() == dim;
@@ -282,8 +280,8 @@ impl Expansion {
         (mass, (0..n).map(|i| self.forces.re(i)).collect(), cons)
     }
 
-    /// `-K_y`, the derivatives in `y = (x, u)` of the logistic and hard models' equations ([`system`](
-    /// super::linearise::system)) with a constant noise at their solution `p = [v'; lambda]`, into `out`
+    /// `-K_y`, the derivatives in `y = (x, u)` of the logistic and hard models' equations (the linearise
+    /// stage's `system`) with a constant noise at their solution `p = [v'; lambda]`, into `out`
     /// (row-major `(n + m) x (2n + n_u)`), read off the ingredients' gradients: with `v` the step's
     /// velocities and `slope_k` row `k`'s `d phi / d w` (0 for a row held fixed),
     /// `K_i = sum_j M_ij (v'_j - v_j) - h r_i - sum_k J_ki lambda_k` and
@@ -378,131 +376,6 @@ fn lift_second(t: &Taylor, i: usize, dirs: &[usize]) -> D2 {
 }
 
 /// A first-order jet over `y` (or a chunk of it) as the vector dual of the step's equations.
-fn jet1_dual(d: &F1) -> D1 {
+pub(super) fn jet1_dual(d: &F1) -> D1 {
     D1::new(d.re, Derivative::some(SVector::from(d.g)))
-}
-
-impl Model {
-    /// Each row's noise in the scalar type of `jac`: the model's constant, or eq. (18) through `J(q)`.
-    pub(super) fn noise<T: crate::kinematics::Ring>(&self, jac: &[T], m: usize) -> Vec<T> {
-        use crate::step::{Complementarity, row_sigmas};
-        let sigma = match self.settings().model {
-            Complementarity::Hard => 0.0,
-            Complementarity::Logistic { sigma } | Complementarity::Normal { sigma } => sigma,
-        };
-        match self.state_covariance() {
-            Some(cov) => row_sigmas(cov, jac, self.scene().n_dof(), self.settings().h, sigma),
-            None => vec![T::from(sigma); m],
-        }
-    }
-
-    /// The ingredients in first-order duals over `y[first..first + 8]`.
-    pub(super) fn first_order_ingredients(
-        &self,
-        x: &[f64],
-        u: &[f64],
-        first: usize,
-    ) -> Result<Ingredients<D1>, DynamicsError> {
-        let scene = self.scene();
-        let n = scene.n_dof();
-        let ys: Vec<F1> = x
-            .iter()
-            .chain(u)
-            .enumerate()
-            .map(|(j, &e)| {
-                if (first..first + DIRECTIONS).contains(&j) {
-                    F1::variable(e, j - first)
-                } else {
-                    F1::from(e)
-                }
-            })
-            .collect();
-        let (xs, us) = ys.split_at(2 * n);
-        let kin = Kinematics::new(scene, &xs[..n]);
-        let r = kin.applied_forces(scene, &xs[n..], us);
-        let cons = Constraints::new(scene, &kin, &xs[..n])?;
-        let sigma = self.noise(&cons.jacobian, cons.d.len());
-        let dual = |v: &[F1]| v.iter().map(jet1_dual).collect::<Vec<_>>();
-        let mut M = kin.mass_matrix(scene);
-        let mut d = cons.d;
-        let (distance, correction) = self.prepare_ingredients(&mut M, &cons.jacobian, &mut d)?;
-        Ok(Ingredients {
-            contacts: cons.contacts,
-            distance,
-            M: dual(&M),
-            r: dual(&r),
-            jac: dual(&cons.jacobian),
-            d: dual(&d),
-            sigma: dual(&sigma),
-            correction: dual(&correction),
-        })
-    }
-
-    /// The geometry `[M; J; d; noise; correction]` of `q` in any jet, with the contact frames and true distances.
-    fn geometry<const K: usize>(
-        &self,
-        q: &[Jet<K>],
-        side: &mut Option<(Vec<ContactFrame>, Vec<f64>)>,
-        sink: &mut Sink<'_>,
-    ) -> Result<(), DynamicsError> {
-        let scene = self.scene();
-        let kin = Kinematics::new(scene, q);
-        let cons = Constraints::new(scene, &kin, q)?;
-        let sigma = self.noise(&cons.jacobian, cons.d.len());
-        let mut M = kin.mass_matrix(scene);
-        let mut d = cons.d;
-        let (distance, correction) = self.prepare_ingredients(&mut M, &cons.jacobian, &mut d)?;
-        if side.is_none() {
-            *side = Some((cons.contacts, distance));
-        }
-        sink.emit(&M);
-        sink.emit(&cons.jacobian);
-        sink.emit(&d);
-        sink.emit(&sigma);
-        sink.emit(&correction);
-        Ok(())
-    }
-
-    /// The forces `r(q, v) + B u` of `(q, v)` in any jet, `u` held constant.
-    fn forces<const K: usize>(&self, qv: &[Jet<K>], u: &[f64]) -> Vec<Jet<K>> {
-        let scene = self.scene();
-        let n = scene.n_dof();
-        let u: Vec<Jet<K>> = u.iter().map(|&e| Jet::from(e)).collect();
-        Kinematics::new(scene, &qv[..n]).applied_forces(scene, &qv[n..], &u)
-    }
-
-    /// The second-order ingredients at `(x, u)`, any number of joints: the geometry over the joint angles
-    /// and the forces over `(q, v)`, to be lifted to `y`. Three joints (the finger) take one pass of
-    /// three-direction jets for the geometry and one of six for the forces.
-    pub(super) fn expansion(&self, x: &[f64], u: &[f64]) -> Result<Expansion, DynamicsError> {
-        let scene = self.scene();
-        let n = scene.n_dof();
-        let mut side = None;
-        let m = scene.n_constraints();
-        let len = n * n + m * n + 2 * m + n;
-        let geometry = if n <= 3 {
-            Taylor::expand::<3>(&x[..n], len, |q, sink| self.geometry(q, &mut side, sink))?
-        } else {
-            Taylor::expand::<6>(&x[..n], len, |q, sink| self.geometry(q, &mut side, sink))?
-        };
-        let forces = Taylor::expand::<6>(&x[..2 * n], n, |qv, sink| {
-            sink.emit(&self.forces(qv, u));
-            Ok(())
-        })?;
-        let (contacts, distance) = side.expect("the geometry ran at least once");
-        Ok(Expansion {
-            n,
-            m: distance.len(),
-            contacts,
-            distance,
-            actuated: scene
-                .coordinates
-                .iter()
-                .enumerate()
-                .filter_map(|(j, c)| c.actuator.map(|k| (j, 2 * n + k)))
-                .collect(),
-            geometry,
-            forces,
-        })
-    }
 }

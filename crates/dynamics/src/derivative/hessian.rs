@@ -8,11 +8,9 @@
 
 #![allow(non_snake_case)]
 
-use super::StepDerivatives;
 use super::expansion::{D2, DIRECTIONS, Expansion, block_pairs};
-use super::linearise::{Linearised, RowKind, Source, system};
+use super::linearise::{Linearised, RowKind, system};
 use crate::error::DynamicsError;
-use crate::step::{Complementarity, Model, Step};
 use nalgebra::SMatrix;
 use ncp::{DenseLu, NcpFunction};
 use num_dual::Derivative;
@@ -22,7 +20,7 @@ use num_dual::Derivative;
 /// product in the equations ([`system`]) is of a function of `q` alone (gradient and Hessian over the first
 /// `n` directions, from its expansion) and a function affine in `s`, and each complementarity row is a
 /// function of two such quantities (`lambda_k`, `w_k`).
-struct Structured {
+pub(super) struct Structured {
     expansion: Expansion,
     h: f64,
     /// The velocities `v` of `x`.
@@ -44,7 +42,7 @@ struct Structured {
 impl Structured {
     /// Everything of the contraction that does not depend on `mu`, from the step's expansion and
     /// linearisation (`p`, `dp` and the rows' kinds).
-    fn new(
+    pub(super) fn new(
         expansion: Expansion,
         h: f64,
         x: &[f64],
@@ -238,92 +236,9 @@ impl Structured {
     }
 }
 
-impl Model {
-    /// The step's first derivatives and what its second derivatives keep besides them, for the step in
-    /// `source` (solved now or stored).
-    pub(super) fn second_order_parts(
-        &self,
-        x: &[f64],
-        u: &[f64],
-        mut source: Source<'_>,
-    ) -> Result<(StepDerivatives, SecondOrderParts), DynamicsError> {
-        let (n, nu, h) = (
-            self.scene().n_dof(),
-            self.scene().n_controls,
-            self.settings().h,
-        );
-        let cols = 2 * n + nu;
-        let bytes = self.second_order_bytes();
-        if bytes > super::SECOND_ORDER_MAX_BYTES {
-            return Err(DynamicsError::TooLarge {
-                what: "one step's second-order expansion",
-                bytes,
-                limit: super::SECOND_ORDER_MAX_BYTES,
-                alternative: "first derivatives only: iLQR / Gauss-Newton (--method ilqr)",
-            });
-        }
-        let ing = self.expansion(x, u)?;
-        let lin = self.linearise(x, u, Some(&ing), &mut source)?;
-        let derivatives = self.first_derivatives(&lin);
-        let model = self.settings().model;
-        let structured = match model {
-            Complementarity::Hard => Some(0.0),
-            Complementarity::Logistic { sigma } if !self.has_state_covariance() => Some(sigma),
-            _ => None,
-        };
-        let assembled = match structured {
-            Some(_) => None,
-            None => {
-                let normal = matches!(model, Complementarity::Normal { .. });
-                Some(general_hessians(&ing, h, x, &lin, cols, normal))
-            }
-        };
-        let correction = correction_hessians(&ing);
-        let Linearised {
-            p, lu, dp, kinds, ..
-        } = lin;
-        let equations = match (structured, assembled) {
-            (Some(sigma), _) => {
-                Equations::Structured(Structured::new(ing, h, x, p, dp, &kinds, sigma))
-            }
-            (None, assembled) => Equations::Assembled(assembled.expect("assembled above")),
-        };
-        let parts = SecondOrderParts {
-            n,
-            cols,
-            h,
-            adjoint: lu,
-            equations,
-            correction,
-        };
-        Ok((derivatives, parts))
-    }
-
-    /// [`Model::second_order_parts`] with a copy of the step, as one owned value.
-    pub(super) fn second_order_from(
-        &self,
-        x: &[f64],
-        u: &[f64],
-        source: Source<'_>,
-    ) -> Result<SecondOrderStep, DynamicsError> {
-        let (data, (derivatives, parts)) = match source {
-            Source::Solve(data) => {
-                let out = self.second_order_parts(x, u, Source::Solve(&mut *data))?;
-                (&*data, out)
-            }
-            Source::Stored(data) => (data, self.second_order_parts(x, u, Source::Stored(data))?),
-        };
-        Ok(SecondOrderStep {
-            step: data.step().expect("linearised above").clone(),
-            derivatives,
-            parts: std::cell::RefCell::new(parts),
-        })
-    }
-}
-
 /// The Hessians over `q` of the position-level correction's entries (`n` row-major `n x n` blocks), or
 /// `None` where the correction is zero (no constraint deeper than the recovery).
-fn correction_hessians(ing: &Expansion) -> Option<Vec<f64>> {
+pub(super) fn correction_hessians(ing: &Expansion) -> Option<Vec<f64>> {
     let n = ing.n;
     let geo = &ing.geometry;
     let dim = geo.dim();
@@ -348,7 +263,7 @@ fn correction_hessians(ing: &Expansion) -> Option<Vec<f64>> {
 /// What the second-order adjoint contracts with `mu`: the Hessians of the step's equations along `T`.
 // One per knot, kept with the knot's data: the variants' sizes do not matter, an allocation would.
 #[allow(clippy::large_enum_variant)]
-enum Equations {
+pub(super) enum Equations {
     /// Each equation's Hessian, row-major `cols x cols`, one after the other (the general path).
     Assembled(Vec<f64>),
     /// The ingredients they are assembled from, contracted directly ([`Structured::contract`]).
@@ -357,7 +272,7 @@ enum Equations {
 
 /// The Hessians along `T` of the step's equations ([`system`]) in second-order vector duals: one pass
 /// when `y` has at most eight entries, otherwise one pass per pair of blocks of four directions.
-fn general_hessians(
+pub(super) fn general_hessians(
     ing: &Expansion,
     h: f64,
     x: &[f64],
@@ -410,15 +325,15 @@ fn general_hessians(
 /// of (module documentation of stage 3). Kept in the step's data ([`Model::calc_diff2_prepare`]) or in a
 /// [`SecondOrderStep`].
 pub(crate) struct SecondOrderParts {
-    n: usize,
-    cols: usize,
-    h: f64,
-    adjoint: DenseLu,
+    pub(super) n: usize,
+    pub(super) cols: usize,
+    pub(super) h: f64,
+    pub(super) adjoint: DenseLu,
     /// The Hessians of the step's equations along `T`, or what they are made of.
-    equations: Equations,
+    pub(super) equations: Equations,
     /// The Hessians over `q` of the position-level correction `dq(q)` (`q' = q + dq + h v'`), `n` blocks of
     /// `n x n`; `None` when it is zero.
-    correction: Option<Vec<f64>>,
+    pub(super) correction: Option<Vec<f64>>,
 }
 
 impl std::fmt::Debug for SecondOrderParts {
@@ -427,44 +342,6 @@ impl std::fmt::Debug for SecondOrderParts {
             .field("n", &self.n)
             .field("cols", &self.cols)
             .finish_non_exhaustive()
-    }
-}
-
-/// A step prepared for its second derivatives ([`Simulator::second_order_step`]): the step, its first
-/// derivatives, and the Hessian of `c^T f` for any `c` by [`SecondOrderStep::hessian`]. Second-order
-/// adjoint: with `K_p^T mu = -g` for the step's equations `K(p; y) = 0` and `g = (dx'/dp)^T c`,
-/// `d^2 (c^T f) / dy^2 = T^T (d^2 (mu^T K) / d(p, y)^2) T`, `T = [dp/dy; I]`, the inner Hessian along the
-/// columns of `T` (stage 3, module documentation). An owned copy of what [`Model::calc_diff2_prepare`]
-/// keeps in a step's data.
-pub struct SecondOrderStep {
-    /// The step.
-    pub step: Step,
-    /// Its first derivatives.
-    pub derivatives: StepDerivatives,
-    parts: std::cell::RefCell<SecondOrderParts>,
-}
-
-impl std::fmt::Debug for SecondOrderStep {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("SecondOrderStep")
-            .field("step", &self.step)
-            .field("derivatives", &self.derivatives)
-            .finish_non_exhaustive()
-    }
-}
-
-impl SecondOrderStep {
-    /// The Hessian of `c^T f(x, u)` with respect to `(x, u)`, row-major `(2n + n_u)^2`.
-    pub fn hessian(&self, c: &[f64]) -> Result<Vec<f64>, DynamicsError> {
-        let cols = self.parts.borrow().cols;
-        let mut hess = vec![0.0; cols * cols];
-        self.hessian_into(c, &mut hess)?;
-        Ok(hess)
-    }
-
-    /// [`SecondOrderStep::hessian`] written into `hess` (`(2n + n_u)^2` entries), which is overwritten.
-    pub fn hessian_into(&self, c: &[f64], hess: &mut [f64]) -> Result<(), DynamicsError> {
-        self.parts.borrow_mut().hessian_into(c, hess)
     }
 }
 
@@ -531,131 +408,5 @@ impl SecondOrderParts {
             }
         }
         Ok(())
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::{Scene, Simulator, StepSettings};
-
-    /// SCENE.md's flicking finger, from its scene file.
-    fn finger_scene() -> Scene {
-        Scene::from_toml_str(include_str!("../../../../scenes/finger.toml")).unwrap()
-    }
-
-    /// The structured equation Hessians and the dual path (one pass, or one per pair of blocks of four
-    /// directions) for the same step and `c`.
-    fn both(sim: &mut Simulator, x: &[f64], u: &[f64], c: &[f64]) -> (Vec<f64>, Vec<f64>, f64) {
-        let structured = sim.second_order_step(x, u).unwrap();
-        let ing = sim.model().expansion(x, u).unwrap();
-        let lin = sim
-            .model()
-            .linearise(x, u, Some(&ing), &mut Source::Stored(sim.data()))
-            .unwrap();
-        let (n, cols, h) = {
-            let parts = structured.parts.borrow();
-            (parts.n, parts.cols, parts.h)
-        };
-        let equations = general_hessians(&ing, h, x, &lin, cols, false);
-        let step = sim.data().step().unwrap().clone();
-        let lambda = step.lambda.iter().fold(0.0f64, |a, &b| a.max(b));
-        let general = SecondOrderStep {
-            step,
-            derivatives: structured.derivatives.clone(),
-            parts: std::cell::RefCell::new(SecondOrderParts {
-                n,
-                cols,
-                h,
-                adjoint: lin.lu,
-                equations: Equations::Assembled(equations),
-                correction: correction_hessians(&ing),
-            }),
-        };
-        (
-            structured.hessian(c).unwrap(),
-            general.hessian(c).unwrap(),
-            lambda,
-        )
-    }
-
-    fn agree(sim: &mut Simulator, states: &[Vec<f64>], u: &[f64]) -> usize {
-        let n = sim.scene().n_dof();
-        let c: Vec<f64> = (0..2 * n)
-            .map(|i| ((i * 7 + 3) % 5) as f64 * 0.2 - 0.4)
-            .collect();
-        let mut touching = 0;
-        for x in states {
-            let (a, b, lambda) = both(sim, x, u, &c);
-            let scale = b.iter().fold(1.0f64, |m, v| m.max(v.abs()));
-            for (i, (p, q)) in a.iter().zip(&b).enumerate() {
-                assert!(
-                    (p - q).abs() <= 1e-9 * scale,
-                    "entry {i} at {x:?}: structured {p} vs duals {q}"
-                );
-            }
-            touching += usize::from(lambda > 1e-3);
-        }
-        touching
-    }
-
-    #[test]
-    fn the_structured_hessian_is_the_dual_one_for_the_finger_and_a_four_joint_scene() {
-        let finger: Vec<Vec<f64>> = (0..24)
-            .map(|i| {
-                let t = i as f64 * 0.26;
-                vec![
-                    -1.0 - 0.3 * t.sin(),
-                    -0.8 + 0.2 * t.cos(),
-                    t,
-                    0.5 * t.sin(),
-                    -0.3,
-                    1.0,
-                ]
-            })
-            .collect();
-        for model in [
-            Complementarity::Logistic { sigma: 0.1 },
-            Complementarity::Logistic { sigma: 0.3 },
-            Complementarity::Hard,
-        ] {
-            let settings = StepSettings {
-                model,
-                ..StepSettings::default()
-            };
-            let mut sim = Simulator::new(finger_scene(), settings).unwrap();
-            assert!(
-                agree(&mut sim, &finger, &[0.3, -0.2]) > 0,
-                "{model:?}: no contact"
-            );
-        }
-        // A third link: 4 joints, 3 controls, 11 directions (six pairs of blocks in duals).
-        let mut spec = finger_scene().spec().clone();
-        let mut link = spec.bodies[1].clone();
-        link.name = "link3".into();
-        link.parent = "link2".into();
-        link.semi_axes = [0.5, 0.2];
-        link.centre = [0.5, 0.0];
-        link.joint.limits = None;
-        spec.bodies.insert(2, link);
-        let mut pair = spec.contacts[0].clone();
-        pair.a = "link3".into();
-        spec.contacts.push(pair);
-        let scene = Scene::new(spec).unwrap();
-        let settings = StepSettings {
-            model: Complementarity::Logistic { sigma: 0.2 },
-            ..StepSettings::default()
-        };
-        let mut sim = Simulator::new(scene, settings).unwrap();
-        let states: Vec<Vec<f64>> = (0..12)
-            .map(|i| {
-                let t = i as f64 * 0.5;
-                vec![-1.0, -0.9 - 0.2 * t.cos(), -0.6, t, 0.3, -0.2, 0.1, 1.0]
-            })
-            .collect();
-        assert!(
-            agree(&mut sim, &states, &[0.2, -0.1, 0.3]) > 0,
-            "no contact"
-        );
     }
 }

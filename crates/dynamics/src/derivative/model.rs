@@ -1,0 +1,857 @@
+//! The derivative stages as methods of the step's [`Model`], and the owned [`SecondOrderStep`]: the entry
+//! points check their inputs once and run the stages (`expansion`, `linearise`, `hessian`) on the step a
+//! [`StepData`] holds or solves, keeping the result in the data ([`Model::calc_diff`],
+//! [`Model::calc_diff2_prepare`], [`Model::calc_diff2`]) or handing out a copy. The stages' own files hold
+//! data and arithmetic only and import nothing of the step, so that the step's data can hold what they
+//! compute.
+
+#![allow(non_snake_case)]
+
+use super::StepDerivatives;
+use super::expansion::{D1, DIRECTIONS, Expansion, F1, Ingredients, Sink, Taylor, jet1_dual};
+use super::hessian::{
+    Equations, SecondOrderParts, Structured, correction_hessians, general_hessians,
+};
+use super::linearise::{Linearised, RowKind, System, system};
+use crate::constraint::{Constraints, ContactFrame};
+use crate::error::DynamicsError;
+use crate::jet::Jet;
+use crate::kinematics::Kinematics;
+use crate::step::{Complementarity, Model, Step, StepData, check};
+use ncp::{DenseLu, LinearSolver, Mcp, NcpFunction, normal_expected_squared};
+
+impl Model {
+    /// An estimate, before anything is allocated, of the bytes one step's second-order expansion
+    /// ([`Model::second_order`]) holds: the second-order Taylor expansions of `M`, `J`, `d` and the
+    /// noise over `q` and of the forces over `(q, v)`, and the Hessians of the step's equations over
+    /// `(x, u)`. An optimiser that keeps one per knot needs this times its knots.
+    pub fn second_order_bytes(&self) -> usize {
+        let scene = self.scene();
+        let (n, m, nu) = (scene.n_dof(), scene.n_constraints(), scene.n_controls);
+        let taylor = |len: usize, dim: usize| len.saturating_mul(1 + dim + dim.saturating_mul(dim));
+        let cols = 2 * n + nu;
+        let doubles = taylor(n * n + m * n + 2 * m, n)
+            .saturating_add(taylor(n, 2 * n))
+            .saturating_add(
+                (n + m)
+                    .saturating_mul(cols)
+                    .saturating_mul(cols)
+                    .saturating_mul(2),
+            );
+        doubles.saturating_mul(std::mem::size_of::<f64>())
+    }
+
+    /// The first derivatives of the step `data` holds ([`Model::derivatives`]), kept in `data` (and read
+    /// from it when [`Model::calc_diff2_prepare`] computed them already) until its next step: the
+    /// first-order stage of the optimiser's knots, without copying.
+    pub fn calc_diff<'d>(
+        &self,
+        data: &'d mut StepData,
+    ) -> Result<&'d StepDerivatives, DynamicsError> {
+        if data.derivatives.is_none() {
+            let d = self.derivatives(data)?;
+            data.derivatives = Some(d);
+        }
+        Ok(data.derivatives.as_ref().expect("kept above"))
+    }
+
+    /// Keep in `data` the first derivatives of the step it holds and everything its second derivatives
+    /// need except the vector they are contracted with ([`Model::second_order`], without copying the
+    /// step); nothing when they are kept already. Each [`Model::calc_diff2`] is then the contraction.
+    pub fn calc_diff2_prepare(&self, data: &mut StepData) -> Result<(), DynamicsError> {
+        if data.second.is_none() {
+            let (x, u) = self.stored_point(data)?;
+            let (derivatives, parts) = self.second_order_parts(x, u, Source::Stored(data))?;
+            data.derivatives = Some(derivatives);
+            data.second = Some(parts);
+        }
+        Ok(())
+    }
+
+    /// The Hessian of `c^T f(x, u)` with respect to `y = (x, u)` for the step `data` holds, into `hess`
+    /// (row-major `(2n + n_u)^2`), and its first derivatives: [`Model::calc_diff2_prepare`] (if it has
+    /// not run since the step) and the contraction with `c` ([`SecondOrderStep::hessian`]).
+    pub fn calc_diff2<'d>(
+        &self,
+        data: &'d mut StepData,
+        c: &[f64],
+        hess: &mut [f64],
+    ) -> Result<&'d StepDerivatives, DynamicsError> {
+        self.calc_diff2_prepare(data)?;
+        data.second
+            .as_mut()
+            .expect("prepared above")
+            .hessian_into(c, hess)?;
+        Ok(data.derivatives.as_ref().expect("prepared above"))
+    }
+
+    /// The exact derivatives of the step `data` holds (the last [`Model::step`] computed with it), at the
+    /// `(x, u)` it was computed from: its solution is linearised as it is, never solved again, so the
+    /// derivatives belong to exactly that step. For every model: the hard model's are its active set's
+    /// (module documentation), the normal model's those of the first-order conditions of its minimisation.
+    /// `Err` when `data` holds no step.
+    #[tracing::instrument(name = "dynamics.derivatives", level = "debug", skip_all)]
+    pub fn derivatives(&self, data: &StepData) -> Result<StepDerivatives, DynamicsError> {
+        let (x, u) = self.stored_point(data)?;
+        let lin = self.linearise(x, u, None, &mut Source::Stored(data))?;
+        Ok(self.first_derivatives(&lin))
+    }
+
+    /// One step from `x` under `u` in `data` (as [`Model::step`]) and its exact derivatives, the geometry
+    /// evaluated once for both.
+    #[tracing::instrument(name = "dynamics.step_derivatives", level = "debug", skip_all)]
+    pub fn step_with_derivatives(
+        &self,
+        data: &mut StepData,
+        x: &[f64],
+        u: &[f64],
+    ) -> Result<StepDerivatives, DynamicsError> {
+        self.check_point(data, x, u)?;
+        let lin = self.linearise(x, u, None, &mut Source::Solve(data))?;
+        Ok(self.first_derivatives(&lin))
+    }
+
+    /// The point of the step `data` holds; `Err` for data of another model or holding no step.
+    fn stored_point<'d>(
+        &self,
+        data: &'d StepData,
+    ) -> Result<(&'d [f64], &'d [f64]), DynamicsError> {
+        self.check_data(data)?;
+        if data.step().is_none() {
+            return Err(DynamicsError::Input {
+                what: "step data",
+                problem: "holds no step to linearise (compute one with Model::step first)".into(),
+            });
+        }
+        Ok(data.point())
+    }
+
+    /// `Err` for data of another model, or an `x` or `u` of the wrong length or not finite.
+    fn check_point(&self, data: &StepData, x: &[f64], u: &[f64]) -> Result<(), DynamicsError> {
+        self.check_data(data)?;
+        check("x", x, self.scene().n_state())?;
+        check("u", u, self.scene().n_controls)
+    }
+
+    fn first_derivatives(&self, lin: &Linearised) -> StepDerivatives {
+        let scene = self.scene();
+        let (n, nu, h) = (scene.n_dof(), scene.n_controls, self.settings().h);
+        let cols = 2 * n + nu;
+        let dv = &lin.dp;
+        let nx = 2 * n;
+        let mut fx = vec![0.0; nx * nx];
+        let mut fu = vec![0.0; nx * nu];
+        let dc = &lin.dcorrection;
+        for i in 0..n {
+            for j in 0..nx {
+                let d = dv[i * cols + j];
+                fx[i * nx + j] = h * d + dc[i * cols + j] + if i == j { 1.0 } else { 0.0 };
+                fx[(n + i) * nx + j] = d;
+            }
+            for k in 0..nu {
+                let d = dv[i * cols + nx + k];
+                fu[i * nu + k] = h * d + dc[i * cols + nx + k];
+                fu[(n + i) * nu + k] = d;
+            }
+        }
+        StepDerivatives { fx, fu }
+    }
+
+    /// The first derivatives of the step `data` holds and everything its second derivatives need except
+    /// the vector they are contracted with (any scene): the step's linearisation, the factors of `K_p^T`,
+    /// and the Hessians of the step's equations (for the logistic and hard models with a constant noise,
+    /// what they are made of). Each [`SecondOrderStep::hessian`] is the rest. Linearises the stored step
+    /// as [`Model::derivatives`] does; `Err` when `data` holds no step.
+    #[tracing::instrument(name = "dynamics.second_order", level = "debug", skip_all)]
+    pub fn second_order(&self, data: &StepData) -> Result<SecondOrderStep, DynamicsError> {
+        let (x, u) = self.stored_point(data)?;
+        self.second_order_from(x, u, Source::Stored(data))
+    }
+
+    /// One step from `x` under `u` in `data` (as [`Model::step`]) and its [`Model::second_order`], the
+    /// geometry evaluated once for both.
+    #[tracing::instrument(name = "dynamics.second_order_step", level = "debug", skip_all)]
+    pub fn second_order_step(
+        &self,
+        data: &mut StepData,
+        x: &[f64],
+        u: &[f64],
+    ) -> Result<SecondOrderStep, DynamicsError> {
+        self.check_point(data, x, u)?;
+        self.second_order_from(x, u, Source::Solve(data))
+    }
+}
+
+impl Model {
+    /// Each row's noise in the scalar type of `jac`: the model's constant, or eq. (18) through `J(q)`.
+    pub(super) fn noise<T: crate::kinematics::Ring>(&self, jac: &[T], m: usize) -> Vec<T> {
+        use crate::step::{Complementarity, row_sigmas};
+        let sigma = match self.settings().model {
+            Complementarity::Hard => 0.0,
+            Complementarity::Logistic { sigma } | Complementarity::Normal { sigma } => sigma,
+        };
+        match self.state_covariance() {
+            Some(cov) => row_sigmas(cov, jac, self.scene().n_dof(), self.settings().h, sigma),
+            None => vec![T::from(sigma); m],
+        }
+    }
+
+    /// The ingredients in first-order duals over `y[first..first + 8]`.
+    pub(super) fn first_order_ingredients(
+        &self,
+        x: &[f64],
+        u: &[f64],
+        first: usize,
+    ) -> Result<Ingredients<D1>, DynamicsError> {
+        let scene = self.scene();
+        let n = scene.n_dof();
+        let ys: Vec<F1> = x
+            .iter()
+            .chain(u)
+            .enumerate()
+            .map(|(j, &e)| {
+                if (first..first + DIRECTIONS).contains(&j) {
+                    F1::variable(e, j - first)
+                } else {
+                    F1::from(e)
+                }
+            })
+            .collect();
+        let (xs, us) = ys.split_at(2 * n);
+        let kin = Kinematics::new(scene, &xs[..n]);
+        let r = kin.applied_forces(scene, &xs[n..], us);
+        let cons = Constraints::new(scene, &kin, &xs[..n])?;
+        let sigma = self.noise(&cons.jacobian, cons.d.len());
+        let dual = |v: &[F1]| v.iter().map(jet1_dual).collect::<Vec<_>>();
+        let mut M = kin.mass_matrix(scene);
+        let mut d = cons.d;
+        let (distance, correction) = self.prepare_ingredients(&mut M, &cons.jacobian, &mut d)?;
+        Ok(Ingredients {
+            contacts: cons.contacts,
+            distance,
+            M: dual(&M),
+            r: dual(&r),
+            jac: dual(&cons.jacobian),
+            d: dual(&d),
+            sigma: dual(&sigma),
+            correction: dual(&correction),
+        })
+    }
+
+    /// The geometry `[M; J; d; noise; correction]` of `q` in any jet, with the contact frames and true distances.
+    fn geometry<const K: usize>(
+        &self,
+        q: &[Jet<K>],
+        side: &mut Option<(Vec<ContactFrame>, Vec<f64>)>,
+        sink: &mut Sink<'_>,
+    ) -> Result<(), DynamicsError> {
+        let scene = self.scene();
+        let kin = Kinematics::new(scene, q);
+        let cons = Constraints::new(scene, &kin, q)?;
+        let sigma = self.noise(&cons.jacobian, cons.d.len());
+        let mut M = kin.mass_matrix(scene);
+        let mut d = cons.d;
+        let (distance, correction) = self.prepare_ingredients(&mut M, &cons.jacobian, &mut d)?;
+        if side.is_none() {
+            *side = Some((cons.contacts, distance));
+        }
+        sink.emit(&M);
+        sink.emit(&cons.jacobian);
+        sink.emit(&d);
+        sink.emit(&sigma);
+        sink.emit(&correction);
+        Ok(())
+    }
+
+    /// The forces `r(q, v) + B u` of `(q, v)` in any jet, `u` held constant.
+    fn forces<const K: usize>(&self, qv: &[Jet<K>], u: &[f64]) -> Vec<Jet<K>> {
+        let scene = self.scene();
+        let n = scene.n_dof();
+        let u: Vec<Jet<K>> = u.iter().map(|&e| Jet::from(e)).collect();
+        Kinematics::new(scene, &qv[..n]).applied_forces(scene, &qv[n..], &u)
+    }
+
+    /// The second-order ingredients at `(x, u)`, any number of joints: the geometry over the joint angles
+    /// and the forces over `(q, v)`, to be lifted to `y`. Three joints (the finger) take one pass of
+    /// three-direction jets for the geometry and one of six for the forces.
+    pub(super) fn expansion(&self, x: &[f64], u: &[f64]) -> Result<Expansion, DynamicsError> {
+        let scene = self.scene();
+        let n = scene.n_dof();
+        let mut side = None;
+        let m = scene.n_constraints();
+        let len = n * n + m * n + 2 * m + n;
+        let geometry = if n <= 3 {
+            Taylor::expand::<3>(&x[..n], len, |q, sink| self.geometry(q, &mut side, sink))?
+        } else {
+            Taylor::expand::<6>(&x[..n], len, |q, sink| self.geometry(q, &mut side, sink))?
+        };
+        let forces = Taylor::expand::<6>(&x[..2 * n], n, |qv, sink| {
+            sink.emit(&self.forces(qv, u));
+            Ok(())
+        })?;
+        let (contacts, distance) = side.expect("the geometry ran at least once");
+        Ok(Expansion {
+            n,
+            m: distance.len(),
+            contacts,
+            distance,
+            actuated: scene
+                .coordinates
+                .iter()
+                .enumerate()
+                .filter_map(|(j, c)| c.actuator.map(|k| (j, 2 * n + k)))
+                .collect(),
+            geometry,
+            forces,
+        })
+    }
+}
+
+/// Where the step to linearise comes from. The public entry points check the data (and, to solve, `x` and
+/// `u`) once; the stages below trust them.
+pub(super) enum Source<'a> {
+    /// Solve it now in this data (the ingredients' values make its problem: the geometry runs once).
+    Solve(&'a mut StepData),
+    /// The step this data holds, linearised as it is (no second solve).
+    Stored(&'a StepData),
+}
+
+impl Source<'_> {
+    /// The data, with the step once it is solved.
+    pub(super) fn data(&self) -> &StepData {
+        match self {
+            Source::Solve(data) => data,
+            Source::Stored(data) => data,
+        }
+    }
+}
+
+impl Model {
+    /// The step, the Jacobian of its equations in their unknowns and `dp/d(x, u)`.
+    /// With `second` (the Hessian pass computes them anyway) the first-order ingredients are read off it.
+    pub(super) fn linearise(
+        &self,
+        x: &[f64],
+        u: &[f64],
+        second: Option<&Expansion>,
+        source: &mut Source<'_>,
+    ) -> Result<Linearised, DynamicsError> {
+        let model = self.settings().model;
+        if self.has_state_covariance() && matches!(model, Complementarity::Normal { .. }) {
+            return Err(DynamicsError::Unsupported(
+                "derivatives of the normal model with per-row noise from a state covariance",
+            ));
+        }
+        let (n, nu) = (self.scene().n_dof(), self.scene().n_controls);
+        let cols = 2 * n + nu;
+        // With the second-order expansion of a logistic or hard step with a constant noise, the
+        // equations' derivatives in y are read off the ingredients' gradients directly; otherwise the
+        // ingredients run in first-order duals, eight directions of y per pass.
+        let direct = second.filter(|_| {
+            !self.has_state_covariance() && !matches!(model, Complementarity::Normal { .. })
+        });
+        let mut passes = Vec::new();
+        if direct.is_none() {
+            for first in (0..cols).step_by(DIRECTIONS) {
+                passes.push(match second {
+                    Some(so) => so.first_order(first, cols),
+                    _ => self.first_order_ingredients(x, u, first)?,
+                });
+            }
+        }
+        // The ingredients' values make the step's problem (the geometry runs once).
+        let (M, mut r, cons) = match direct {
+            Some(ex) => ex.values(),
+            None => {
+                let values = |v: &[D1]| v.iter().map(|e| e.re).collect::<Vec<f64>>();
+                let ing = &passes[0];
+                let cons = Constraints {
+                    d: ing.distance.clone(),
+                    jacobian: values(&ing.jac),
+                    contacts: ing.contacts.clone(),
+                };
+                (values(&ing.M), values(&ing.r), cons)
+            }
+        };
+        for (r, f) in r.iter_mut().zip(source.data().forces()) {
+            *r += f;
+        }
+        let problem = self.assemble_problem(&x[n..], &M, &r, cons)?;
+        let problem = match source {
+            Source::Stored(_) => problem.0,
+            Source::Solve(data) => self.solve_into(data, x, u, problem)?,
+        };
+        let step = source
+            .data()
+            .step()
+            .expect("a stored step (checked by the entry point) or one just solved");
+        if step.info.status != ncp::Status::Converged {
+            return Err(DynamicsError::Unsupported(
+                "derivatives of a step whose complementarity solve did not converge",
+            ));
+        }
+        let m = step.lambda.len();
+        let h = self.settings().h;
+        let mut z = step.x_next[n..].to_vec();
+        z.extend_from_slice(&step.lambda);
+        let dim = n + m;
+        let mut f = vec![0.0; dim];
+        let mut jac = vec![0.0; dim * dim];
+        problem.evaluate(&z, &mut f, Some(&mut jac));
+        let normal = matches!(model, Complementarity::Normal { .. });
+        let (p, _, mut lu, kinds, slope) = if normal {
+            self.normal_system(&z, &f, &jac, n)?
+        } else {
+            self.complementarity_system(&z, &f, &jac, n)?
+        };
+        let np = p.len();
+        let mut dp = vec![0.0; np * cols];
+        if let Some(ex) = direct {
+            ex.equations_y(h, &x[n..], &p, &slope, &mut dp);
+        }
+        // Otherwise the equations' derivatives in y = (x, u) in duals, eight directions per pass (one
+        // pass for the finger).
+        let pc: Vec<D1> = p.iter().map(|&e| D1::from_re(e)).collect();
+        for (ing, first) in passes.iter().zip((0..cols).step_by(DIRECTIONS)) {
+            let v: Vec<D1> = (0..n)
+                .map(|j| {
+                    let d = D1::from_re(x[n + j]);
+                    if (first..first + DIRECTIONS).contains(&(n + j)) {
+                        d.derivative(n + j - first)
+                    } else {
+                        d
+                    }
+                })
+                .collect();
+            let res = system(n, h, ing, &v, &pc, &kinds, normal);
+            for k in 0..DIRECTIONS.min(cols - first) {
+                for (i, e) in res.iter().enumerate() {
+                    dp[i * cols + first + k] = -e.eps.0.as_ref().map_or(0.0, |g| g[k]);
+                }
+            }
+        }
+        lu.solve_many(&mut dp, cols);
+        // The position-level correction's derivatives: a function of q alone, read off its duals.
+        let mut dcorrection = vec![0.0; n * cols];
+        if let Some(ex) = direct {
+            let geo = &ex.geometry;
+            for i in 0..n {
+                dcorrection[i * cols..i * cols + n].copy_from_slice(geo.g(ex.correction(i)));
+            }
+        }
+        for (ing, first) in passes.iter().zip((0..cols).step_by(DIRECTIONS)) {
+            for (i, e) in ing.correction.iter().enumerate() {
+                if let Some(g) = e.eps.0.as_ref() {
+                    for k in 0..DIRECTIONS.min(cols - first) {
+                        dcorrection[i * cols + first + k] = g[k];
+                    }
+                }
+            }
+        }
+        Ok(Linearised {
+            p,
+            lu,
+            dp,
+            kinds,
+            dcorrection,
+        })
+    }
+
+    /// Logistic and hard models: `p = z`, the Newton matrix with each row's `(d phi/d lambda, d phi/d w)`;
+    /// redundant active rows held fixed.
+    fn complementarity_system(
+        &self,
+        z: &[f64],
+        f: &[f64],
+        jac: &[f64],
+        n: usize,
+    ) -> Result<System, DynamicsError> {
+        let dim = z.len();
+        let m = dim - n;
+        let model = self.settings().model;
+        let sigmas: Vec<f64> = match self.state_covariance() {
+            Some(_) => {
+                let rows: Vec<f64> = (0..m)
+                    .flat_map(|k| jac[(n + k) * dim..(n + k) * dim + n].to_vec())
+                    .collect();
+                self.noise(&rows, m)
+            }
+            None => self.noise(&vec![0.0; m * n], m),
+        };
+        let mut kinds = Vec::with_capacity(m);
+        let mut dphi = vec![(0.0, 0.0); m];
+        for k in 0..m {
+            let (lambda, w) = (z[n + k], f[n + k]);
+            let (kind, d) = match model {
+                Complementarity::Logistic { .. } => {
+                    let sigma = sigmas[k];
+                    let (_, da, db) = NcpFunction::Logistic { sigma }.first_order(lambda, w);
+                    (RowKind::Logistic, (da, db))
+                }
+                _ if lambda > 0.0 => (RowKind::Contact, (0.0, 1.0)),
+                _ => (RowKind::Fixed, (1.0, 0.0)),
+            };
+            kinds.push(kind);
+            dphi[k] = d;
+        }
+        let build = |dphi: &[(f64, f64)]| {
+            let mut H = jac.to_vec();
+            for k in 0..m {
+                let row = &mut H[(n + k) * dim..(n + k + 1) * dim];
+                for e in row.iter_mut() {
+                    *e *= dphi[k].1;
+                }
+                row[n + k] += dphi[k].0;
+            }
+            H
+        };
+        let mut H = build(&dphi);
+        let mut lu = DenseLu::new(dim, LinearSolver::Hand);
+        // Redundant active rows (more than the velocities can satisfy independently) make the matrix
+        // singular: exactly for the hard model's active set, to working precision for a smoothed row whose
+        // d phi / d lambda has underflowed (lambda >> sigma). The velocities are still unique. Hold the
+        // smallest impulses of such rows fixed, one at a time, until the remaining active rows are
+        // independent: the derivative of that branch of impulses, and the derivative of v'.
+        while let Err(cause) = lu.factor(&H) {
+            let weakest = (0..m)
+                .filter(|&k| dphi[k].1 > 0.5 && dphi[k].0 < 1e-12)
+                .min_by(|&a, &b| z[n + a].total_cmp(&z[n + b]));
+            match weakest {
+                Some(k) => {
+                    dphi[k] = (1.0, 0.0);
+                    kinds[k] = RowKind::Fixed;
+                    H = build(&dphi);
+                }
+                None => {
+                    return Err(DynamicsError::Singular {
+                        what: "the step's Jacobian",
+                        cause,
+                    });
+                }
+            }
+        }
+        let slope = dphi.iter().map(|d| d.1).collect();
+        Ok((z.to_vec(), H, lu, kinds, slope))
+    }
+
+    /// Normal model: `p = [v'; lambda; nu]` with `nu = -M^-1 J^T e_b` and the first-order conditions'
+    /// Jacobian; rows with `lambda_i = 0` are on their bound and held there.
+    fn normal_system(
+        &self,
+        z: &[f64],
+        f: &[f64],
+        jac: &[f64],
+        n: usize,
+    ) -> Result<System, DynamicsError> {
+        let dim = z.len();
+        let m = dim - n;
+        let sigmas = self.noise(&vec![0.0; m * n], m);
+        let M = |i: usize, j: usize| jac[i * dim + j];
+        let J = |k: usize, j: usize| jac[(n + k) * dim + j];
+        let jets: Vec<_> = (0..m)
+            .map(|k| normal_expected_squared(z[n + k], f[n + k], sigmas[k]))
+            .collect();
+        let kinds: Vec<RowKind> = (0..m)
+            .map(|k| {
+                if z[n + k] > 0.0 {
+                    RowKind::Stationary
+                } else {
+                    RowKind::Fixed
+                }
+            })
+            .collect();
+        // nu from M nu = -J^T e_b.
+        let mut lu = DenseLu::new(n, LinearSolver::Hand);
+        let mass: Vec<f64> = (0..n * n).map(|e| M(e / n, e % n)).collect();
+        lu.factor(&mass).map_err(|cause| DynamicsError::Singular {
+            what: "the mass matrix",
+            cause,
+        })?;
+        let mut nu: Vec<f64> = (0..n)
+            .map(|i| -(0..m).map(|k| J(k, i) * jets[k].db).sum::<f64>())
+            .collect();
+        lu.solve(&mut nu);
+        let np = 2 * n + m;
+        let mut H = vec![0.0; np * np];
+        for i in 0..n {
+            for j in 0..n {
+                H[i * np + j] = M(i, j);
+                // K2 = J^T e_b + M nu: d/dv' = J^T diag(e_bb) J, d/dlambda = J^T diag(e_ab), d/dnu = M.
+                H[(n + i) * np + n + m + j] = M(i, j);
+                H[(n + i) * np + j] = (0..m).map(|k| J(k, i) * jets[k].dbb * J(k, j)).sum();
+            }
+            for k in 0..m {
+                H[i * np + n + k] = -J(k, i);
+                H[(n + i) * np + n + k] = J(k, i) * jets[k].dab;
+            }
+        }
+        for k in 0..m {
+            let row = n + n + k;
+            match kinds[k] {
+                RowKind::Stationary => {
+                    for j in 0..n {
+                        H[row * np + j] = jets[k].dab * J(k, j);
+                        H[row * np + n + m + j] = -J(k, j);
+                    }
+                    H[row * np + n + k] = jets[k].daa;
+                }
+                _ => H[row * np + n + k] = 1.0,
+            }
+        }
+        let mut p = z.to_vec();
+        p.extend_from_slice(&nu);
+        let mut lu = DenseLu::new(np, LinearSolver::Hand);
+        lu.factor(&H).map_err(|cause| DynamicsError::Singular {
+            what: "the step's Jacobian",
+            cause,
+        })?;
+        Ok((p, H, lu, kinds, Vec::new()))
+    }
+}
+
+impl Model {
+    /// The step's first derivatives and what its second derivatives keep besides them, for the step in
+    /// `source` (solved now or stored).
+    pub(super) fn second_order_parts(
+        &self,
+        x: &[f64],
+        u: &[f64],
+        mut source: Source<'_>,
+    ) -> Result<(StepDerivatives, SecondOrderParts), DynamicsError> {
+        let (n, nu, h) = (
+            self.scene().n_dof(),
+            self.scene().n_controls,
+            self.settings().h,
+        );
+        let cols = 2 * n + nu;
+        let bytes = self.second_order_bytes();
+        if bytes > super::SECOND_ORDER_MAX_BYTES {
+            return Err(DynamicsError::TooLarge {
+                what: "one step's second-order expansion",
+                bytes,
+                limit: super::SECOND_ORDER_MAX_BYTES,
+                alternative: "first derivatives only: iLQR / Gauss-Newton (--method ilqr)",
+            });
+        }
+        let ing = self.expansion(x, u)?;
+        let lin = self.linearise(x, u, Some(&ing), &mut source)?;
+        let derivatives = self.first_derivatives(&lin);
+        let model = self.settings().model;
+        let structured = match model {
+            Complementarity::Hard => Some(0.0),
+            Complementarity::Logistic { sigma } if !self.has_state_covariance() => Some(sigma),
+            _ => None,
+        };
+        let assembled = match structured {
+            Some(_) => None,
+            None => {
+                let normal = matches!(model, Complementarity::Normal { .. });
+                Some(general_hessians(&ing, h, x, &lin, cols, normal))
+            }
+        };
+        let correction = correction_hessians(&ing);
+        let Linearised {
+            p, lu, dp, kinds, ..
+        } = lin;
+        let equations = match (structured, assembled) {
+            (Some(sigma), _) => {
+                Equations::Structured(Structured::new(ing, h, x, p, dp, &kinds, sigma))
+            }
+            (None, assembled) => Equations::Assembled(assembled.expect("assembled above")),
+        };
+        let parts = SecondOrderParts {
+            n,
+            cols,
+            h,
+            adjoint: lu,
+            equations,
+            correction,
+        };
+        Ok((derivatives, parts))
+    }
+
+    /// [`Model::second_order_parts`] with a copy of the step, as one owned value.
+    pub(super) fn second_order_from(
+        &self,
+        x: &[f64],
+        u: &[f64],
+        source: Source<'_>,
+    ) -> Result<SecondOrderStep, DynamicsError> {
+        let (data, (derivatives, parts)) = match source {
+            Source::Solve(data) => {
+                let out = self.second_order_parts(x, u, Source::Solve(&mut *data))?;
+                (&*data, out)
+            }
+            Source::Stored(data) => (data, self.second_order_parts(x, u, Source::Stored(data))?),
+        };
+        Ok(SecondOrderStep {
+            step: data.step().expect("linearised above").clone(),
+            derivatives,
+            parts: std::cell::RefCell::new(parts),
+        })
+    }
+}
+
+/// A step prepared for its second derivatives ([`Simulator::second_order_step`]): the step, its first
+/// derivatives, and the Hessian of `c^T f` for any `c` by [`SecondOrderStep::hessian`]. Second-order
+/// adjoint: with `K_p^T mu = -g` for the step's equations `K(p; y) = 0` and `g = (dx'/dp)^T c`,
+/// `d^2 (c^T f) / dy^2 = T^T (d^2 (mu^T K) / d(p, y)^2) T`, `T = [dp/dy; I]`, the inner Hessian along the
+/// columns of `T` (stage 3, module documentation). An owned copy of what [`Model::calc_diff2_prepare`]
+/// keeps in a step's data.
+pub struct SecondOrderStep {
+    /// The step.
+    pub step: Step,
+    /// Its first derivatives.
+    pub derivatives: StepDerivatives,
+    parts: std::cell::RefCell<SecondOrderParts>,
+}
+
+impl std::fmt::Debug for SecondOrderStep {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SecondOrderStep")
+            .field("step", &self.step)
+            .field("derivatives", &self.derivatives)
+            .finish_non_exhaustive()
+    }
+}
+
+impl SecondOrderStep {
+    /// The Hessian of `c^T f(x, u)` with respect to `(x, u)`, row-major `(2n + n_u)^2`.
+    pub fn hessian(&self, c: &[f64]) -> Result<Vec<f64>, DynamicsError> {
+        let cols = self.parts.borrow().cols;
+        let mut hess = vec![0.0; cols * cols];
+        self.hessian_into(c, &mut hess)?;
+        Ok(hess)
+    }
+
+    /// [`SecondOrderStep::hessian`] written into `hess` (`(2n + n_u)^2` entries), which is overwritten.
+    pub fn hessian_into(&self, c: &[f64], hess: &mut [f64]) -> Result<(), DynamicsError> {
+        self.parts.borrow_mut().hessian_into(c, hess)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{Scene, Simulator, StepSettings};
+
+    /// SCENE.md's flicking finger, from its scene file.
+    fn finger_scene() -> Scene {
+        Scene::from_toml_str(include_str!("../../../../scenes/finger.toml")).unwrap()
+    }
+
+    /// The structured equation Hessians and the dual path (one pass, or one per pair of blocks of four
+    /// directions) for the same step and `c`.
+    fn both(sim: &mut Simulator, x: &[f64], u: &[f64], c: &[f64]) -> (Vec<f64>, Vec<f64>, f64) {
+        let structured = sim.second_order_step(x, u).unwrap();
+        let ing = sim.model().expansion(x, u).unwrap();
+        let lin = sim
+            .model()
+            .linearise(x, u, Some(&ing), &mut Source::Stored(sim.data()))
+            .unwrap();
+        let (n, cols, h) = {
+            let parts = structured.parts.borrow();
+            (parts.n, parts.cols, parts.h)
+        };
+        let equations = general_hessians(&ing, h, x, &lin, cols, false);
+        let step = sim.data().step().unwrap().clone();
+        let lambda = step.lambda.iter().fold(0.0f64, |a, &b| a.max(b));
+        let general = SecondOrderStep {
+            step,
+            derivatives: structured.derivatives.clone(),
+            parts: std::cell::RefCell::new(SecondOrderParts {
+                n,
+                cols,
+                h,
+                adjoint: lin.lu,
+                equations: Equations::Assembled(equations),
+                correction: correction_hessians(&ing),
+            }),
+        };
+        (
+            structured.hessian(c).unwrap(),
+            general.hessian(c).unwrap(),
+            lambda,
+        )
+    }
+
+    fn agree(sim: &mut Simulator, states: &[Vec<f64>], u: &[f64]) -> usize {
+        let n = sim.scene().n_dof();
+        let c: Vec<f64> = (0..2 * n)
+            .map(|i| ((i * 7 + 3) % 5) as f64 * 0.2 - 0.4)
+            .collect();
+        let mut touching = 0;
+        for x in states {
+            let (a, b, lambda) = both(sim, x, u, &c);
+            let scale = b.iter().fold(1.0f64, |m, v| m.max(v.abs()));
+            for (i, (p, q)) in a.iter().zip(&b).enumerate() {
+                assert!(
+                    (p - q).abs() <= 1e-9 * scale,
+                    "entry {i} at {x:?}: structured {p} vs duals {q}"
+                );
+            }
+            touching += usize::from(lambda > 1e-3);
+        }
+        touching
+    }
+
+    #[test]
+    fn the_structured_hessian_is_the_dual_one_for_the_finger_and_a_four_joint_scene() {
+        let finger: Vec<Vec<f64>> = (0..24)
+            .map(|i| {
+                let t = i as f64 * 0.26;
+                vec![
+                    -1.0 - 0.3 * t.sin(),
+                    -0.8 + 0.2 * t.cos(),
+                    t,
+                    0.5 * t.sin(),
+                    -0.3,
+                    1.0,
+                ]
+            })
+            .collect();
+        for model in [
+            Complementarity::Logistic { sigma: 0.1 },
+            Complementarity::Logistic { sigma: 0.3 },
+            Complementarity::Hard,
+        ] {
+            let settings = StepSettings {
+                model,
+                ..StepSettings::default()
+            };
+            let mut sim = Simulator::new(finger_scene(), settings).unwrap();
+            assert!(
+                agree(&mut sim, &finger, &[0.3, -0.2]) > 0,
+                "{model:?}: no contact"
+            );
+        }
+        // A third link: 4 joints, 3 controls, 11 directions (six pairs of blocks in duals).
+        let mut spec = finger_scene().spec().clone();
+        let mut link = spec.bodies[1].clone();
+        link.name = "link3".into();
+        link.parent = "link2".into();
+        link.semi_axes = [0.5, 0.2];
+        link.centre = [0.5, 0.0];
+        link.joint.limits = None;
+        spec.bodies.insert(2, link);
+        let mut pair = spec.contacts[0].clone();
+        pair.a = "link3".into();
+        spec.contacts.push(pair);
+        let scene = Scene::new(spec).unwrap();
+        let settings = StepSettings {
+            model: Complementarity::Logistic { sigma: 0.2 },
+            ..StepSettings::default()
+        };
+        let mut sim = Simulator::new(scene, settings).unwrap();
+        let states: Vec<Vec<f64>> = (0..12)
+            .map(|i| {
+                let t = i as f64 * 0.5;
+                vec![-1.0, -0.9 - 0.2 * t.cos(), -0.6, t, 0.3, -0.2, 0.1, 1.0]
+            })
+            .collect();
+        assert!(
+            agree(&mut sim, &states, &[0.2, -0.1, 0.3]) > 0,
+            "no contact"
+        );
+    }
+}
