@@ -538,16 +538,21 @@ impl Ddp {
             let run = |(i, d): (usize, &mut D::Data), fx: &mut [f64], fu: &mut [f64]| {
                 knot(i, d, fx, fu).err().map(|e| (i, e))
             };
+            // One contiguous run of knots per thread: the fewest hand-overs, and each thread's knots
+            // adjacent in memory.
+            let chunk = data.len().div_ceil(pool.current_num_threads());
             match full {
                 true => data
                     .par_iter_mut()
                     .enumerate()
+                    .with_min_len(chunk)
                     .filter_map(|k| run(k, &mut [], &mut []))
                     .collect(),
                 false => data
                     .par_iter_mut()
                     .enumerate()
                     .zip(lin_fx.par_iter_mut().zip(lin_fu.par_iter_mut()))
+                    .with_min_len(chunk)
                     .filter_map(|(k, (fx, fu))| run(k, fx, fu))
                     .collect(),
             }
