@@ -465,35 +465,43 @@ fn pass_row<C: ddp::Cost>(
     })?
     .solve(&make()?, cost, x0, &vec![vec![0.0; m]; 75])?;
     let midway = before.controls;
-    // Median of 21 of a solve of at most `max_iterations` passes (0: the rollout alone) with the knots on
-    // `threads` threads, and of the time in the knots' second-order preparation (the stage shared out).
-    let time = |max_iterations: usize, threads: usize| -> anyhow::Result<(f64, f64)> {
-        let (mut t, mut prepare) = (Vec::new(), Vec::new());
-        for _ in 0..21 {
-            let d = Timed::new(make()?);
-            let s = Instant::now();
-            if max_iterations == 0 {
-                ddp::rollout(&d, cost, x0, &midway)
-                    .map_err(|(i, e)| anyhow::anyhow!("step {i}: {e}"))?;
-            } else {
-                Ddp::new(DdpSettings {
-                    max_iterations,
-                    threads,
-                    ..DdpSettings::default()
-                })?
-                .solve(&d, cost, x0, &midway)?;
-            }
-            t.push(s.elapsed().as_secs_f64() * 1e3);
-            prepare.push(Timed::<SceneDynamics>::ms(&d.prepare));
+    // A solve of at most `max_iterations` passes (0: the rollout alone) with the knots on `threads`
+    // threads: its time and the time in the knots' second-order preparation (the stage shared out).
+    let run = |max_iterations: usize, threads: usize| -> anyhow::Result<(f64, f64)> {
+        let d = Timed::new(make()?);
+        let s = Instant::now();
+        if max_iterations == 0 {
+            ddp::rollout(&d, cost, x0, &midway)
+                .map_err(|(i, e)| anyhow::anyhow!("step {i}: {e}"))?;
+        } else {
+            Ddp::new(DdpSettings {
+                max_iterations,
+                threads,
+                ..DdpSettings::default()
+            })?
+            .solve(&d, cost, x0, &midway)?;
         }
-        t.sort_by(f64::total_cmp);
-        prepare.sort_by(f64::total_cmp);
-        Ok((t[10], prepare[10]))
+        let ms = s.elapsed().as_secs_f64() * 1e3;
+        Ok((ms, Timed::<SceneDynamics>::ms(&d.prepare)))
     };
-    let rollout = time(0, 1)?.0;
-    let (one, prepare) = time(1, 1)?;
-    let pass = one - rollout;
-    let two = time(1, 2)?.0 - rollout;
+    // Median of 21 of each, the three taken in turn so that the machine's drift (it varies up to 2x
+    // between hours) falls on all of them alike.
+    let (mut rollouts, mut ones, mut twos, mut prepares) = (vec![], vec![], vec![], vec![]);
+    for _ in 0..21 {
+        rollouts.push(run(0, 1)?.0);
+        let (one, prepare) = run(1, 1)?;
+        ones.push(one);
+        prepares.push(prepare);
+        twos.push(run(1, 2)?.0);
+    }
+    let median = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let rollout = median(rollouts);
+    let pass = median(ones) - rollout;
+    let two = median(twos) - rollout;
+    let prepare = median(prepares);
     Ok(format!(
         "| {name} | {} / {m} | {pass:.2} | {:.1} | {two:.2} | {:.2} | {:.0}% | {} |\n",
         2 * n,
