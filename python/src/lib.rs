@@ -4,8 +4,8 @@
 //! released for the whole of any long computation (rollouts, optimisation, library builds, evaluations).
 
 use ::library::{
-    Evaluation, EvaluationSettings, Exploration, Library as RsLibrary, LibrarySettings,
-    Model as LibModel, Policy as RsPolicy, ProblemFile, SceneDynamics, Task,
+    ContactModel, Evaluation, EvaluationSettings, Exploration, Library as RsLibrary,
+    LibrarySettings, Policy as RsPolicy, ProblemFile, SceneDynamics, Task,
 };
 use ddp::{Ddp, DdpSettings, Method};
 use dynamics::{Scene, Simulator as RsSimulator, StepSettings};
@@ -95,11 +95,11 @@ fn stacked<'py>(
 }
 
 /// The contact model named `model` (`"logistic"`, `"normal"`, `"hard"`) at `sigma`.
-fn model(model: &str, sigma: f64) -> PyResult<LibModel> {
+fn model(model: &str, sigma: f64) -> PyResult<ContactModel> {
     match model {
-        "logistic" => Ok(LibModel::Logistic(sigma)),
-        "normal" => Ok(LibModel::Normal(sigma)),
-        "hard" => Ok(LibModel::Hard),
+        "logistic" => Ok(ContactModel::Logistic(sigma)),
+        "normal" => Ok(ContactModel::Normal(sigma)),
+        "hard" => Ok(ContactModel::Hard),
         other => Err(error(format!(
             "model \"{other}\" is not one of \"logistic\", \"normal\", \"hard\""
         ))),
@@ -109,18 +109,22 @@ fn model(model: &str, sigma: f64) -> PyResult<LibModel> {
 /// The contact model asked for: `model` at `sigma` (the task's own sigma when not given), or the task's
 /// own model `own` with `sigma` replacing its noise scale. A sigma for the hard model is refused rather
 /// than ignored.
-fn contact_model(own: LibModel, model: Option<&str>, sigma: Option<f64>) -> PyResult<LibModel> {
+fn contact_model(
+    own: ContactModel,
+    model: Option<&str>,
+    sigma: Option<f64>,
+) -> PyResult<ContactModel> {
     let own_sigma = match own {
-        LibModel::Logistic(s) | LibModel::Normal(s) => s,
-        LibModel::Hard => 0.1,
+        ContactModel::Logistic(s) | ContactModel::Normal(s) => s,
+        ContactModel::Hard => 0.1,
     };
     match (model, own, sigma) {
-        (Some("hard"), _, Some(s)) | (None, LibModel::Hard, Some(s)) => Err(error(format!(
+        (Some("hard"), _, Some(s)) | (None, ContactModel::Hard, Some(s)) => Err(error(format!(
             "sigma {s} given for the hard model, which has no noise scale (pass model=\"logistic\" or \"normal\")"
         ))),
         (Some(name), _, s) => self::model(name, s.unwrap_or(own_sigma)),
-        (None, LibModel::Logistic(_), Some(s)) => Ok(LibModel::Logistic(s)),
-        (None, LibModel::Normal(_), Some(s)) => Ok(LibModel::Normal(s)),
+        (None, ContactModel::Logistic(_), Some(s)) => Ok(ContactModel::Logistic(s)),
+        (None, ContactModel::Normal(_), Some(s)) => Ok(ContactModel::Normal(s)),
         (None, own, _) => Ok(own),
     }
 }
@@ -175,7 +179,7 @@ impl Simulator {
             }
         };
         let model = self::model(model, sigma)?;
-        if let LibModel::Logistic(s) | LibModel::Normal(s) = model
+        if let ContactModel::Logistic(s) | ContactModel::Normal(s) = model
             && !(s.is_finite() && s > 0.0)
         {
             return Err(error(format!("sigma {s} must be positive and finite")));

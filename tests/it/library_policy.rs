@@ -3,13 +3,19 @@
 //! library's time step and at another. The paper's library of single first controllers is compared.
 
 use crate::support::finger_library as library;
-use library::{Evaluation, EvaluationSettings, Library, Model, evaluate};
+use library::{ContactModel, Evaluation, EvaluationSettings, Library, evaluate};
 
-fn run(lib: &Library, model: Model, h: f64, kick_every: f64) -> Evaluation {
+fn run(lib: &Library, model: ContactModel, h: f64, kick_every: f64) -> Evaluation {
     run_for(lib, model, h, kick_every, 100.0)
 }
 
-fn run_for(lib: &Library, model: Model, h: f64, kick_every: f64, seconds: f64) -> Evaluation {
+fn run_for(
+    lib: &Library,
+    model: ContactModel,
+    h: f64,
+    kick_every: f64,
+    seconds: f64,
+) -> Evaluation {
     let policy = lib.policy().unwrap();
     let e = evaluate(
         lib,
@@ -57,10 +63,10 @@ fn from_rest_without_kicks_the_global_policy_spins_the_ellipse_in_a_steady_cycle
     let lib = library();
     assert!(lib.entries.len() >= 1600);
     for (model, h) in [
-        (Model::Logistic(0.1), 0.05),
-        (Model::Hard, 0.05),
-        (Model::Logistic(0.1), 0.03),
-        (Model::Hard, 0.03),
+        (ContactModel::Logistic(0.1), 0.05),
+        (ContactModel::Hard, 0.05),
+        (ContactModel::Logistic(0.1), 0.03),
+        (ContactModel::Hard, 0.03),
     ] {
         let e = run_for(lib, model, h, 0.0, 200.0);
         assert!(e.final_spin_rate > 0.5, "{model:?} at h = {h}: {e:?}");
@@ -81,9 +87,9 @@ fn from_rest_without_kicks_the_global_policy_spins_the_ellipse_in_a_steady_cycle
 fn under_kicks_the_global_policy_resumes_its_cycle_on_smoothed_and_hard_worlds() {
     let lib = library();
     for (model, h) in [
-        (Model::Logistic(0.1), 0.05),
-        (Model::Hard, 0.05),
-        (Model::Logistic(0.1), 0.03),
+        (ContactModel::Logistic(0.1), 0.05),
+        (ContactModel::Hard, 0.05),
+        (ContactModel::Logistic(0.1), 0.03),
     ] {
         let e = run(lib, model, h, 10.0);
         assert!(e.spin_rate > 0.5, "{model:?} at h = {h}: {e:?}");
@@ -102,11 +108,11 @@ fn the_default_recipe_spins_faster_than_the_papers_with_and_without_kicks() {
     // Without kicks the paper's library is slower by the last quarter of the run (most seeds' stop; this
     // one's keeps a slower cycle: `cargo xtask seeds`).
     let (p, d) = (
-        run(paper, Model::Logistic(0.1), 0.05, 0.0),
-        run(default, Model::Logistic(0.1), 0.05, 0.0),
+        run(paper, ContactModel::Logistic(0.1), 0.05, 0.0),
+        run(default, ContactModel::Logistic(0.1), 0.05, 0.0),
     );
     assert!(p.final_spin_rate < d.final_spin_rate, "{p:?} vs {d:?}");
-    for model in [Model::Logistic(0.1), Model::Hard] {
+    for model in [ContactModel::Logistic(0.1), ContactModel::Hard] {
         let (p, d) = (
             run(paper, model, 0.05, 10.0),
             run(default, model, 0.05, 10.0),
@@ -120,8 +126,8 @@ fn the_default_recipe_spins_faster_than_the_papers_with_and_without_kicks() {
     // kicks a single seed may keep its cycle either way; under kicks it shows.
     let mut nearest = default.clone();
     nearest.settings.neighbours = 1;
-    let ranked = run(default, Model::Logistic(0.1), 0.03, 10.0);
-    let alone = run(&nearest, Model::Logistic(0.1), 0.03, 10.0);
+    let ranked = run(default, ContactModel::Logistic(0.1), 0.03, 10.0);
+    let alone = run(&nearest, ContactModel::Logistic(0.1), 0.03, 10.0);
     assert!(
         ranked.spin_rate > alone.spin_rate,
         "{ranked:?} vs {alone:?}"

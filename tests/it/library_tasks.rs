@@ -4,7 +4,7 @@
 
 use ddp::{Cost, CostDerivatives};
 use dynamics::Scene;
-use library::{LibraryError, Model, ProblemFile};
+use library::{ContactModel, LibraryError, ProblemFile};
 use proptest::prelude::*;
 
 const FINGER: &str = include_str!("../../scenes/finger.toml");
@@ -115,7 +115,7 @@ fn the_finger_file_carries_the_papers_task() {
     let task = file.task(None).unwrap();
     assert_eq!(task.name, "spin");
     assert_eq!((task.h, task.horizon), (0.05, 75));
-    assert_eq!(task.model, Model::Logistic(0.1));
+    assert_eq!(task.model, ContactModel::Logistic(0.1));
     // SCENE.md's x0: the correctly rounded -pi/4 and -pi/6 (pi / 6.0 computed in floats is an ulp off).
     use std::f64::consts::{FRAC_PI_4, FRAC_PI_6};
     assert_eq!(task.x0, vec![-FRAC_PI_4, -FRAC_PI_6, 0.0, 0.0, 0.0, 0.0]);
@@ -192,7 +192,7 @@ fn a_task_may_start_anywhere_and_act_on_velocities() {
     .unwrap();
     let task = file.task(None).unwrap();
     assert_eq!(task.x0, vec![0.0, 0.0, 1.0, 0.0, 0.0, 3.0]);
-    assert_eq!(task.model, Model::Normal(0.05));
+    assert_eq!(task.model, ContactModel::Normal(0.05));
     let limits = task.control_limits.as_ref().unwrap();
     assert_eq!(
         (limits.lower.clone(), limits.upper.clone()),

@@ -250,8 +250,8 @@ fn task_world(text: &str, task: &str, policy: PolicyKind) -> World {
     let problem = library::ProblemFile::from_toml_str(text).unwrap();
     let task = problem.task(Some(task)).unwrap();
     let sigma = match task.model {
-        library::Model::Logistic(s) | library::Model::Normal(s) => s,
-        library::Model::Hard => 0.1,
+        library::ContactModel::Logistic(s) | library::ContactModel::Normal(s) => s,
+        library::ContactModel::Hard => 0.1,
     };
     World::new(
         problem.scene.clone(),

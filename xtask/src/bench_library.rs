@@ -1,7 +1,7 @@
 //! The library section of `cargo xtask benchmarks`: building the finger's library (paper IV-C) and the
 //! global policy's look-up (eq. 20) at the library's sizes.
 
-use library::{EvaluationSettings, Library, LibrarySettings, Model, evaluate};
+use library::{ContactModel, EvaluationSettings, Library, LibrarySettings, evaluate};
 use rand::SeedableRng;
 use rand_distr::Distribution;
 use std::hint::black_box;
@@ -152,7 +152,10 @@ pub fn tolerance_section() -> anyhow::Result<String> {
                 .sum::<u64>();
             let policy = lib.policy()?;
             let mut seed_spin = 0.0;
-            for (w, model) in [Model::Logistic(0.1), Model::Hard].into_iter().enumerate() {
+            for (w, model) in [ContactModel::Logistic(0.1), ContactModel::Hard]
+                .into_iter()
+                .enumerate()
+            {
                 for evaluation_seed in EVALUATION_SEEDS {
                     let run = |kick_every| {
                         evaluate(

@@ -2,7 +2,7 @@
 //! and on the hard system, at the library's time step and at another, with random velocity kicks.
 
 use anyhow::Context;
-use library::{Evaluation, EvaluationSettings, Library, Model, evaluate};
+use library::{ContactModel, Evaluation, EvaluationSettings, Library, evaluate};
 use serde::Serialize;
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -39,17 +39,17 @@ struct Row {
 
 /// The worlds of the paper's experiment: the library's own smoothed model and the hard one, at the
 /// library's time step and at 0.03.
-pub fn worlds(library: &Library) -> Vec<(String, Model, f64)> {
+pub fn worlds(library: &Library) -> Vec<(String, ContactModel, f64)> {
     let own = library.settings.model;
     let h = library.settings.h;
-    let name = |m: Model| match m {
-        Model::Hard => "hard".to_string(),
-        Model::Logistic(s) => format!("logistic {s}"),
-        Model::Normal(s) => format!("normal {s}"),
+    let name = |m: ContactModel| match m {
+        ContactModel::Hard => "hard".to_string(),
+        ContactModel::Logistic(s) => format!("logistic {s}"),
+        ContactModel::Normal(s) => format!("normal {s}"),
     };
     let mut out = Vec::new();
     for step in [h, library::WORLD_TIME_STEP] {
-        for m in [own, Model::Hard] {
+        for m in [own, ContactModel::Hard] {
             if !out.iter().any(|(_, mm, hh)| *mm == m && *hh == step) {
                 out.push((name(m), m, step));
             }

@@ -9,8 +9,8 @@ use crate::figures::{both, err, register_font};
 use anyhow::Context;
 use ddp::{Ddp, DdpSettings};
 use library::{
-    Evaluation, EvaluationSettings, Library, LibrarySettings, Model, ProblemFile, SceneDynamics,
-    Task, evaluate,
+    ContactModel, Evaluation, EvaluationSettings, Library, LibrarySettings, ProblemFile,
+    SceneDynamics, Task, evaluate,
 };
 use plotters::prelude::*;
 use serde::Serialize;
@@ -297,7 +297,7 @@ fn evaluated(
     lib: &Library,
     policy: &library::Policy,
     task: &Task,
-    (model, h): (Model, f64),
+    (model, h): (ContactModel, f64),
     seconds: f64,
     (kick_every, kick_seed): (f64, u64),
 ) -> anyhow::Result<Evaluation> {

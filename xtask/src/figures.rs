@@ -249,7 +249,7 @@ pub(crate) struct Run {
 pub(crate) fn closed_loop(
     lib: &Library,
     policy: &Policy,
-    (model, h): (library::Model, f64),
+    (model, h): (library::ContactModel, f64),
     x0: &[f64],
     steps: usize,
 ) -> anyhow::Result<Run> {
@@ -557,7 +557,7 @@ pub fn write_task(lib: &Library, dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
     let policy = lib.policy()?;
     let steps = (40.0 / task.h).round() as usize;
     let mut traces = Vec::new();
-    for model in [lib.settings.model, library::Model::Hard] {
+    for model in [lib.settings.model, library::ContactModel::Hard] {
         traces.push(closed_loop(lib, &policy, (model, task.h), &task.x0, steps)?.states);
     }
     let holds = lib.progress()?.forward.is_none();

@@ -8,7 +8,7 @@ use ddp::{Ddp, DdpSettings};
 use dynamics::{Complementarity, Scene, Simulator, StepSettings};
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
 use library::{
-    Evaluation, EvaluationSettings, Library, LibrarySettings, Model, SceneDynamics, evaluate,
+    ContactModel, Evaluation, EvaluationSettings, Library, LibrarySettings, SceneDynamics, evaluate,
 };
 use serde::Serialize;
 use std::fmt::Write as _;
@@ -266,7 +266,7 @@ fn build(sigma: f64, bars: &MultiProgress) -> anyhow::Result<(Library, f64)> {
         (COMPARISON_GROWTH, 2)
     };
     let settings = LibrarySettings {
-        model: Model::Logistic(sigma),
+        model: ContactModel::Logistic(sigma),
         growth,
         chains,
         ..base
@@ -296,8 +296,8 @@ fn on_both_worlds(
     kick_std: f64,
 ) -> anyhow::Result<Vec<(&'static str, Evaluation)>> {
     [
-        ("logistic 0.1", Model::Logistic(0.1)),
-        ("hard", Model::Hard),
+        ("logistic 0.1", ContactModel::Logistic(0.1)),
+        ("hard", ContactModel::Hard),
     ]
     .into_iter()
     .map(|(world, model)| {
@@ -407,7 +407,7 @@ struct Evaluated {
 
 fn evaluate_built(args: &Args, lib: Library, secs: f64) -> anyhow::Result<Evaluated> {
     let sigma = match lib.settings.model {
-        Model::Logistic(sigma) => sigma,
+        ContactModel::Logistic(sigma) => sigma,
         other => anyhow::bail!("reproduce builds logistic libraries, not {other:?}"),
     };
     let mut larger_kicks = Vec::new();

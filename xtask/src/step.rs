@@ -8,7 +8,7 @@ use std::path::PathBuf;
 
 /// The complementarity model on the command line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum Model {
+pub enum ModelArg {
     /// The exact LCP (Lemke).
     Hard,
     /// Logistic smoothing, paper eq. (17).
@@ -22,7 +22,7 @@ pub enum Model {
 pub struct SimArgs {
     /// Complementarity model [default: logistic; with `optimize --task`, the task's].
     #[arg(long, value_enum)]
-    model: Option<Model>,
+    model: Option<ModelArg>,
     /// Noise scale of the smoothed models [default: with `optimize --task`, the task's when its model has one; otherwise 0.1].
     #[arg(long, allow_negative_numbers = true)]
     sigma: Option<f64>,
@@ -105,11 +105,11 @@ impl SimArgs {
 /// model has one, else 0.1) if given, else the task's (with `--sigma` in place of its noise scale; refused
 /// for a hard task), else logistic.
 pub fn contact_model(
-    model: Option<Model>,
+    model: Option<ModelArg>,
     sigma: Option<f64>,
     task: Option<&library::Task>,
-) -> anyhow::Result<library::Model> {
-    use library::Model as M;
+) -> anyhow::Result<library::ContactModel> {
+    use library::ContactModel as M;
     // A noise scale the command line does not give is the task's, when its model has one.
     let task_sigma = task.and_then(|t| match t.model {
         M::Logistic(s) | M::Normal(s) => Some(s),
@@ -117,9 +117,9 @@ pub fn contact_model(
     });
     let s = sigma.or(task_sigma).unwrap_or(0.1);
     Ok(match (model, task) {
-        (Some(Model::Hard), _) => M::Hard,
-        (Some(Model::Logistic), _) => M::Logistic(s),
-        (Some(Model::Normal), _) => M::Normal(s),
+        (Some(ModelArg::Hard), _) => M::Hard,
+        (Some(ModelArg::Logistic), _) => M::Logistic(s),
+        (Some(ModelArg::Normal), _) => M::Normal(s),
         (None, Some(task)) => match (task.model, sigma) {
             (M::Logistic(_), Some(s)) => M::Logistic(s),
             (M::Normal(_), Some(s)) => M::Normal(s),
@@ -552,11 +552,11 @@ mod tests {
             (Complementarity::Logistic { sigma: 0.2 }, 0.03)
         );
         assert_eq!(
-            settings(args(Some(Model::Hard), None, None), &task),
+            settings(args(Some(ModelArg::Hard), None, None), &task),
             (Complementarity::Hard, 0.05)
         );
         let hard = library::Task {
-            model: library::Model::Hard,
+            model: library::ContactModel::Hard,
             ..task.clone()
         };
         assert_eq!(
@@ -565,15 +565,15 @@ mod tests {
         );
         // A model named without its noise scale takes the task's, not the default 0.1.
         let sharp = library::Task {
-            model: library::Model::Logistic(0.03),
+            model: library::ContactModel::Logistic(0.03),
             ..task.clone()
         };
         assert_eq!(
-            settings(args(Some(Model::Normal), None, None), &sharp),
+            settings(args(Some(ModelArg::Normal), None, None), &sharp),
             (Complementarity::Normal { sigma: 0.03 }, 0.05)
         );
         assert_eq!(
-            settings(args(Some(Model::Logistic), None, None), &hard),
+            settings(args(Some(ModelArg::Logistic), None, None), &hard),
             (Complementarity::Logistic { sigma: 0.1 }, 0.05)
         );
         let err = args(None, Some(0.2), None)
@@ -583,7 +583,7 @@ mod tests {
         assert!(err.contains("has no noise scale"), "{err}");
     }
 
-    fn sim(model: Model) -> Simulator {
+    fn sim(model: ModelArg) -> Simulator {
         SimArgs {
             model: Some(model),
             sigma: Some(0.1),
@@ -598,7 +598,7 @@ mod tests {
 
     #[test]
     fn a_step_line_gives_the_next_state_and_derivatives() {
-        let mut s = sim(Model::Logistic);
+        let mut s = sim(ModelArg::Logistic);
         let out: serde_json::Value = serde_json::from_str(
             &answer_line(
                 &mut s,
@@ -617,7 +617,7 @@ mod tests {
 
     #[test]
     fn bad_step_lines_get_an_error() {
-        let mut s = sim(Model::Hard);
+        let mut s = sim(ModelArg::Hard);
         for bad in [
             "nope",
             r#"{"x":[1,2],"u":[0,0]}"#,
@@ -626,7 +626,7 @@ mod tests {
         ] {
             assert!(answer_line(&mut s, bad, Answers::Step).is_err(), "{bad}");
         }
-        let mut n = sim(Model::Normal);
+        let mut n = sim(ModelArg::Normal);
         let nan = r#"{"x":[-0.7,-0.5,0,0,0,0],"u":[0,"NaN"]}"#;
         assert!(answer_line(&mut n, nan, Answers::Derivatives).is_err());
         // The normal model has derivatives too.

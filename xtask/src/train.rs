@@ -15,7 +15,7 @@ pub struct Args {
     out: PathBuf,
     /// Contact model of the optimiser's dynamics [default: the task's with --task, else logistic].
     #[arg(long, value_enum)]
-    model: Option<crate::step::Model>,
+    model: Option<crate::step::ModelArg>,
     /// Noise scale of the smoothed models [default: the task's with --task when its model has one, else
     /// 0.1].
     #[arg(long)]

@@ -130,10 +130,10 @@ fn config(args: &Args) -> anyhow::Result<ViewerConfig> {
         },
         task.h,
         match task.model {
-            library::Model::Logistic(s) | library::Model::Normal(s) => s,
-            library::Model::Hard => defaults.sigma,
+            library::ContactModel::Logistic(s) | library::ContactModel::Normal(s) => s,
+            library::ContactModel::Hard => defaults.sigma,
         },
-        if task.model == library::Model::Hard {
+        if task.model == library::ContactModel::Hard {
             viewer::protocol::WorldKind::Hard
         } else {
             viewer::protocol::WorldKind::Smoothed

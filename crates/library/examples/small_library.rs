@@ -10,7 +10,7 @@
 //! robustly (docs/results.md).
 
 use library::{
-    EvaluationSettings, Exploration, Library, LibrarySettings, Model, ProblemFile, evaluate,
+    ContactModel, EvaluationSettings, Exploration, Library, LibrarySettings, ProblemFile, evaluate,
 };
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -49,7 +49,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             &library,
             &policy,
             &EvaluationSettings {
-                model: Model::Hard,
+                model: ContactModel::Hard,
                 seconds: 60.0,
                 kick_every,
                 ..EvaluationSettings::default()

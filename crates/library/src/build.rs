@@ -2,7 +2,7 @@
 //! keeping each trajectory's first local controller `u(x) = u_1 + K_1 (x - x_1)`, shifting by `d` steps
 //! with the warm start of eq. (19), and perturbing the initial state's velocities every few steps.
 
-use crate::entry::{Entry, LocalValue, Model};
+use crate::entry::{ContactModel, Entry, LocalValue};
 use crate::error::LibraryError;
 use crate::policy::Policy;
 use crate::problem::{Task, TaskCost};
@@ -18,7 +18,7 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct LibrarySettings {
     /// Contact model of the optimiser's dynamics.
-    pub model: Model,
+    pub model: ContactModel,
     /// Time step.
     pub h: f64,
     /// Optimisation horizon `N`.
@@ -154,7 +154,7 @@ pub const GROWTH_SHARPENING: f64 = 0.25;
 impl Default for LibrarySettings {
     fn default() -> Self {
         LibrarySettings {
-            model: Model::Logistic(0.1),
+            model: ContactModel::Logistic(0.1),
             h: 0.05,
             horizon: 90,
             shift: 4,
@@ -251,7 +251,7 @@ impl LibrarySettings {
         if !(self.h.is_finite() && self.h > 0.0) {
             return bad("h", self.h, "finite and positive");
         }
-        if let Model::Logistic(s) | Model::Normal(s) = self.model
+        if let ContactModel::Logistic(s) | ContactModel::Normal(s) = self.model
             && !(s.is_finite() && s > 0.0)
         {
             return bad("sigma", s, "finite and positive");
@@ -993,9 +993,9 @@ fn grow(
     // (LibrarySettings::growth_sharpening).
     let other_world = round % 2 == 1 || h != s.h;
     let sharpened = match s.model {
-        Model::Logistic(sigma) => Some(Model::Logistic(sigma * s.growth_sharpening)),
-        Model::Normal(sigma) => Some(Model::Normal(sigma * s.growth_sharpening)),
-        Model::Hard => None,
+        ContactModel::Logistic(sigma) => Some(ContactModel::Logistic(sigma * s.growth_sharpening)),
+        ContactModel::Normal(sigma) => Some(ContactModel::Normal(sigma * s.growth_sharpening)),
+        ContactModel::Hard => None,
     };
     let mut sharper = match sharpened {
         Some(model) if progress.forward.is_none() && other_world && s.growth_sharpening != 1.0 => {

@@ -1,4 +1,4 @@
-//! What a library stores: its contact model ([`Model`]) and its controllers ([`Entry`]), each with the
+//! What a library stores: its contact model ([`ContactModel`]) and its controllers ([`Entry`]), each with the
 //! local model of its cost-to-go ([`LocalValue`]) that the policy ranks them by. Plain data, below the
 //! build and the policy that both use it.
 
@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 /// The contact model a library is built on (a plain enum so that library files stay compact and
 /// self-contained).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub enum Model {
+pub enum ContactModel {
     /// Hard contact (the active set's derivatives).
     Hard,
     /// Logistic smoothing (eq. 17) with this sigma.
@@ -17,13 +17,13 @@ pub enum Model {
     Normal(f64),
 }
 
-impl Model {
+impl ContactModel {
     /// The simulator's model.
     pub fn complementarity(self) -> Complementarity {
         match self {
-            Model::Hard => Complementarity::Hard,
-            Model::Logistic(sigma) => Complementarity::Logistic { sigma },
-            Model::Normal(sigma) => Complementarity::Normal { sigma },
+            ContactModel::Hard => Complementarity::Hard,
+            ContactModel::Logistic(sigma) => Complementarity::Logistic { sigma },
+            ContactModel::Normal(sigma) => Complementarity::Normal { sigma },
         }
     }
 }

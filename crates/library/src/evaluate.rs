@@ -15,7 +15,7 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct EvaluationSettings {
     /// The world's contact model.
-    pub model: crate::Model,
+    pub model: crate::ContactModel,
     /// The world's time step.
     pub h: f64,
     /// Simulated time.
@@ -33,7 +33,7 @@ pub struct EvaluationSettings {
 impl Default for EvaluationSettings {
     fn default() -> Self {
         EvaluationSettings {
-            model: crate::Model::Logistic(0.1),
+            model: crate::ContactModel::Logistic(0.1),
             h: 0.05,
             seconds: 200.0,
             kick_every: 10.0,

@@ -22,7 +22,7 @@ pub use build::{
     LONGEST_HORIZON, LibrarySettings, MAX_NEIGHBOURS, Progress, STALL_ADVANCE, STALL_WINDOW,
     WORLD_TIME_STEP, build_entries,
 };
-pub use entry::{Entry, LocalValue, Model};
+pub use entry::{ContactModel, Entry, LocalValue};
 pub use error::LibraryError;
 pub use evaluate::{
     CONTACT_IMPULSE, ContactEvents, CoordinateRate, Evaluation, EvaluationSettings, TargetDistance,

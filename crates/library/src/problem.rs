@@ -21,7 +21,7 @@
 //! that names the task and the field.
 
 use crate::LibraryError;
-use crate::entry::Model;
+use crate::entry::ContactModel;
 use ddp::{ControlLimits, Cost, CostDerivatives};
 use dynamics::Scene;
 use serde::{Deserialize, Serialize};
@@ -249,7 +249,7 @@ pub struct Task {
     /// Optimisation horizon.
     pub horizon: usize,
     /// The optimiser's contact model.
-    pub model: Model,
+    pub model: ContactModel,
     /// Initial state `[q; v]`.
     pub x0: Vec<f64>,
     /// The cost.
@@ -311,7 +311,7 @@ impl Task {
         };
         let model = match spec.model.as_str() {
             "hard" => match spec.sigma {
-                None => Model::Hard,
+                None => ContactModel::Hard,
                 Some(_) => {
                     return Err(bad(
                         "sigma",
@@ -319,8 +319,8 @@ impl Task {
                     ));
                 }
             },
-            "logistic" => Model::Logistic(sigma("logistic")?),
-            "normal" => Model::Normal(sigma("normal")?),
+            "logistic" => ContactModel::Logistic(sigma("logistic")?),
+            "normal" => ContactModel::Normal(sigma("normal")?),
             other => {
                 return Err(bad(
                     "model",
