@@ -406,48 +406,48 @@ impl Model {
         };
         let np = p.len();
         let mut dp = vec![0.0; np * cols];
-        if let Some(ex) = direct {
-            ex.equations_y(h, &x[n..], &p, &slope, &mut dp);
-        }
-        // Otherwise the equations' derivatives in y = (x, u) in duals, eight directions per pass (one
-        // pass for the finger).
-        let pc: Vec<D1> = p.iter().map(|&e| D1::from_re(e)).collect();
-        for (ing, first) in passes.iter().zip((0..cols).step_by(DIRECTIONS)) {
-            let v: Vec<D1> = (0..n)
-                .map(|j| {
-                    let d = D1::from_re(x[n + j]);
-                    if (first..first + DIRECTIONS).contains(&(n + j)) {
-                        d.derivative(n + j - first)
-                    } else {
-                        d
+        // The position-level correction's derivatives: a function of q alone.
+        let mut dcorrection = vec![0.0; n * cols];
+        match direct {
+            Some(ex) => {
+                ex.equations_y(h, &x[n..], &p, &slope, &mut dp);
+                let geo = &ex.geometry;
+                for i in 0..n {
+                    dcorrection[i * cols..i * cols + n].copy_from_slice(geo.g(ex.correction(i)));
+                }
+            }
+            None => {
+                // The equations' derivatives in y = (x, u) in duals, eight directions per pass (one
+                // pass for the finger), and the correction's read off its duals.
+                let pc: Vec<D1> = p.iter().map(|&e| D1::from_re(e)).collect();
+                for (ing, first) in passes.iter().zip((0..cols).step_by(DIRECTIONS)) {
+                    let v: Vec<D1> = (0..n)
+                        .map(|j| {
+                            let d = D1::from_re(x[n + j]);
+                            if (first..first + DIRECTIONS).contains(&(n + j)) {
+                                d.derivative(n + j - first)
+                            } else {
+                                d
+                            }
+                        })
+                        .collect();
+                    let res = system(n, h, ing, &v, &pc, &kinds, normal);
+                    for k in 0..DIRECTIONS.min(cols - first) {
+                        for (i, e) in res.iter().enumerate() {
+                            dp[i * cols + first + k] = -e.eps.0.as_ref().map_or(0.0, |g| g[k]);
+                        }
                     }
-                })
-                .collect();
-            let res = system(n, h, ing, &v, &pc, &kinds, normal);
-            for k in 0..DIRECTIONS.min(cols - first) {
-                for (i, e) in res.iter().enumerate() {
-                    dp[i * cols + first + k] = -e.eps.0.as_ref().map_or(0.0, |g| g[k]);
+                    for (i, e) in ing.correction.iter().enumerate() {
+                        if let Some(g) = e.eps.0.as_ref() {
+                            for k in 0..DIRECTIONS.min(cols - first) {
+                                dcorrection[i * cols + first + k] = g[k];
+                            }
+                        }
+                    }
                 }
             }
         }
         lu.solve_many(&mut dp, cols);
-        // The position-level correction's derivatives: a function of q alone, read off its duals.
-        let mut dcorrection = vec![0.0; n * cols];
-        if let Some(ex) = direct {
-            let geo = &ex.geometry;
-            for i in 0..n {
-                dcorrection[i * cols..i * cols + n].copy_from_slice(geo.g(ex.correction(i)));
-            }
-        }
-        for (ing, first) in passes.iter().zip((0..cols).step_by(DIRECTIONS)) {
-            for (i, e) in ing.correction.iter().enumerate() {
-                if let Some(g) = e.eps.0.as_ref() {
-                    for k in 0..DIRECTIONS.min(cols - first) {
-                        dcorrection[i * cols + first + k] = g[k];
-                    }
-                }
-            }
-        }
         Ok(Linearised {
             p,
             lu,
