@@ -4,9 +4,10 @@
 //! released for the whole of any long computation (rollouts, optimisation, library builds, evaluations).
 
 use ::library::{
-    ContactModel, Evaluation, EvaluationSettings, Exploration, Library as RsLibrary,
-    LibrarySettings, Policy as RsPolicy, ProblemFile, SceneDynamics, Task,
+    Evaluation, EvaluationSettings, Exploration, Library as RsLibrary, LibrarySettings,
+    Policy as RsPolicy,
 };
+use ::task::{ContactModel, ProblemFile, SceneDynamics, Task};
 use ddp::{Ddp, DdpSettings, Method};
 use dynamics::{Scene, Simulator as RsSimulator, StepSettings};
 use numpy::ndarray::{Array1, Array2, Array3};

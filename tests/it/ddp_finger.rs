@@ -4,7 +4,7 @@
 
 use ddp::{Ddp, DdpSettings, Method, Solution};
 use dynamics::{Complementarity, Simulator, StepSettings};
-use library::{ProblemFile, SceneDynamics};
+use task::{ProblemFile, SceneDynamics};
 
 fn solve(sigma: f64, method: Method, max_iterations: usize) -> Solution {
     solve_on(sigma, method, max_iterations, 1)
@@ -145,7 +145,7 @@ fn a_step_started_from_a_nearby_steps_solution_is_the_same_step() {
             h: case["h"].as_f64().unwrap(),
             ..StepSettings::default()
         };
-        let sim = || Simulator::new(library::ProblemFile::builtin().scene, settings).unwrap();
+        let sim = || Simulator::new(task::ProblemFile::builtin().scene, settings).unwrap();
         let (x, u) = (vector(&case["x"]), vector(&case["u"]));
         for shift in [1e-6, 1e-3, 0.1] {
             let near_x: Vec<f64> = x.iter().map(|e| e + shift).collect();

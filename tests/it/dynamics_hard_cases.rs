@@ -6,7 +6,7 @@ use ncp::Status;
 
 fn sim(model: Complementarity, h: f64) -> Simulator {
     Simulator::new(
-        library::ProblemFile::builtin().scene,
+        task::ProblemFile::builtin().scene,
         StepSettings {
             model,
             h,
@@ -378,7 +378,7 @@ fn hessians_of_four_and_five_joint_scenes_match_differences() {
 /// The finger with its free ellipse thinned to `ratio : 1` (semi-axes 0.7 and 0.7 / ratio: mass and
 /// inertia fall with the minor axis), optionally without drag.
 fn thin_ellipse(ratio: f64, drag: bool) -> Scene {
-    let mut spec = library::ProblemFile::builtin().scene.spec().clone();
+    let mut spec = task::ProblemFile::builtin().scene.spec().clone();
     spec.bodies[2].semi_axes = [0.7, 0.7 / ratio];
     if !drag {
         for b in &mut spec.bodies {
@@ -501,7 +501,7 @@ fn with_a_recovery_limit_the_derivatives_still_match_differences_in_deep_penetra
             drag: dynamics::Drag::Implicit,
             ..StepSettings::default()
         };
-        let mut sim = Simulator::new(library::ProblemFile::builtin().scene, settings).unwrap();
+        let mut sim = Simulator::new(task::ProblemFile::builtin().scene, settings).unwrap();
         let u = [0.5, -0.5];
         let (step, der) = sim.step_with_derivatives(&x, &u).unwrap();
         assert!(

@@ -9,7 +9,7 @@ use dynamics::{
 use proptest::prelude::*;
 
 fn finger() -> Scene {
-    library::ProblemFile::builtin().scene
+    task::ProblemFile::builtin().scene
 }
 
 fn state() -> impl Strategy<Value = Vec<f64>> {
@@ -347,7 +347,7 @@ proptest! {
         others in proptest::collection::vec((state(), (-2.0f64..2.0, -2.0f64..2.0)), 1..4),
         u in (-2.0f64..2.0, -2.0f64..2.0),
     ) {
-        let model = Model::new(library::ProblemFile::builtin().scene, StepSettings::default()).unwrap();
+        let model = Model::new(task::ProblemFile::builtin().scene, StepSettings::default()).unwrap();
         let u = [u.0, u.1];
         let mut quiet = model.create_data();
         let alone = model.step(&mut quiet, &x, &u).map(|s| s.x_next.clone()).ok();
@@ -363,7 +363,7 @@ proptest! {
 
 /// The finger without drag, limits or contact: a double pendulum and a free spinner.
 fn conservative_scene() -> Scene {
-    let mut spec = library::ProblemFile::builtin().scene.spec().clone();
+    let mut spec = task::ProblemFile::builtin().scene.spec().clone();
     for b in &mut spec.bodies {
         b.joint.damping = 0.0;
         b.joint.limits = None;
@@ -405,7 +405,7 @@ fn energy_is_conserved_to_first_order_in_h_without_drag_or_contact() {
 
 #[test]
 fn contact_never_creates_energy_in_a_drag_free_scene() {
-    let mut spec = library::ProblemFile::builtin().scene.spec().clone();
+    let mut spec = task::ProblemFile::builtin().scene.spec().clone();
     for b in &mut spec.bodies {
         b.joint.damping = 0.0;
     }
@@ -625,12 +625,8 @@ fn a_data_steps_with_the_settings_of_the_model_that_steps_it() {
         },
         ..StepSettings::default()
     };
-    let tight = Model::new(
-        library::ProblemFile::builtin().scene,
-        StepSettings::default(),
-    )
-    .unwrap();
-    let loose = Model::new(library::ProblemFile::builtin().scene, loose).unwrap();
+    let tight = Model::new(task::ProblemFile::builtin().scene, StepSettings::default()).unwrap();
+    let loose = Model::new(task::ProblemFile::builtin().scene, loose).unwrap();
     let x = [-0.9, -1.5, 0.3, 0.5, -0.4, 0.2];
     let u = [0.3, -0.2];
     let mut borrowed = loose.create_data();

@@ -47,8 +47,7 @@ fn single_steps_match_the_reference_in_all_three_models() {
     assert_eq!(steps.len(), 30);
     let mut worst = (0.0f64, 0.0f64, 0.0f64);
     for case in steps {
-        let mut sim =
-            Simulator::new(library::ProblemFile::builtin().scene, settings(case)).unwrap();
+        let mut sim = Simulator::new(task::ProblemFile::builtin().scene, settings(case)).unwrap();
         let (x, u) = (vector(&case["x"]), vector(&case["u"]));
         let step = sim.step(&x, &u).unwrap();
         let tag = format!(
@@ -94,7 +93,7 @@ fn the_rollout_matches_the_reference() {
         recovery: None,
         ..StepSettings::default()
     };
-    let mut sim = Simulator::new(library::ProblemFile::builtin().scene, settings).unwrap();
+    let mut sim = Simulator::new(task::ProblemFile::builtin().scene, settings).unwrap();
     let u = vector(&r["u"]);
     let states: Vec<Vec<f64>> = r["states"].as_array().unwrap().iter().map(vector).collect();
     let lambdas: Vec<Vec<f64>> = r["lambdas"]
@@ -133,7 +132,7 @@ fn the_shipped_scene_file_is_scene_md() {
     .unwrap();
     assert_eq!(
         Scene::from_toml_str(&text).unwrap(),
-        library::ProblemFile::builtin().scene
+        task::ProblemFile::builtin().scene
     );
 }
 
@@ -150,8 +149,7 @@ fn logistic_step_derivatives_match_the_reference() {
         if case["model"] != "logistic" {
             continue;
         }
-        let mut sim =
-            Simulator::new(library::ProblemFile::builtin().scene, settings(case)).unwrap();
+        let mut sim = Simulator::new(task::ProblemFile::builtin().scene, settings(case)).unwrap();
         let (x, u) = (vector(&case["x"]), vector(&case["u"]));
         let (_, der) = sim.step_with_derivatives(&x, &u).unwrap();
         for (name, ours, exact) in [
@@ -184,8 +182,7 @@ fn hessians_of_c_f_match_differences_at_the_reference_contact_states() {
         if case["model"] != "logistic" {
             continue;
         }
-        let mut sim =
-            Simulator::new(library::ProblemFile::builtin().scene, settings(case)).unwrap();
+        let mut sim = Simulator::new(task::ProblemFile::builtin().scene, settings(case)).unwrap();
         let (x, u) = (vector(&case["x"]), vector(&case["u"]));
         let (step, _, hess) = sim.step_with_hessian(&x, &u, &c).unwrap();
         let in_contact = step.lambda[4] + step.lambda[5] > 1e-3;

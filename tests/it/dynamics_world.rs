@@ -89,7 +89,7 @@ fn the_world_geometry_is_read_and_checked() {
     // The file round-trips through its spec; a scene without world geometry writes none.
     let text = toml::to_string(scene.spec()).unwrap();
     assert_eq!(Scene::from_toml_str(&text).unwrap(), scene);
-    let finger = toml::to_string(library::ProblemFile::builtin().scene.spec()).unwrap();
+    let finger = toml::to_string(task::ProblemFile::builtin().scene.spec()).unwrap();
     assert!(
         !finger.contains("plane") && !finger.contains("fixed"),
         "{finger}"

@@ -1,11 +1,11 @@
 //! Noise annealing (paper section VI's proposal): lowering sigma step by step with warm starts reaches
 //! sigmas at which a solve from zero controls never touches the ellipse.
 
-use library::anneal;
+use task::anneal;
 
 #[test]
 fn annealing_reaches_small_sigma_where_a_direct_solve_never_touches_the_ellipse() {
-    let (scene, task) = library::ProblemFile::builtin_task();
+    let (scene, task) = task::ProblemFile::builtin_task();
     let schedule = [0.3, 0.2, 0.1, 0.05, 0.03, 0.02, 0.01, 0.005];
     let annealed = anneal(&scene, &task, &schedule, 300).unwrap();
     for s in &annealed {

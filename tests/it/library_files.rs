@@ -16,7 +16,7 @@ fn small(seed: u64) -> Library {
         seed,
         ..LibrarySettings::paper()
     };
-    Library::build(&library::ProblemFile::builtin(), None, &settings, |_, _| {}).unwrap()
+    Library::build(&task::ProblemFile::builtin(), None, &settings, |_, _| {}).unwrap()
 }
 
 #[test]
@@ -49,7 +49,7 @@ fn chains_built_in_parallel_are_the_chains_built_one_by_one() {
             ..LibrarySettings::paper()
         };
         let mut seen = Vec::new();
-        let lib = Library::build(&library::ProblemFile::builtin(), None, &settings, |k, _| {
+        let lib = Library::build(&task::ProblemFile::builtin(), None, &settings, |k, _| {
             seen.push(k)
         })
         .unwrap();
@@ -140,7 +140,7 @@ fn a_library_file_round_trips_and_bad_files_are_refused_whole() {
     lib.save(&path).unwrap();
     let back = Library::load(&path).unwrap();
     assert_eq!(back, lib);
-    back.check_scene(&library::ProblemFile::builtin().scene)
+    back.check_scene(&task::ProblemFile::builtin().scene)
         .unwrap();
     let bytes = std::fs::read(&path).unwrap();
 
@@ -190,7 +190,7 @@ fn a_library_file_round_trips_and_bad_files_are_refused_whole() {
         Err(LibraryError::Invalid(_))
     ));
     // A scene the library was not built for.
-    let mut spec = library::ProblemFile::builtin().scene.spec().clone();
+    let mut spec = task::ProblemFile::builtin().scene.spec().clone();
     spec.contacts[0].friction = 0.3;
     let other = Scene::new(spec).unwrap();
     assert!(matches!(
@@ -205,7 +205,7 @@ fn a_library_file_round_trips_and_bad_files_are_refused_whole() {
 
 #[test]
 fn impossible_library_settings_are_typed_errors() {
-    let problem = library::ProblemFile::builtin();
+    let problem = task::ProblemFile::builtin();
     for s in [
         LibrarySettings {
             shift: 0,
@@ -299,7 +299,7 @@ fn branched(chains: usize) -> Library {
         chains,
         ..LibrarySettings::default()
     };
-    Library::build(&library::ProblemFile::builtin(), None, &settings, |_, _| {}).unwrap()
+    Library::build(&task::ProblemFile::builtin(), None, &settings, |_, _| {}).unwrap()
 }
 
 #[test]

@@ -3,7 +3,8 @@
 //! library's time step and at another. The paper's library of single first controllers is compared.
 
 use crate::support::finger_library as library;
-use library::{ContactModel, Evaluation, EvaluationSettings, Library, evaluate};
+use library::{Evaluation, EvaluationSettings, Library, evaluate};
+use task::ContactModel;
 
 fn run(lib: &Library, model: ContactModel, h: f64, kick_every: f64) -> Evaluation {
     run_for(lib, model, h, kick_every, 100.0)

@@ -1,16 +1,17 @@
-//! Tasks as data (`[task.NAME]` tables of a scene file, `library::ProblemFile`): the finger's task read
+//! Tasks as data (`[task.NAME]` tables of a scene file, `task::ProblemFile`): the finger's task read
 //! from scenes/finger.toml is the paper's cost in code; the cost's derivatives are exact, its periodic
 //! targets wrap; every malformed task is refused with an error naming the task and the field.
 
 use ddp::{Cost, CostDerivatives};
 use dynamics::Scene;
-use library::{ContactModel, LibraryError, ProblemFile};
+use library::LibraryError;
 use proptest::prelude::*;
+use task::{ContactModel, ProblemFile, TaskError};
 
 const FINGER: &str = include_str!("../../scenes/finger.toml");
 
 /// The finger's scene with `task` as its only task.
-fn finger_with(task: &str) -> Result<ProblemFile, LibraryError> {
+fn finger_with(task: &str) -> Result<ProblemFile, TaskError> {
     ProblemFile::from_toml_str(&format!("{}\n{task}", finger_scene()))
 }
 
@@ -35,7 +36,7 @@ fn the_finger_file_carries_the_papers_task() {
     let file = ProblemFile::from_toml_str(FINGER).unwrap();
     // The built-in file is this one.
     assert_eq!(file.scene.spec(), ProblemFile::builtin().scene.spec());
-    assert_eq!(library::BUILTIN_SCENE_FILE, FINGER);
+    assert_eq!(task::BUILTIN_SCENE_FILE, FINGER);
     // SCENE.md's numbers: two links of semi-axes 0.8 x 0.25 on hinges at the origin and at 1.6 along
     // link 1, limits [-pi, 0] and [-2 pi / 3, 0], drag 0.2; the free ellipse 0.7 x 0.5 hinged at
     // (0, -3), drag 0.7; gravity -4; friction 0.5 between link 2 and the ellipse.
@@ -360,7 +361,7 @@ fn the_example_scenes_tasks_are_solved_from_rest() {
         })
         .unwrap()
         .solve(
-            &library::SceneDynamics::new(sim),
+            &task::SceneDynamics::new(sim),
             &task.cost,
             &task.x0,
             &vec![vec![0.0; m]; task.horizon],
@@ -399,7 +400,7 @@ fn the_example_scenes_tasks_are_solved_from_rest() {
 }
 
 /// A small library of the paper's recipe (one kicked chain) on a task of a scene file.
-fn small_settings(task: &library::Task, trajectories: usize) -> library::LibrarySettings {
+fn small_settings(task: &task::Task, trajectories: usize) -> library::LibrarySettings {
     library::LibrarySettings {
         trajectories,
         first_passes: 60,
@@ -419,7 +420,7 @@ fn a_library_is_built_for_a_task_of_a_scene_file_and_keeps_it() {
         .iter()
         .position(|c| c == "ellipse.angle")
         .unwrap();
-    let progress = library::Progress::of_task(&task).unwrap();
+    let progress = task::Progress::of_task(&task).unwrap();
     assert_eq!(progress.coordinate, ellipse);
     assert_eq!(progress.period, Some(std::f64::consts::PI));
     assert_eq!(progress.forward, None);
@@ -490,21 +491,24 @@ fn a_task_library_takes_no_periodic_coordinate_or_one() {
     )
     .unwrap();
     let task = two.task(None).unwrap();
-    let err = library::Progress::of_task(&task).unwrap_err();
+    let err = task::Progress::of_task(&task).unwrap_err();
     assert!(
-        matches!(&err, LibraryError::Task { field, .. } if field == "periods"),
+        matches!(&err, TaskError::Spec { field, .. } if field == "periods"),
         "{err}"
     );
     let err =
         library::Library::build(&two, None, &small_settings(&task, 2), |_, _| {}).unwrap_err();
-    assert!(matches!(err, LibraryError::Task { .. }), "{err}");
+    assert!(
+        matches!(err, LibraryError::Task(TaskError::Spec { .. })),
+        "{err}"
+    );
     // No period: progress along the rewarded coordinate, which the policy does not wrap.
     let none = finger_with(
         "[task.t]\nh = 0.05\nhorizon = 10\nmodel = \"hard\"\ncontrol_weight = 0.05\nrunning = [{ coordinate = \"ellipse.angle\", linear = -1.0 }]\n",
     )
     .unwrap();
     let task = none.task(None).unwrap();
-    let p = library::Progress::of_task(&task).unwrap();
+    let p = task::Progress::of_task(&task).unwrap();
     let ellipse = none
         .scene
         .coordinate_names()
@@ -525,7 +529,7 @@ fn a_task_library_takes_no_periodic_coordinate_or_one() {
     assert_eq!(turns, 0.0);
     // The paper's task on the finger spins forward: growth has its direction.
     let file = ProblemFile::from_toml_str(FINGER).unwrap();
-    let p = library::Progress::of_task(&file.task(None).unwrap()).unwrap();
+    let p = task::Progress::of_task(&file.task(None).unwrap()).unwrap();
     assert_eq!(
         (p.coordinate, p.period, p.forward),
         (2, Some(std::f64::consts::PI), Some(1.0))
@@ -538,9 +542,9 @@ fn a_task_library_takes_no_periodic_coordinate_or_one() {
 fn a_task_starting_with_bodies_inside_each_other_is_refused_with_the_pair_named() {
     let pushing = include_str!("../../scenes/pushing.toml");
     // The block (semi-axis 0.2 upright) resting on the ground is fine.
-    assert!(library::ProblemFile::from_toml_str(pushing).is_ok());
+    assert!(task::ProblemFile::from_toml_str(pushing).is_ok());
     let sunk = pushing.replacen("\"block.y\" = 0.2", "\"block.y\" = 0.15", 1);
-    let err = library::ProblemFile::from_toml_str(&sunk)
+    let err = task::ProblemFile::from_toml_str(&sunk)
         .unwrap_err()
         .to_string();
     assert!(
@@ -548,7 +552,7 @@ fn a_task_starting_with_bodies_inside_each_other_is_refused_with_the_pair_named(
         "{err}"
     );
     let bent = pushing.replacen("\"link1.angle\" = -0.5", "\"link1.angle\" = 0.7", 1);
-    let err = library::ProblemFile::from_toml_str(&bent)
+    let err = task::ProblemFile::from_toml_str(&bent)
         .unwrap_err()
         .to_string();
     assert!(
@@ -557,7 +561,7 @@ fn a_task_starting_with_bodies_inside_each_other_is_refused_with_the_pair_named(
     );
     // Rounding is not an overlap.
     let touching = pushing.replacen("\"block.y\" = 0.2", "\"block.y\" = 0.1999999999", 1);
-    assert!(library::ProblemFile::from_toml_str(&touching).is_ok());
+    assert!(task::ProblemFile::from_toml_str(&touching).is_ok());
 }
 
 /// Issue 28, why `pushing` recovers from few kicks (docs/results.md): its finger flicks the block to a
@@ -571,11 +575,11 @@ fn pushing_target_is_beyond_the_fingers_reach() {
     let task = file.task(Some("push")).unwrap();
     let scene = &file.scene;
     // The one pair the task needs: the finger's second link against the block.
-    let pairs = library::needed_pairs(scene, &task.cost).unwrap();
+    let pairs = task::needed_pairs(scene, &task.cost).unwrap();
     let &[pair] = pairs.as_slice() else {
         panic!("one needed pair, not {pairs:?}")
     };
-    let reach = library::ReachCost::new(&task.cost, scene, pair, 1.0).unwrap();
+    let reach = task::ReachCost::new(&task.cost, scene, pair, 1.0).unwrap();
     // Angle `k` of `steps` across joint `j`'s limits.
     let angle = |j: usize, k: usize, steps: usize| {
         let [lo, hi] = scene.coordinates[j].limits.unwrap();
@@ -624,7 +628,7 @@ fn overlaps_are_named_deepest_first() {
 /// finger's budget of 400 keeps the recipe it was chosen for.
 #[test]
 fn the_default_recipe_fits_every_budget() {
-    let scene = library::ProblemFile::builtin().scene;
+    let scene = task::ProblemFile::builtin().scene;
     let base = library::LibrarySettings::default();
     assert_eq!(base.exploration.fitted(400), base.exploration);
     assert_eq!(base.exploration.fitted(4000), base.exploration);
@@ -684,10 +688,7 @@ final = [{ coordinate = "wheel.angle", linear = 1.0 }]
 "#;
     let file = ProblemFile::from_toml_str(&text).unwrap();
     let task = file.task(Some("back")).unwrap();
-    assert_eq!(
-        library::Progress::of_task(&task).unwrap().forward,
-        Some(-1.0)
-    );
+    assert_eq!(task::Progress::of_task(&task).unwrap().forward, Some(-1.0));
     let settings = default_recipe(&task, 8);
     let lib = library::Library::build(&file, Some("back"), &settings, |_, _| {}).unwrap();
     let policy = lib.policy().unwrap();
@@ -771,9 +772,9 @@ fn a_continuation_that_finds_no_contact_keeps_the_tasks_own_solve() {
     .unwrap();
     let zero = vec![vec![0.0; 4]; task.horizon];
     let start = ddp
-        .solve(&library::SceneDynamics::new(sim), &task.cost, &x0, &zero)
+        .solve(&task::SceneDynamics::new(sim), &task.cost, &x0, &zero)
         .unwrap();
-    let c = library::ContactProblem {
+    let c = task::ContactProblem {
         ddp: &ddp,
         scene: &file.scene,
         settings: &step,
@@ -797,26 +798,26 @@ fn a_continuation_that_finds_no_contact_keeps_the_tasks_own_solve() {
 /// The task's solve from `x0` with zero controls at first, under `step`.
 fn solve_from(
     file: &ProblemFile,
-    task: &library::Task,
+    task: &task::Task,
     step: dynamics::StepSettings,
     ddp: &ddp::Ddp,
     x0: &[f64],
 ) -> ddp::Solution {
     let sim = dynamics::Simulator::new(file.scene.clone(), step).unwrap();
     let zero = vec![vec![0.0; file.scene.n_controls]; task.horizon];
-    ddp.solve(&library::SceneDynamics::new(sim), &task.cost, x0, &zero)
+    ddp.solve(&task::SceneDynamics::new(sim), &task.cost, x0, &zero)
         .unwrap()
 }
 
 fn felt(
     file: &ProblemFile,
-    task: &library::Task,
+    task: &task::Task,
     step: dynamics::StepSettings,
     x0: &[f64],
     sol: &ddp::Solution,
 ) -> bool {
     let mut probe = dynamics::Simulator::new(file.scene.clone(), step).unwrap();
-    library::contact_felt(&mut probe, &task.cost, x0, &sol.controls).unwrap()
+    task::contact_felt(&mut probe, &task.cost, x0, &sol.controls).unwrap()
 }
 
 /// A contact out of reach is reached by pulling the pair together: the slider's fork starts with both
@@ -830,7 +831,7 @@ fn a_contact_out_of_reach_is_reached_by_pulling_the_pair_together() {
     let file = ProblemFile::from_toml_str(include_str!("../../scenes/slider_push.toml")).unwrap();
     let task = file.task(Some("push")).unwrap();
     assert_eq!(
-        library::needed_pairs(&file.scene, &task.cost),
+        task::needed_pairs(&file.scene, &task.cost),
         Some(vec![1, 2])
     );
     let ddp = ddp::Ddp::new(ddp::DdpSettings {
@@ -861,7 +862,7 @@ fn a_contact_out_of_reach_is_reached_by_pulling_the_pair_together() {
             "{:?}",
             step.model
         );
-        let r = library::ContactProblem {
+        let r = task::ContactProblem {
             ddp: &ddp,
             scene: &file.scene,
             settings: &step,
@@ -911,7 +912,7 @@ fn reaching_replaces_the_start_only_where_touching_pays() {
         .unwrap();
         let start = solve_from(&file, &task, step, &ddp, &x0);
         assert!(!felt(&file, &task, step, &x0, &start));
-        let r = library::ContactProblem {
+        let r = task::ContactProblem {
             ddp: &ddp,
             scene: &file.scene,
             settings: &step,
@@ -938,7 +939,7 @@ fn reaching_replaces_the_start_only_where_touching_pays() {
 fn the_pulls_gradient_is_exact() {
     let file = ProblemFile::from_toml_str(include_str!("../../scenes/two_fingers.toml")).unwrap();
     let task = file.task(Some("turn")).unwrap();
-    let pull = library::ReachCost::new(&task.cost, &file.scene, 0, 3.0).unwrap();
+    let pull = task::ReachCost::new(&task.cost, &file.scene, 0, 3.0).unwrap();
     let x = [-0.6, -0.9, 4.0, 0.6, 0.3, 0.1, -0.2, 0.3, 0.0, 0.5];
     let u = [0.1, -0.2, 0.3, 0.0];
     assert!(pull.gap(&x).is_some());
@@ -962,12 +963,12 @@ fn the_pulls_gradient_is_exact() {
         }
         assert!(d.lxx[a * n + a] >= 0.0);
     }
-    assert!(library::ReachCost::new(&task.cost, &file.scene, 2, 1.0).is_err());
-    assert!(library::ReachCost::new(&task.cost, &file.scene, 0, f64::NAN).is_err());
+    assert!(task::ReachCost::new(&task.cost, &file.scene, 2, 1.0).is_err());
+    assert!(task::ReachCost::new(&task.cost, &file.scene, 0, f64::NAN).is_err());
 }
 
 /// The default recipe on `task`, fitted to `trajectories`, without growth.
-fn default_recipe(task: &library::Task, trajectories: usize) -> library::LibrarySettings {
+fn default_recipe(task: &task::Task, trajectories: usize) -> library::LibrarySettings {
     let base = library::LibrarySettings::default().for_task(task);
     library::LibrarySettings {
         trajectories,
@@ -986,7 +987,7 @@ fn wheel_scene(actuated: bool) -> String {
 
 /// A wheel on a driven hinge (no contact needed) with a target task: turn it to 1.0 and hold it there,
 /// `success` being the task's `[task.hold.success]` table (or none).
-fn wheel_to_target(success: &str) -> Result<ProblemFile, LibraryError> {
+fn wheel_to_target(success: &str) -> Result<ProblemFile, TaskError> {
     ProblemFile::from_toml_str(&format!(
         r#"{}
 [task.hold]
@@ -1030,7 +1031,7 @@ fn a_task_says_what_success_is_with_defaults_from_its_terms() {
     // The ellipse's angle to 0.5 (its velocity's target is not a position target).
     assert_eq!(s.targets.len(), 1, "{:?}", s.targets);
     assert_eq!((s.targets[0].1, s.tolerance), (0.5, 0.05));
-    assert_eq!(s.settle, library::DEFAULT_SETTLE);
+    assert_eq!(s.settle, task::DEFAULT_SETTLE);
     // From 0 to 1.0: a tenth of the way is 0.1, more than 0.05.
     let hold = wheel_to_target("").unwrap().task(None).unwrap();
     assert_eq!(hold.success.tolerance, 0.1);
@@ -1056,7 +1057,7 @@ fn a_task_says_what_success_is_with_defaults_from_its_terms() {
     ] {
         let err = wheel_to_target(&format!("[task.hold.success]\n{table}\n")).unwrap_err();
         assert!(
-            matches!(&err, LibraryError::Task { field: f, .. } if f.starts_with(field)),
+            matches!(&err, TaskError::Spec { field: f, .. } if f.starts_with(field)),
             "{table}: {err}"
         );
     }
@@ -1176,7 +1177,7 @@ fn the_policy_keeps_the_tasks_control_limits() {
 /// at its own noise scale, its library the same for any fraction.
 #[test]
 fn growth_sharpening_shapes_a_target_tasks_branches_and_leaves_a_progress_task_alone() {
-    let small = |task: &library::Task, sharpening: f64| library::LibrarySettings {
+    let small = |task: &task::Task, sharpening: f64| library::LibrarySettings {
         horizon: 40,
         growth: 2,
         growth_sharpening: sharpening,
@@ -1263,7 +1264,7 @@ fn stalled_trunk_lengthens_the_horizon() {
 }
 
 /// The default recipe on `task` with nothing but its unperturbed chain of `trunk` trajectories.
-fn trunk_only(task: &library::Task, trunk: usize) -> library::LibrarySettings {
+fn trunk_only(task: &task::Task, trunk: usize) -> library::LibrarySettings {
     library::LibrarySettings {
         exploration: library::Exploration::Branches {
             trunk,

@@ -39,13 +39,8 @@ fn built_once(
     settings: fn() -> library::LibrarySettings,
 ) -> &'static library::Library {
     cell.get_or_init(|| {
-        library::Library::build(
-            &library::ProblemFile::builtin(),
-            None,
-            &settings(),
-            |_, _| {},
-        )
-        .unwrap()
+        library::Library::build(&task::ProblemFile::builtin(), None, &settings(), |_, _| {})
+            .unwrap()
     })
 }
 

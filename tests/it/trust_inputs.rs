@@ -144,7 +144,7 @@ fn a_crafted_length_prefix_is_refused_without_allocating_it() {
 #[test]
 fn a_library_used_with_another_scene_says_what_differs() {
     let lib = crate::support::paper_library();
-    let mut spec = library::ProblemFile::builtin().scene.spec().clone();
+    let mut spec = task::ProblemFile::builtin().scene.spec().clone();
     spec.bodies[1].joint.damping = 0.7;
     let other = dynamics::Scene::new(spec).unwrap();
     let err = lib.check_scene(&other).unwrap_err().to_string();
@@ -195,7 +195,7 @@ fn a_file_being_replaced_is_never_seen_in_part() {
 fn a_converged_step_keeps_its_joint_limits_at_any_input_scale() {
     use dynamics::{Complementarity, Simulator, StepSettings};
     use rand::{Rng, SeedableRng};
-    let scene = library::ProblemFile::builtin().scene;
+    let scene = task::ProblemFile::builtin().scene;
     let n = scene.n_dof();
     let limits: Vec<Option<[f64; 2]>> = scene.coordinates.iter().map(|c| c.limits).collect();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(27);
@@ -211,7 +211,7 @@ fn a_converged_step_keeps_its_joint_limits_at_any_input_scale() {
             },
         )
         .unwrap();
-        let x0 = library::ProblemFile::builtin_task().1.x0;
+        let x0 = task::ProblemFile::builtin_task().1.x0;
         let s = sim.step(&x0, &[1e20, 0.0]).unwrap();
         let [lo, hi] = limits[0].unwrap();
         assert!(
@@ -265,7 +265,7 @@ fn full_ddp_past_its_memory_limit_is_refused_with_the_estimate_and_ilqr_runs() {
     let model = dynamics::Model::new(scene, dynamics::StepSettings::default()).unwrap();
     let per_knot = model.second_order_bytes();
     assert!(per_knot > 100 << 20, "{per_knot}");
-    let dynamics = library::SceneDynamics::from_model(model);
+    let dynamics = task::SceneDynamics::from_model(model);
     let cost = ddp::QuadraticCost::diagonal(&vec![1.0; n], &vec![0.1; nu], &vec![1.0; n]);
     let x0 = vec![0.0; n];
     let controls = vec![vec![0.0; nu]; 60];
@@ -294,7 +294,7 @@ fn a_malformed_task_field_is_named() {
         "control_weight = 0.05\ncontrol_limits = [-1.0, 0.0, 1.0]",
         1,
     );
-    let err = library::ProblemFile::from_toml_str(&text)
+    let err = task::ProblemFile::from_toml_str(&text)
         .unwrap_err()
         .to_string();
     assert!(

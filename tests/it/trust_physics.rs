@@ -429,7 +429,7 @@ fn the_rocking_ellipse_never_rolls_over_nor_sinks() {
 #[test]
 fn derivatives_through_the_position_level_recovery_match_differences() {
     let x = crate::dynamics_hard_cases::deep_penetration();
-    let scene = library::ProblemFile::builtin().scene;
+    let scene = task::ProblemFile::builtin().scene;
     for model in [
         Complementarity::Hard,
         Complementarity::Logistic { sigma: 0.1 },

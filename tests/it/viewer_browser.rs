@@ -76,7 +76,7 @@ fn in_a_browser_a_drag_against_the_spin_holds_the_ellipse_and_the_spin_resumes()
     let Some(result) = in_browser(
         ViewerConfig {
             addr: SocketAddr::from((Ipv4Addr::LOCALHOST, 0)),
-            scene: library::ProblemFile::builtin().scene,
+            scene: task::ProblemFile::builtin().scene,
             library: Some(crate::support::finger_library().clone()),
             world: WorldSettings {
                 policy: PolicyKind::Library,
@@ -97,7 +97,7 @@ fn in_a_browser_a_drag_against_the_spin_holds_the_ellipse_and_the_spin_resumes()
 #[test]
 fn in_a_browser_the_pushing_scene_shows_its_ground_and_its_free_block_can_be_lifted() {
     let problem =
-        library::ProblemFile::from_toml_str(include_str!("../../scenes/pushing.toml")).unwrap();
+        task::ProblemFile::from_toml_str(include_str!("../../scenes/pushing.toml")).unwrap();
     let task = problem.task(Some("push")).unwrap();
     let Some(result) = in_browser(
         ViewerConfig {

@@ -17,7 +17,7 @@ type Socket = WebSocketStream<MaybeTlsStream<TcpStream>>;
 fn config(port: u16) -> ViewerConfig {
     ViewerConfig {
         addr: SocketAddr::from((Ipv4Addr::LOCALHOST, port)),
-        scene: library::ProblemFile::builtin().scene,
+        scene: task::ProblemFile::builtin().scene,
         library: None,
         world: WorldSettings {
             policy: PolicyKind::Off,
@@ -192,9 +192,9 @@ async fn a_port_in_use_and_a_library_for_another_scene_are_errors_at_start() {
         warm_passes: 2,
         ..library::LibrarySettings::paper()
     };
-    let lib = library::Library::build(&library::ProblemFile::builtin(), None, &settings, |_, _| {})
-        .unwrap();
-    let mut spec = library::ProblemFile::builtin().scene.spec().clone();
+    let lib =
+        library::Library::build(&task::ProblemFile::builtin(), None, &settings, |_, _| {}).unwrap();
+    let mut spec = task::ProblemFile::builtin().scene.spec().clone();
     spec.gravity = [0.0, -9.81];
     let mut other = config(0);
     other.scene = dynamics::Scene::new(spec).unwrap();

@@ -8,7 +8,7 @@ use viewer::{ViewerError, World, WorldSettings};
 fn online_mpc_spins_the_ellipse_from_rest_and_recovers_from_a_drag() {
     // Seeded by the library's policy at the start and whenever its plan stalls.
     let mut world = World::new(
-        library::ProblemFile::builtin().scene,
+        task::ProblemFile::builtin().scene,
         Some(crate::support::finger_library().clone()),
         WorldSettings {
             policy: PolicyKind::Mpc,
@@ -60,7 +60,7 @@ fn online_mpc_spins_the_ellipse_from_rest_and_recovers_from_a_drag() {
 
 #[test]
 fn bad_world_settings_and_messages_are_typed_errors_that_change_nothing() {
-    let scene = library::ProblemFile::builtin().scene;
+    let scene = task::ProblemFile::builtin().scene;
     for settings in [
         WorldSettings {
             h: 0.0,
@@ -173,7 +173,7 @@ proptest::proptest! {
         // Whatever the page sends (valid or not, in any order), the world answers Ok or a typed error,
         // keeps stepping, and its state stays finite, with the library's policy in the loop or none.
         let mut world = World::new(
-            library::ProblemFile::builtin().scene,
+            task::ProblemFile::builtin().scene,
             with_library.then(|| crate::support::finger_library().clone()),
             WorldSettings {
                 policy: PolicyKind::Off,
@@ -201,7 +201,7 @@ proptest::proptest! {
 #[test]
 fn switching_to_online_mpc_never_stalls_the_world_and_spreads_its_first_solve_over_steps() {
     let mut world = World::new(
-        library::ProblemFile::builtin().scene,
+        task::ProblemFile::builtin().scene,
         Some(crate::support::finger_library().clone()),
         WorldSettings {
             policy: PolicyKind::Off,
@@ -247,11 +247,11 @@ fn switching_to_online_mpc_never_stalls_the_world_and_spreads_its_first_solve_ov
 /// A world on a scene file's task: the task's initial state, time step and noise scale, as
 /// `cargo xtask view --scene FILE --task NAME` sets them.
 fn task_world(text: &str, task: &str, policy: PolicyKind) -> World {
-    let problem = library::ProblemFile::from_toml_str(text).unwrap();
+    let problem = task::ProblemFile::from_toml_str(text).unwrap();
     let task = problem.task(Some(task)).unwrap();
     let sigma = match task.model {
-        library::ContactModel::Logistic(s) | library::ContactModel::Normal(s) => s,
-        library::ContactModel::Hard => 0.1,
+        task::ContactModel::Logistic(s) | task::ContactModel::Normal(s) => s,
+        task::ContactModel::Hard => 0.1,
     };
     World::new(
         problem.scene.clone(),
@@ -362,7 +362,7 @@ fn a_scene_with_a_fixed_peg_and_a_ground_sends_both_and_keeps_them_in_the_window
         "{}\n[task.level]\nh = 0.05\nhorizon = 10\nmodel = \"hard\"\ncontrol_weight = 0.1\nrunning = [{{ coordinate = \"upper.angle\", quadratic = 1.0 }}]\n",
         crate::dynamics_world::PENDULUM
     );
-    let problem = library::ProblemFile::from_toml_str(&text).unwrap();
+    let problem = task::ProblemFile::from_toml_str(&text).unwrap();
     let scene = problem.scene.clone();
     // The default world's task (the built-in finger's spin) does not fit this scene: refused by its sizes.
     let err = World::new(

@@ -6,9 +6,9 @@ use ddp::{
     ControlLimits, Ddp, DdpSettings, Dynamics, Method, Regularisation, SecondOrder, Solution,
 };
 use dynamics::{Complementarity, Scene, Simulator, StepSettings};
-use library::{ProblemFile, SceneDynamics};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Instant;
+use task::{ProblemFile, SceneDynamics};
 
 /// Dynamics that time every call of the wrapped ones (nanoseconds, summed over threads).
 struct Timed<D> {
@@ -436,7 +436,7 @@ fn scenes_pass_table() -> anyhow::Result<String> {
             "push",
         ),
     ] {
-        let file = library::ProblemFile::from_toml_str(text)?;
+        let file = task::ProblemFile::from_toml_str(text)?;
         let task = file.task(Some(task))?;
         out.push_str(&pass_row(name, &file.scene, &task.x0, &task.cost)?);
     }

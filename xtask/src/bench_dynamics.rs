@@ -9,12 +9,12 @@ use std::time::Instant;
 
 /// The finger apart, at rest: the built-in scene file's task start (SCENE.md's x0).
 fn x0() -> Vec<f64> {
-    library::ProblemFile::builtin_task().1.x0
+    task::ProblemFile::builtin_task().1.x0
 }
 
 /// SCENE.md's flicking finger: the built-in scene file's scene.
 fn finger() -> Scene {
-    library::ProblemFile::builtin().scene
+    task::ProblemFile::builtin().scene
 }
 const U: [f64; 2] = [0.3, -0.2];
 

@@ -1,17 +1,18 @@
 //! The library section of `cargo xtask benchmarks`: building the finger's library (paper IV-C) and the
 //! global policy's look-up (eq. 20) at the library's sizes.
 
-use library::{ContactModel, EvaluationSettings, Library, LibrarySettings, evaluate};
+use library::{EvaluationSettings, Library, LibrarySettings, evaluate};
 use rand::SeedableRng;
 use rand_distr::Distribution;
 use std::hint::black_box;
 use std::time::Instant;
+use task::ContactModel;
 
 /// Building a library with `settings`: wall time, trajectories, passes of the first solve and of the
 /// re-solves (median, 90th percentile, largest).
 fn build_row(name: &str, settings: &LibrarySettings) -> anyhow::Result<(Library, String)> {
     let start = Instant::now();
-    let lib = Library::build(&library::ProblemFile::builtin(), None, settings, |_, _| {})?;
+    let lib = Library::build(&task::ProblemFile::builtin(), None, settings, |_, _| {})?;
     let seconds = start.elapsed().as_secs_f64();
     let firsts: Vec<_> = lib.entries.iter().step_by(settings.keep).collect();
     let mut passes: Vec<u32> = firsts.iter().map(|e| e.passes).collect();
@@ -118,7 +119,7 @@ pub fn section() -> anyhow::Result<String> {
 pub fn tolerance_section() -> anyhow::Result<String> {
     const SEEDS: std::ops::RangeInclusive<u64> = 1..=4;
     const EVALUATION_SEEDS: std::ops::RangeInclusive<u64> = 7..=9;
-    let problem = library::ProblemFile::builtin();
+    let problem = task::ProblemFile::builtin();
     let mut out = format!(
         "The library optimiser's stopping tolerance (relative cost change per accepted pass) against build time and closed-loop quality. Each row: default libraries built from kick seeds {}-{} (mean wall time; single thread, or the branches on two threads, which builds the same library), each run for 200 s on the smoothed (logistic 0.1) and the hard world at h = 0.05 with velocity kicks of std 2 every 10 s and without kicks, evaluation seeds {}-{}. Spin under kicks: mean rate over the second half of each interval between kicks; recovered: intervals whose second half spun forward; resumed: kicks after which the ellipse turned a further quarter turn before the next kick (stricter). The spread between kick seeds at one tolerance is large (one library spins at 0.3 rad/s where another of the same settings stalls), so differences smaller than it are noise.\n\n| tolerance | threads | build (s) | passes | spin under kicks, logistic / hard (rad/s) | kicks recovered, logistic / hard | quarter turn resumed, logistic / hard | spin without kicks, logistic / hard (rad/s) | spread of spin under kicks over seeds (rad/s) |\n|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
         SEEDS.start(),

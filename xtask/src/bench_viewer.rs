@@ -15,7 +15,7 @@ fn default_library() -> anyhow::Result<Library> {
         return Ok(lib.clone());
     }
     let lib = Library::build(
-        &library::ProblemFile::builtin(),
+        &task::ProblemFile::builtin(),
         None,
         &LibrarySettings::default(),
         |_, _| {},
@@ -51,7 +51,7 @@ pub fn section() -> anyhow::Result<String> {
     for (name, policy, horizon, passes) in configs {
         for world_kind in [WorldKind::Smoothed, WorldKind::Hard] {
             let mut world = World::new(
-                library::ProblemFile::builtin().scene,
+                task::ProblemFile::builtin().scene,
                 Some(lib.clone()),
                 WorldSettings {
                     policy,
@@ -109,7 +109,7 @@ pub fn load_section() -> anyhow::Result<String> {
     runtime.block_on(async move {
         let viewer = viewer::Viewer::bind(viewer::ViewerConfig {
             addr: std::net::SocketAddr::from((std::net::Ipv4Addr::LOCALHOST, 0)),
-            scene: library::ProblemFile::builtin().scene,
+            scene: task::ProblemFile::builtin().scene,
             library: Some(lib),
             world: WorldSettings {
                 policy: PolicyKind::Library,

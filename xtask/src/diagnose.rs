@@ -10,11 +10,12 @@ use crate::figures::{Run, both, draw_cycle_2d, register_font};
 use anyhow::Context;
 use ddp::{Ddp, DdpSettings};
 use dynamics::{Complementarity, Simulator, StepSettings};
-use library::{ContactEvents, Library, LibrarySettings, SceneDynamics};
+use library::{ContactEvents, Library, LibrarySettings};
 use plotters::prelude::*;
 use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::time::Instant;
+use task::SceneDynamics;
 use viewer::protocol::{ClientMessage, PolicyKind, WorldKind};
 use viewer::{World, WorldSettings};
 
@@ -93,7 +94,7 @@ fn model(hard: bool) -> Complementarity {
 /// The world's simulator at h = 0.05.
 fn world(hard: bool) -> anyhow::Result<Simulator> {
     Ok(Simulator::new(
-        library::ProblemFile::builtin().scene,
+        task::ProblemFile::builtin().scene,
         StepSettings {
             model: model(hard),
             h: 0.05,
@@ -103,7 +104,7 @@ fn world(hard: bool) -> anyhow::Result<Simulator> {
 }
 
 fn receding(horizon: usize, shift: usize, hard: bool, seconds: f64) -> anyhow::Result<Run> {
-    let (scene, task) = library::ProblemFile::builtin_task();
+    let (scene, task) = task::ProblemFile::builtin_task();
     let settings = LibrarySettings {
         horizon,
         ..LibrarySettings::default().for_task(&task)
@@ -152,7 +153,7 @@ fn receding(horizon: usize, shift: usize, hard: bool, seconds: f64) -> anyhow::R
 
 fn online(lib: &Library, hard: bool, seconds: f64) -> anyhow::Result<Run> {
     let mut w = World::new(
-        library::ProblemFile::builtin().scene,
+        task::ProblemFile::builtin().scene,
         Some(lib.clone()),
         WorldSettings {
             policy: PolicyKind::Mpc,
@@ -243,7 +244,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         let jobs: Vec<_> = [LibrarySettings::paper(), LibrarySettings::default()]
             .map(|s| {
                 scope.spawn(move || {
-                    Library::build(&library::ProblemFile::builtin(), None, &s, |_, _| {})
+                    Library::build(&task::ProblemFile::builtin(), None, &s, |_, _| {})
                 })
             })
             .into_iter()

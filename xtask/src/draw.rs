@@ -234,7 +234,7 @@ mod tests {
     #[test]
     fn the_window_holds_the_ground_and_the_block_of_the_pushing_scene() {
         let problem =
-            library::ProblemFile::from_toml_str(include_str!("../../scenes/pushing.toml")).unwrap();
+            task::ProblemFile::from_toml_str(include_str!("../../scenes/pushing.toml")).unwrap();
         let task = problem.task(Some("push")).unwrap();
         let (xr, yr) = bounds(&problem.scene, std::slice::from_ref(&task.x0), 1.5);
         assert!(yr.start < -0.05 && yr.end > 0.4, "{yr:?}");

@@ -2,10 +2,11 @@
 //! and on the hard system, at the library's time step and at another, with random velocity kicks.
 
 use anyhow::Context;
-use library::{ContactModel, Evaluation, EvaluationSettings, Library, evaluate};
+use library::{Evaluation, EvaluationSettings, Library, evaluate};
 use serde::Serialize;
 use std::fmt::Write as _;
 use std::path::PathBuf;
+use task::ContactModel;
 
 /// Options of `cargo xtask evaluate`.
 #[derive(Debug, clap::Args)]

@@ -8,15 +8,13 @@ use crate::draw;
 use crate::figures::{both, err, register_font};
 use anyhow::Context;
 use ddp::{Ddp, DdpSettings};
-use library::{
-    ContactModel, Evaluation, EvaluationSettings, Library, LibrarySettings, ProblemFile,
-    SceneDynamics, Task, evaluate,
-};
+use library::{Evaluation, EvaluationSettings, Library, LibrarySettings, evaluate};
 use plotters::prelude::*;
 use serde::Serialize;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
+use task::{ContactModel, ProblemFile, SceneDynamics, Task};
 
 /// Options of `cargo xtask examples`.
 #[derive(Debug, clap::Args)]
@@ -62,7 +60,7 @@ const KICK_EVERY: f64 = 10.0;
 const KICK_SEED_BASE: u64 = 100;
 
 /// One example: a scene file of this repository and its task. Its library is `train`'s defaults for the
-/// task, and its success the task's own criterion ([`library::Success`]).
+/// task, and its success the task's own criterion ([`task::Success`]).
 #[derive(Debug, Clone, Serialize)]
 struct Example {
     name: String,
@@ -198,7 +196,7 @@ fn from_rest(problem: &ProblemFile, task: &Task) -> anyhow::Result<FromRest> {
     let probe = LibrarySettings::default()
         .for_task(task)
         .simulator(&problem.scene)?;
-    let sol = library::ContactProblem {
+    let sol = task::ContactProblem {
         ddp: &ddp,
         scene: &problem.scene,
         settings: probe.settings(),

@@ -249,7 +249,7 @@ pub(crate) struct Run {
 pub(crate) fn closed_loop(
     lib: &Library,
     policy: &Policy,
-    (model, h): (library::ContactModel, f64),
+    (model, h): (task::ContactModel, f64),
     x0: &[f64],
     steps: usize,
 ) -> anyhow::Result<Run> {
@@ -549,7 +549,7 @@ fn finger_shaped(scene: &Scene) -> bool {
 pub fn write_task(lib: &Library, dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
     let task = lib.task();
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    let task = library::Task {
+    let task = task::Task {
         x0: lib.x0().to_vec(),
         h: lib.settings.h,
         ..task.clone()
@@ -557,7 +557,7 @@ pub fn write_task(lib: &Library, dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
     let policy = lib.policy()?;
     let steps = (40.0 / task.h).round() as usize;
     let mut traces = Vec::new();
-    for model in [lib.settings.model, library::ContactModel::Hard] {
+    for model in [lib.settings.model, task::ContactModel::Hard] {
         traces.push(closed_loop(lib, &policy, (model, task.h), &task.x0, steps)?.states);
     }
     let holds = lib.progress()?.forward.is_none();
@@ -616,7 +616,7 @@ mod tests {
             ..LibrarySettings::default()
         };
         let lib =
-            Library::build(&library::ProblemFile::builtin(), None, &settings, |_, _| {}).unwrap();
+            Library::build(&task::ProblemFile::builtin(), None, &settings, |_, _| {}).unwrap();
         let dir = std::env::temp_dir().join(format!("slcp-figures-{}", std::process::id()));
         let files = write_all(&lib, &dir).unwrap();
         assert_eq!(files.len(), 8);

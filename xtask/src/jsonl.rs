@@ -279,7 +279,7 @@ mod tests {
             let expected = answered(&input);
             let lcp = <LcpCli as clap::Parser>::parse_from(["lcp"]).args;
             let mut sim = dynamics::Simulator::new(
-                library::ProblemFile::builtin().scene,
+                task::ProblemFile::builtin().scene,
                 dynamics::StepSettings::default(),
             )
             .unwrap();

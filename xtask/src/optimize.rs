@@ -7,10 +7,10 @@ use anyhow::Context;
 use ddp::problems::Unicycle;
 use ddp::{ControlLimits, Ddp, DdpSettings, Iteration, Method, Regularisation, Solution};
 use indicatif::{ProgressBar, ProgressStyle};
-use library::SceneDynamics;
 use serde::Serialize;
 use std::path::PathBuf;
 use std::time::Instant;
+use task::SceneDynamics;
 
 /// Which problem.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -132,7 +132,7 @@ struct Report<'a> {
 
 /// The optimiser's settings from the command line (and a task's control limits unless `--limit` is
 /// given).
-fn settings(args: &Args, m: usize, task: Option<&library::Task>) -> DdpSettings {
+fn settings(args: &Args, m: usize, task: Option<&task::Task>) -> DdpSettings {
     DdpSettings {
         method: match args.method {
             MethodArg::Full => Method::Full,
@@ -212,7 +212,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                 &vec![vec![0.0; m]; horizon],
                 observe,
             )?;
-            let felt = library::contact_felt(&mut probe, &task.cost, &x0, &sol.controls)?;
+            let felt = task::contact_felt(&mut probe, &task.cost, &x0, &sol.controls)?;
             let mut note = None;
             if !felt {
                 println!(
@@ -224,7 +224,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                     never_felt = true;
                     note = Some("no contact felt (--no-continuation)".to_string());
                 } else {
-                    let problem = library::ContactProblem {
+                    let problem = task::ContactProblem {
                         ddp: &ddp,
                         scene: &file.scene,
                         settings: &base,
@@ -257,7 +257,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                             }
                         );
                     }
-                    let sigma = library::noise_scale(base.model);
+                    let sigma = task::noise_scale(base.model);
                     note = Some(match (reach.and_then(|r| r.pair), &search.continuation, sigma) {
                     (Some(p), _, _) => format!(
                         "reached the contact by pulling {} together, then solved the task's own cost",
@@ -275,8 +275,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                         (None, _) => format!(
                             "no contact felt even at sigma {:.4} ({}x the task's): nothing the controls \
                              do reaches a contact within the horizon; the solve at the task's is kept",
-                            sigma * (1 << library::CONTINUATION_DOUBLINGS) as f64,
-                            1 << library::CONTINUATION_DOUBLINGS
+                            sigma * (1 << task::CONTINUATION_DOUBLINGS) as f64,
+                            1 << task::CONTINUATION_DOUBLINGS
                         ),
                     },
                     (None, _, _) => "no contact felt: no pull found a cheaper solve that feels it, \
@@ -365,7 +365,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
 
 /// Each state entry a task's terms weigh, from the first state to the last (with the target of a
 /// quadratic term), one line: `block.x 0.000 -> 0.584 (target 0.6)`.
-fn task_summary(scene: &dynamics::Scene, task: &library::Task, states: &[Vec<f64>]) -> String {
+fn task_summary(scene: &dynamics::Scene, task: &task::Task, states: &[Vec<f64>]) -> String {
     let names = scene.state_names();
     let (first, last) = (&states[0], states.last().expect("N + 1 states"));
     let mut seen: Vec<(usize, Option<f64>)> = Vec::new();

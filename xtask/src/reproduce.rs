@@ -7,13 +7,12 @@ use anyhow::Context;
 use ddp::{Ddp, DdpSettings};
 use dynamics::{Complementarity, Scene, Simulator, StepSettings};
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
-use library::{
-    ContactModel, Evaluation, EvaluationSettings, Library, LibrarySettings, SceneDynamics, evaluate,
-};
+use library::{Evaluation, EvaluationSettings, Library, LibrarySettings, evaluate};
 use serde::Serialize;
 use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::time::Instant;
+use task::{ContactModel, SceneDynamics};
 
 /// Options of `cargo xtask reproduce`.
 #[derive(Debug, clap::Args)]
@@ -48,7 +47,7 @@ pub(crate) const SECONDS: f64 = 200.0;
 pub(crate) fn stamp() -> String {
     // The settings as the finger's results use them: on the built-in file's spin task. A setting only a
     // target task reads (the growth's sharpening) leaves the finger's numbers as they are.
-    let task = library::ProblemFile::builtin_task().1;
+    let task = task::ProblemFile::builtin_task().1;
     let finger = |s: LibrarySettings| {
         let mut v = serde_json::to_value(s.for_task(&task)).expect("settings serialise");
         if let Some(o) = v.as_object_mut() {
@@ -216,7 +215,7 @@ struct Summary {
 }
 
 fn optimise(sigma: f64) -> anyhow::Result<Optimised> {
-    let (scene, task) = library::ProblemFile::builtin_task();
+    let (scene, task) = task::ProblemFile::builtin_task();
     let sim = Simulator::new(
         scene,
         StepSettings {
@@ -279,7 +278,7 @@ fn build(sigma: f64, bars: &MultiProgress) -> anyhow::Result<(Library, f64)> {
         .expect("a valid template"),
     );
     let t = Instant::now();
-    let lib = Library::build(&library::ProblemFile::builtin(), None, &settings, |_, _| {
+    let lib = Library::build(&task::ProblemFile::builtin(), None, &settings, |_, _| {
         bar.inc(1)
     })?;
     bar.finish_and_clear();
@@ -316,7 +315,7 @@ fn on_both_worlds(
 
 /// The flicking finger with one property changed (SCENE.md: friction 0.5, density 1, ellipse drag 0.7).
 fn mismatched_scenes() -> Vec<(String, dynamics::SceneSpec)> {
-    let base = library::ProblemFile::builtin().scene.spec().clone();
+    let base = task::ProblemFile::builtin().scene.spec().clone();
     let mut out = Vec::new();
     for friction in [0.1, 0.25, 1.0, 2.0] {
         let mut spec = base.clone();
@@ -379,7 +378,7 @@ fn further_seeds(args: &Args, bars: &MultiProgress) -> anyhow::Result<Vec<crate:
             seed,
             ..LibrarySettings::default()
         };
-        let lib = Library::build(&library::ProblemFile::builtin(), None, &settings, |_, _| {})?;
+        let lib = Library::build(&task::ProblemFile::builtin(), None, &settings, |_, _| {})?;
         let runs = crate::seeds::runs_of(seed, crate::seeds::DEFAULT_RECIPE, &lib, args.seconds);
         bar.inc(1);
         runs
@@ -486,11 +485,11 @@ fn experiments(bars: &MultiProgress) -> anyhow::Result<(Vec<Optimised>, Vec<Anne
     let schedule = [
         0.3, 0.2, 0.1, 0.05, 0.03, 0.02, 0.01, 0.005, 0.003, 0.002, 0.001,
     ];
-    let (scene, task) = library::ProblemFile::builtin_task();
-    let warm = library::anneal(&scene, &task, &schedule, 300)?;
+    let (scene, task) = task::ProblemFile::builtin_task();
+    let warm = task::anneal(&scene, &task, &schedule, 300)?;
     let mut annealing = Vec::new();
     for w in &warm {
-        let direct = &library::anneal(&scene, &task, &[w.sigma], 300)?[0];
+        let direct = &task::anneal(&scene, &task, &[w.sigma], 300)?[0];
         annealing.push(Annealed {
             sigma: w.sigma,
             annealed_passes: w.passes,

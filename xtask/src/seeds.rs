@@ -202,7 +202,7 @@ fn seed_sweep(args: &Args, bars: &MultiProgress) -> anyhow::Result<Vec<SeedRun>>
     );
     let run_job = |&(seed, build): &(u64, Build)| -> anyhow::Result<Vec<SeedRun>> {
         let lib = Library::build(
-            &library::ProblemFile::builtin(),
+            &task::ProblemFile::builtin(),
             None,
             &build.settings(seed),
             |_, _| {},

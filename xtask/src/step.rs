@@ -65,7 +65,7 @@ impl From<DragArg> for dynamics::Drag {
 impl SimArgs {
     pub fn simulator(&self) -> anyhow::Result<Simulator> {
         let scene = match &self.scene {
-            None => library::ProblemFile::builtin().scene,
+            None => task::ProblemFile::builtin().scene,
             Some(path) => {
                 let text = std::fs::read_to_string(path)
                     .with_context(|| format!("reading {}", path.display()))?;
@@ -76,7 +76,7 @@ impl SimArgs {
     }
 
     /// The scene file of `--scene` with its tasks (the built-in scenes/finger.toml without it).
-    pub fn problem_file(&self) -> anyhow::Result<library::ProblemFile> {
+    pub fn problem_file(&self) -> anyhow::Result<task::ProblemFile> {
         Ok(problem_file(self.scene.as_deref())?.0)
     }
 
@@ -85,7 +85,7 @@ impl SimArgs {
     pub fn simulator_of(
         &self,
         scene: Scene,
-        task: Option<&library::Task>,
+        task: Option<&task::Task>,
     ) -> anyhow::Result<Simulator> {
         let model = contact_model(self.model, self.sigma, task)?.complementarity();
         Ok(Simulator::new(
@@ -107,9 +107,9 @@ impl SimArgs {
 pub fn contact_model(
     model: Option<ModelArg>,
     sigma: Option<f64>,
-    task: Option<&library::Task>,
-) -> anyhow::Result<library::ContactModel> {
-    use library::ContactModel as M;
+    task: Option<&task::Task>,
+) -> anyhow::Result<task::ContactModel> {
+    use task::ContactModel as M;
     // A noise scale the command line does not give is the task's, when its model has one.
     let task_sigma = task.and_then(|t| match t.model {
         M::Logistic(s) | M::Normal(s) => Some(s),
@@ -134,19 +134,16 @@ pub fn contact_model(
 }
 
 /// The scene file at `path` with its tasks, or without one the built-in file
-/// ([`library::ProblemFile::builtin`], scenes/finger.toml: SCENE.md's finger and the paper's `spin`), and
+/// ([`task::ProblemFile::builtin`], scenes/finger.toml: SCENE.md's finger and the paper's `spin`), and
 /// the name to report it by.
-pub fn problem_file(
-    path: Option<&std::path::Path>,
-) -> anyhow::Result<(library::ProblemFile, String)> {
+pub fn problem_file(path: Option<&std::path::Path>) -> anyhow::Result<(task::ProblemFile, String)> {
     Ok(match path {
         None => (
-            library::ProblemFile::builtin(),
+            task::ProblemFile::builtin(),
             "scenes/finger.toml (built in)".into(),
         ),
         Some(path) => (
-            library::ProblemFile::load(path)
-                .with_context(|| format!("scene {}", path.display()))?,
+            task::ProblemFile::load(path).with_context(|| format!("scene {}", path.display()))?,
             path.display().to_string(),
         ),
     })
@@ -347,7 +344,7 @@ pub fn run_simulate(args: &SimulateArgs) -> anyhow::Result<()> {
             let overlap = (x.len() == scene.n_state())
                 .then(|| {
                     scene
-                        .overlaps(&x[..scene.n_dof()], library::START_TOLERANCE)
+                        .overlaps(&x[..scene.n_dof()], task::START_TOLERANCE)
                         .ok()
                 })
                 .flatten()
@@ -367,7 +364,7 @@ pub fn run_simulate(args: &SimulateArgs) -> anyhow::Result<()> {
         (None, None) => {
             let rest = vec![0.0; scene.n_state()];
             if let Some(o) = scene
-                .overlaps(&rest[..scene.n_dof()], library::START_TOLERANCE)?
+                .overlaps(&rest[..scene.n_dof()], task::START_TOLERANCE)?
                 .first()
             {
                 anyhow::bail!(
@@ -529,7 +526,7 @@ mod tests {
     /// a noise scale given for a hard task is refused.
     #[test]
     fn a_tasks_settings_yield_to_the_command_lines() {
-        let file = library::ProblemFile::builtin();
+        let file = task::ProblemFile::builtin();
         let task = file.task(Some("spin")).unwrap();
         let args = |model, sigma, h| SimArgs {
             model,
@@ -539,7 +536,7 @@ mod tests {
             drag: DragArg::Explicit,
             recovery: 0.0,
         };
-        let settings = |a: SimArgs, task: &library::Task| {
+        let settings = |a: SimArgs, task: &task::Task| {
             let sim = a.simulator_of(file.scene.clone(), Some(task)).unwrap();
             (sim.settings().model, sim.settings().h)
         };
@@ -555,8 +552,8 @@ mod tests {
             settings(args(Some(ModelArg::Hard), None, None), &task),
             (Complementarity::Hard, 0.05)
         );
-        let hard = library::Task {
-            model: library::ContactModel::Hard,
+        let hard = task::Task {
+            model: task::ContactModel::Hard,
             ..task.clone()
         };
         assert_eq!(
@@ -564,8 +561,8 @@ mod tests {
             (Complementarity::Hard, 0.05)
         );
         // A model named without its noise scale takes the task's, not the default 0.1.
-        let sharp = library::Task {
-            model: library::ContactModel::Logistic(0.03),
+        let sharp = task::Task {
+            model: task::ContactModel::Logistic(0.03),
             ..task.clone()
         };
         assert_eq!(
@@ -653,7 +650,7 @@ mod tests {
     /// simulator, and first derivatives with it.
     #[test]
     fn a_hessian_line_answers_any_scene() {
-        let mut spec = library::ProblemFile::builtin().scene.spec().clone();
+        let mut spec = task::ProblemFile::builtin().scene.spec().clone();
         let mut link = spec.bodies[1].clone();
         link.name = "link3".into();
         link.parent = "link2".into();

@@ -143,7 +143,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         exploration,
         ..base
     };
-    let progress = library::Progress::of_task(&task)?;
+    let progress = task::Progress::of_task(&task)?;
     let watched = problem.scene.coordinate_names()[progress.coordinate].clone();
     // One tick per optimised trajectory (each keeps `keep` controllers); growth adds trajectories beyond
     // the budget, and the bar grows with them.
@@ -193,7 +193,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
 
 /// `train`'s settings for `task` with no flag but `--seed`: the default recipe on the task's model, time
 /// step, horizon and start, shaped for the default budget (what `cargo xtask examples` builds).
-pub(crate) fn defaults_for(task: &library::Task, seed: u64) -> LibrarySettings {
+pub(crate) fn defaults_for(task: &task::Task, seed: u64) -> LibrarySettings {
     let base = LibrarySettings::default().for_task(task);
     let trajectories = base.trajectories;
     LibrarySettings {

@@ -72,8 +72,8 @@ fn library(args: &Args) -> anyhow::Result<Library> {
         }
     }
     let (file, task) = (
-        library::ProblemFile::builtin(),
-        library::ProblemFile::builtin_task().1,
+        task::ProblemFile::builtin(),
+        task::ProblemFile::builtin_task().1,
     );
     let settings = LibrarySettings::default().for_task(&task);
     println!("building the default library (as `cargo xtask train` does) ...");
@@ -94,8 +94,7 @@ fn library(args: &Args) -> anyhow::Result<Library> {
 fn config(args: &Args) -> anyhow::Result<ViewerConfig> {
     let problem = match &args.scene {
         Some(path) => Some(
-            library::ProblemFile::load(path)
-                .with_context(|| format!("scene {}", path.display()))?,
+            task::ProblemFile::load(path).with_context(|| format!("scene {}", path.display()))?,
         ),
         None => None,
     };
@@ -107,16 +106,16 @@ fn config(args: &Args) -> anyhow::Result<ViewerConfig> {
     let scene = match (&problem, &library) {
         (Some(p), _) => p.scene.clone(),
         (None, Some(lib)) => lib.scene().clone(),
-        (None, None) => library::ProblemFile::builtin().scene,
+        (None, None) => task::ProblemFile::builtin().scene,
     };
     // The task named in the scene file (the built-in file's without --scene), else the library's, else
     // the scene file's only task.
     let task = match (&args.task, &problem, &library) {
         (Some(name), Some(p), _) => p.task(Some(name))?,
-        (Some(name), None, _) => library::ProblemFile::builtin().task(Some(name))?,
+        (Some(name), None, _) => task::ProblemFile::builtin().task(Some(name))?,
         (None, _, Some(lib)) => lib.task().clone(),
         (None, Some(p), None) => p.task(None)?,
-        (None, None, None) => library::ProblemFile::builtin_task().1,
+        (None, None, None) => task::ProblemFile::builtin_task().1,
     };
     if let Some(lib) = &library {
         lib.check_scene(&scene)
@@ -130,10 +129,10 @@ fn config(args: &Args) -> anyhow::Result<ViewerConfig> {
         },
         task.h,
         match task.model {
-            library::ContactModel::Logistic(s) | library::ContactModel::Normal(s) => s,
-            library::ContactModel::Hard => defaults.sigma,
+            task::ContactModel::Logistic(s) | task::ContactModel::Normal(s) => s,
+            task::ContactModel::Hard => defaults.sigma,
         },
-        if task.model == library::ContactModel::Hard {
+        if task.model == task::ContactModel::Hard {
             viewer::protocol::WorldKind::Hard
         } else {
             viewer::protocol::WorldKind::Smoothed

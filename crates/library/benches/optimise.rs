@@ -6,8 +6,8 @@
 use criterion::{Criterion, criterion_group, criterion_main};
 use ddp::{Ddp, DdpSettings, Method};
 use dynamics::{Simulator, StepSettings};
-use library::{ProblemFile, SceneDynamics};
 use std::hint::black_box;
+use task::{ProblemFile, SceneDynamics};
 
 fn finger() -> SceneDynamics {
     SceneDynamics::new(

@@ -9,9 +9,8 @@
 //! library (`LibrarySettings::default().for_task(&task)`, what `cargo xtask train` builds) takes longer and spins more
 //! robustly (docs/results.md).
 
-use library::{
-    ContactModel, EvaluationSettings, Exploration, Library, LibrarySettings, ProblemFile, evaluate,
-};
+use library::{EvaluationSettings, Exploration, Library, LibrarySettings, evaluate};
+use task::{ContactModel, ProblemFile};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let out = std::env::args()

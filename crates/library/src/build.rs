@@ -2,17 +2,16 @@
 //! keeping each trajectory's first local controller `u(x) = u_1 + K_1 (x - x_1)`, shifting by `d` steps
 //! with the warm start of eq. (19), and perturbing the initial state's velocities every few steps.
 
-use crate::entry::{ContactModel, Entry, LocalValue};
+use crate::entry::{Entry, LocalValue};
 use crate::error::LibraryError;
 use crate::policy::Policy;
-use crate::problem::{Task, TaskCost};
-use crate::task::SceneDynamics;
 use ddp::{Ddp, DdpError, DdpSettings};
 use dynamics::{Complementarity, Scene, Simulator, StepSettings};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
+use task::{ContactModel, Progress, SceneDynamics, Task, TaskCost, TaskError};
 
 /// How a library is built (SCENE.md, paper V-B).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -411,65 +410,6 @@ pub(crate) fn local_values(
         .collect()
 }
 
-/// The state entry a library's progress is measured along, its period when the policy compares states
-/// modulo it, and the direction its task rewards along it (what growth rounds call progress).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Progress {
-    /// The state entry: the task's periodic coordinate if it has one, else the coordinate its running
-    /// cost rewards, else the first judged target's (or 0).
-    pub coordinate: usize,
-    /// Its period, when it is periodic (the policy then compares states modulo it); `None`: the task has
-    /// no periodic coordinate and states compare as they are.
-    pub period: Option<f64>,
-    /// `1` or `-1`: the direction the running cost rewards motion along it (growth branches where the
-    /// policy stops moving that way); `None` when it rewards none (a target task: growth branches where
-    /// the policy does not get back to its targets).
-    pub forward: Option<f64>,
-}
-
-impl Progress {
-    /// A task's: its periodic coordinate if it has one (the policy compares states modulo at most one),
-    /// forward where the running terms' linear weights on it (or on its velocity) sum to a reward; without
-    /// one, the first rewarded coordinate, or none.
-    pub fn of_task(task: &Task) -> Result<Progress, LibraryError> {
-        let periodic: Vec<(usize, f64)> = task
-            .periods
-            .iter()
-            .enumerate()
-            .filter_map(|(i, p)| p.map(|p| (i, p)))
-            .collect();
-        let n = task.x0.len() / 2;
-        let rewarded = crate::Success::rewarded(&task.cost, n);
-        match periodic.as_slice() {
-            [] => Ok(match rewarded.first() {
-                Some(&(coordinate, direction)) => Progress {
-                    coordinate,
-                    period: None,
-                    forward: Some(direction),
-                },
-                None => Progress {
-                    coordinate: task.success.targets.first().map_or(0, |t| t.0),
-                    period: None,
-                    forward: None,
-                },
-            }),
-            &[(coordinate, period)] => Ok(Progress {
-                coordinate,
-                period: Some(period),
-                forward: rewarded.iter().find(|r| r.0 == coordinate).map(|r| r.1),
-            }),
-            _ => Err(LibraryError::Task {
-                task: task.name.clone(),
-                field: "periods".into(),
-                problem: format!(
-                    "a library's policy compares states modulo at most one periodic coordinate; the task declares {}",
-                    periodic.len()
-                ),
-            }),
-        }
-    }
-}
-
 /// Build the entries of a library for `task` on `scene` (see the module documentation and
 /// [`Exploration`]): its cost, control limits, periodic coordinate and success criterion; the settings'
 /// `model`, `h`, `horizon` and `x0` rule (an empty `x0` is the task's; [`LibrarySettings::for_task`]
@@ -537,13 +477,45 @@ pub(crate) fn start<'a>(x0: &'a [f64], task: &'a Task) -> &'a [f64] {
     if x0.is_empty() { &task.x0 } else { x0 }
 }
 
+/// `Err` naming the reason when the task cannot have a library of controllers on `scene`: the scene
+/// has no control to feed back, or the cost rewards nothing (no state term, so every trajectory's
+/// best is to do nothing).
+fn check_for_library(task: &Task, scene: &Scene) -> Result<(), LibraryError> {
+    let refuse = |field: &str, problem: &str| {
+        Err(LibraryError::Task(TaskError::Spec {
+            task: task.name.clone(),
+            field: field.to_string(),
+            problem: problem.to_string(),
+        }))
+    };
+    if scene.n_controls == 0 {
+        return refuse(
+            "",
+            "the scene has no actuated joint: a library stores feedback controllers and there is nothing to control",
+        );
+    }
+    let weighs = task
+        .cost
+        .running
+        .iter()
+        .chain(&task.cost.final_terms)
+        .any(|t| t.linear != 0.0 || t.quadratic != 0.0);
+    if !weighs {
+        return refuse(
+            "running",
+            "the cost rewards nothing (no running or final term with a non-zero weight): the best control is none, and a library of it is empty of purpose",
+        );
+    }
+    Ok(())
+}
+
 /// What every chain of a build shares.
 struct Build<'a> {
     scene: &'a Scene,
     settings: &'a LibrarySettings,
     cost: TaskCost,
     progress: Progress,
-    success: crate::Success,
+    success: task::Success,
     control_limits: Option<ddp::ControlLimits>,
     kick: Normal<f64>,
 }
@@ -570,7 +542,7 @@ impl<'a> Build<'a> {
         settings: &'a LibrarySettings,
     ) -> Result<Self, LibraryError> {
         task.check_scene(scene)?;
-        task.check_for_library(scene)?;
+        check_for_library(task, scene)?;
         let progress = Progress::of_task(task)?;
         let cost = task.cost.clone();
         let control_limits = task.control_limits.clone();
@@ -704,11 +676,11 @@ impl<'a> Build<'a> {
         Ok(out)
     }
 
-    /// A chain's first solve, checked for the contact its task needs ([`crate::contact_felt`]) under
+    /// A chain's first solve, checked for the contact its task needs ([`task::contact_felt`]) under
     /// `settings` (the chain's dynamics). Where none is felt, the contact is reached for: first by
-    /// pulling each needed pair together ([`crate::ContactProblem::reach_for_contact`]), then, for a smoothed model
+    /// pulling each needed pair together ([`task::ContactProblem::reach_for_contact`]), then, for a smoothed model
     /// where no pull found a cheaper solve that feels it, by continuation in the noise scale
-    /// ([`crate::ContactProblem::continue_in_noise`]). Either replaces the solve only with one that feels the contact
+    /// ([`task::ContactProblem::continue_in_noise`]). Either replaces the solve only with one that feels the contact
     /// and costs less; a first solve that touches (the finger's, for one) is left as it was. Also
     /// whether the solve returned feels the contact.
     fn reach(
@@ -719,7 +691,7 @@ impl<'a> Build<'a> {
         passes: usize,
     ) -> Result<(ddp::Solution, bool), LibraryError> {
         let ddp = self.optimiser(passes, 0)?;
-        let problem = crate::ContactProblem {
+        let problem = task::ContactProblem {
             ddp: &ddp,
             scene: self.scene,
             settings,
@@ -943,10 +915,10 @@ fn branched(
 /// Failure is the task's: for a task that rewards progress, a stall (the progress coordinate advancing
 /// less than [`STALL_ADVANCE`] the rewarded way in [`STALL_WINDOW`] seconds), and a branch starts where
 /// the policy stalled; for a target task, not being back within its success tolerance
-/// ([`crate::Success::tolerance`]) [`crate::Success::settle`] seconds after a kick (or at the end of the
+/// ([`task::Success::tolerance`]) [`task::Success::settle`] seconds after a kick (or at the end of the
 /// first interval, from the start), and two branches start, one from the state the kick left and one
 /// from the state the policy is in then (whose first solve reaches for the contact if the policy let go
-/// of it: [`crate::ContactProblem::feel_contact`]), optimised at the sharpened noise scale
+/// of it: [`task::ContactProblem::feel_contact`]), optimised at the sharpened noise scale
 /// ([`LibrarySettings::growth_sharpening`]) when the round's world is not the library's own.
 fn grow(
     task: &Build,

@@ -1,32 +1,8 @@
-//! What a library stores: its contact model ([`ContactModel`]) and its controllers ([`Entry`]), each with the
-//! local model of its cost-to-go ([`LocalValue`]) that the policy ranks them by. Plain data, below the
-//! build and the policy that both use it.
+//! What a library stores: its controllers ([`Entry`]), each with the local model of its cost-to-go
+//! ([`LocalValue`]) that the policy ranks them by. Plain data, below the build and the policy that both
+//! use it.
 
-use dynamics::Complementarity;
 use serde::{Deserialize, Serialize};
-
-/// The contact model a library is built on (a plain enum so that library files stay compact and
-/// self-contained).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub enum ContactModel {
-    /// Hard contact (the active set's derivatives).
-    Hard,
-    /// Logistic smoothing (eq. 17) with this sigma.
-    Logistic(f64),
-    /// Normal smoothing (eq. 14 with 15) with this sigma.
-    Normal(f64),
-}
-
-impl ContactModel {
-    /// The simulator's model.
-    pub fn complementarity(self) -> Complementarity {
-        match self {
-            ContactModel::Hard => Complementarity::Hard,
-            ContactModel::Logistic(sigma) => Complementarity::Logistic { sigma },
-            ContactModel::Normal(sigma) => Complementarity::Normal { sigma },
-        }
-    }
-}
 
 /// One stored local controller: `u(x) = u + K (x - x)` around the state `x`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -3,7 +3,7 @@
 
 use thiserror::Error;
 
-/// Errors of the task, the library and its files.
+/// Errors of a library: building it, its files, its policy and their use.
 #[derive(Debug, Error)]
 pub enum LibraryError {
     /// A setting out of its range.
@@ -75,26 +75,10 @@ pub enum LibraryError {
     /// The payload does not decode, or decodes to something inconsistent.
     #[error("invalid library: {0}")]
     Invalid(String),
-    /// A task of a scene file is malformed or does not fit its scene.
-    #[error("{}", task_message(task, field, problem))]
-    Task {
-        /// The task's name (empty when the file's task tables as a whole are at fault).
-        task: String,
-        /// The field at fault (empty when the task as a whole is).
-        field: String,
-        /// What is wrong.
-        problem: String,
-    },
+    /// The task refused (a malformed task, one that cannot have a library) or its optimisation failed.
+    #[error(transparent)]
+    Task(#[from] task::TaskError),
     /// The library was built for another scene than the one it is used with.
     #[error("the library was built for another scene ({0})")]
     SceneMismatch(String),
-}
-
-fn task_message(task: &str, field: &str, problem: &str) -> String {
-    match (task.is_empty(), field.is_empty()) {
-        (true, true) => format!("tasks: {problem}"),
-        (true, false) => format!("tasks, {field}: {problem}"),
-        (false, true) => format!("task {task}: {problem}"),
-        (false, false) => format!("task {task}, {field}: {problem}"),
-    }
 }

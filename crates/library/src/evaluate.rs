@@ -15,7 +15,7 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct EvaluationSettings {
     /// The world's contact model.
-    pub model: crate::ContactModel,
+    pub model: task::ContactModel,
     /// The world's time step.
     pub h: f64,
     /// Simulated time.
@@ -33,7 +33,7 @@ pub struct EvaluationSettings {
 impl Default for EvaluationSettings {
     fn default() -> Self {
         EvaluationSettings {
-            model: crate::ContactModel::Logistic(0.1),
+            model: task::ContactModel::Logistic(0.1),
             h: 0.05,
             seconds: 200.0,
             kick_every: 10.0,
@@ -68,7 +68,7 @@ pub struct Evaluation {
     pub recovered: usize,
     /// Kicks after which the progress coordinate turned a further quarter turn the way the task rewards
     /// before the next kick (the stricter measure); for a target task, after which every judged target was
-    /// back within tolerance within the task's settle time ([`crate::Success::settle`]).
+    /// back within tolerance within the task's settle time ([`task::Success::settle`]).
     pub resumed: usize,
     /// Mean time from a kick to that quarter turn (or back within tolerance), over the kicks that
     /// resumed, s; `None` when none did.
@@ -88,7 +88,7 @@ pub struct Evaluation {
     pub success: Verdict,
 }
 
-/// A run judged by its task's success criterion ([`crate::Success`]).
+/// A run judged by its task's success criterion ([`task::Success`]).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct Verdict {
     /// Whether it succeeded.
@@ -158,7 +158,7 @@ pub struct TargetDistance {
 
 /// Accumulates [`TaskMeasures`] along a run.
 struct TaskMeter {
-    cost: crate::TaskCost,
+    cost: task::TaskCost,
     n: usize,
     h: f64,
     quarter: usize,
@@ -166,15 +166,15 @@ struct TaskMeter {
     share: f64,
     running: [f64; 2],
     /// Per quadratic term: sums of the distance over the run and the last quarter, the worst in it.
-    targets: Vec<(crate::Term, bool, [f64; 2], f64)>,
+    targets: Vec<(task::Term, bool, [f64; 2], f64)>,
 }
 
 impl TaskMeter {
-    fn new(cost: crate::TaskCost, n: usize, h: f64, h_library: f64, quarter: usize) -> Self {
-        let mut targets: Vec<(crate::Term, bool, [f64; 2], f64)> = Vec::new();
+    fn new(cost: task::TaskCost, n: usize, h: f64, h_library: f64, quarter: usize) -> Self {
+        let mut targets: Vec<(task::Term, bool, [f64; 2], f64)> = Vec::new();
         let terms = cost.running.iter().map(|t| (t, false));
         for (t, fin) in terms.chain(cost.final_terms.iter().map(|t| (t, true))) {
-            let same = |(o, ..): &&(crate::Term, bool, [f64; 2], f64)| {
+            let same = |(o, ..): &&(task::Term, bool, [f64; 2], f64)| {
                 o.index == t.index && o.target == t.target && o.period == t.period
             };
             if t.quadratic != 0.0 && !targets.iter().any(|e| same(&e)) {
@@ -522,7 +522,7 @@ pub fn evaluate_in(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::{TaskCost, Term};
+    use task::{TaskCost, Term};
 
     #[test]
     fn the_task_meter_sums_costs_rates_and_wrapped_distances() {
@@ -542,7 +542,7 @@ mod tests {
             final_terms: vec![term(1, 0.0, 2.0, 0.0, None)],
             control_weight: 0.5,
         };
-        let finger = crate::ProblemFile::builtin().scene;
+        let finger = task::ProblemFile::builtin().scene;
         let scene = dynamics::Scene::new(dynamics::SceneSpec {
             bodies: vec![finger.spec().bodies[2].clone()],
             contacts: vec![],

@@ -10,14 +10,15 @@
 //! controllers. Loading checks all of it before anything is decoded, then the decoded
 //! library for consistency; a file that fails any check is refused whole.
 
-use crate::build::{LibrarySettings, Progress, build_entries};
+use crate::build::{LibrarySettings, build_entries};
 use crate::entry::Entry;
 use crate::error::LibraryError;
 use crate::policy::Policy;
-use crate::problem::{ProblemFile, Task, TaskSpec};
 use dynamics::{Scene, SceneSpec};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
+use task::Progress;
+use task::{ProblemFile, Task, TaskSpec};
 
 /// The file's magic bytes.
 pub const MAGIC: &[u8; 8] = b"SLCPLIB\0";
@@ -176,13 +177,13 @@ impl Library {
     }
 
     /// The cost its trajectories minimise (its task's).
-    pub fn cost(&self) -> &crate::TaskCost {
+    pub fn cost(&self) -> &task::TaskCost {
         &self.task.0.cost
     }
 
     /// The periodic coordinate its policy compares states modulo, and the direction its task rewards.
     pub fn progress(&self) -> Result<Progress, LibraryError> {
-        Progress::of_task(self.task())
+        Ok(Progress::of_task(self.task())?)
     }
 
     /// The global policy (eq. 20) over its controllers, saturated to its task's control limits.
@@ -193,8 +194,8 @@ impl Library {
             .with_limits(self.task().control_limits.clone())
     }
 
-    /// What counts as success for its task ([`crate::Success`]).
-    pub fn success(&self) -> &crate::Success {
+    /// What counts as success for its task ([`task::Success`]).
+    pub fn success(&self) -> &task::Success {
         &self.task().success
     }
 

@@ -140,12 +140,12 @@ impl Policy {
     }
 
     /// The policy of a task's library: modulo its periodic entry if it has one
-    /// ([`crate::Progress::period`]), else comparing states as they are.
+    /// ([`task::Progress::period`]), else comparing states as they are.
     pub fn for_progress(
         entries: &[Entry],
         n_state: usize,
         m: usize,
-        progress: &crate::Progress,
+        progress: &task::Progress,
     ) -> Result<Self, LibraryError> {
         match progress.period {
             Some(p) => Policy::with_period(entries, n_state, m, progress.coordinate, p),
@@ -154,7 +154,7 @@ impl Policy {
     }
 
     /// [`Policy::new`] with the periodic state entry `free` of period `period` (a task's, see
-    /// [`crate::Progress::of_task`]).
+    /// [`task::Progress::of_task`]).
     pub fn with_period(
         entries: &[Entry],
         n_state: usize,

@@ -20,7 +20,7 @@ async fn main() -> Result<(), Box<dyn std::error::Error>> {
     let viewer = Viewer::bind(ViewerConfig {
         addr: SocketAddr::from((Ipv4Addr::LOCALHOST, port)),
         // The built-in scene file (scenes/finger.toml); the default world runs its spin task.
-        scene: library::ProblemFile::builtin().scene,
+        scene: task::ProblemFile::builtin().scene,
         library: None,
         world: WorldSettings {
             policy: PolicyKind::Mpc,

@@ -37,6 +37,9 @@ pub enum ViewerError {
     /// The library does not fit the scene, or its policy failed.
     #[error(transparent)]
     Library(#[from] library::LibraryError),
+    /// The task file or task refused, or its optimisation failed.
+    #[error(transparent)]
+    Task(#[from] task::TaskError),
     /// The simulator refused a scene, a setting or a state.
     #[error(transparent)]
     Dynamics(#[from] dynamics::DynamicsError),

@@ -6,7 +6,8 @@
 use crate::error::ViewerError;
 use ddp::{ControlLimits, Ddp, DdpError, DdpSettings, Solution};
 use dynamics::{Complementarity, Scene, Simulator, StepSettings};
-use library::{Policy, Progress, SceneDynamics, Task, TaskCost};
+use library::Policy;
+use task::{Progress, SceneDynamics, Task, TaskCost};
 
 /// The largest regularisation carried from one control step to the next (a solve that gave up at a
 /// huge `mu` should not freeze the next ones).

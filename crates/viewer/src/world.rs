@@ -9,10 +9,11 @@ use crate::protocol::{
     ServerMessage, SpringView, WatchedView, WorldKind,
 };
 use dynamics::{Complementarity, Kinematics, Scene, Simulator, StepSettings};
-use library::{Library, Policy, Progress, Task};
+use library::{Library, Policy};
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 use std::collections::VecDeque;
+use task::{Progress, Task};
 
 /// Spring stiffness of a drag, force per unit length.
 pub const SPRING_STIFFNESS: f64 = 10.0;
@@ -58,9 +59,9 @@ pub struct WorldSettings {
 }
 
 impl Default for WorldSettings {
-    /// The built-in scene file's task ([`library::ProblemFile::builtin_task`]) from its start.
+    /// The built-in scene file's task ([`task::ProblemFile::builtin_task`]) from its start.
     fn default() -> Self {
-        let task = library::ProblemFile::builtin_task().1;
+        let task = task::ProblemFile::builtin_task().1;
         WorldSettings {
             h: 0.05,
             sigma: 0.1,

@@ -2,9 +2,9 @@
 //! step by step, warm-starting each solve from the previous controls, so that the contact's action at a
 //! distance guides the early solves and the later ones refine a trajectory that already touches.
 
-use crate::error::LibraryError;
+use crate::error::TaskError;
 use crate::problem::Task;
-use crate::task::SceneDynamics;
+use crate::scene_dynamics::SceneDynamics;
 use ddp::{Ddp, DdpSettings};
 use dynamics::{Complementarity, Scene, Simulator, StepSettings};
 use serde::{Deserialize, Serialize};
@@ -35,7 +35,7 @@ pub fn anneal(
     task: &Task,
     schedule: &[f64],
     max_passes: usize,
-) -> Result<Vec<AnnealStep>, LibraryError> {
+) -> Result<Vec<AnnealStep>, TaskError> {
     let x0 = task.x0.as_slice();
     crate::check("x0", x0, scene.n_state())?;
     let (h, horizon, cost) = (task.h, task.horizon, &task.cost);
@@ -57,10 +57,7 @@ pub fn anneal(
             ..DdpSettings::default()
         })
         .and_then(|d| d.solve(&SceneDynamics::new(sim), cost, x0, &controls))
-        .map_err(|source| LibraryError::Optimiser {
-            trajectory: k,
-            source,
-        })?;
+        .map_err(|source| TaskError::Optimiser { solve: k, source })?;
         controls = sol.controls.clone();
         out.push(AnnealStep {
             sigma,

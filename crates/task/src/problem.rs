@@ -20,8 +20,8 @@
 //! start at rest at their reference (zero). Every field is checked, and a bad one is refused with an error
 //! that names the task and the field.
 
-use crate::LibraryError;
-use crate::entry::ContactModel;
+use crate::error::TaskError;
+use crate::model::ContactModel;
 use ddp::{ControlLimits, Cost, CostDerivatives};
 use dynamics::Scene;
 use serde::{Deserialize, Serialize};
@@ -264,15 +264,15 @@ pub struct Task {
 
 impl Task {
     /// Check `spec` (the task called `name`) against `scene`.
-    pub fn new(scene: &Scene, name: &str, spec: &TaskSpec) -> Result<Self, LibraryError> {
-        let bad = |field: &str, problem: String| LibraryError::Task {
+    pub fn new(scene: &Scene, name: &str, spec: &TaskSpec) -> Result<Self, TaskError> {
+        let bad = |field: &str, problem: String| TaskError::Spec {
             task: name.to_string(),
             field: field.to_string(),
             problem,
         };
         let n = scene.n_dof();
         let names = scene.coordinate_names();
-        let index = |field: &str, coordinate: &str| -> Result<usize, LibraryError> {
+        let index = |field: &str, coordinate: &str| -> Result<usize, TaskError> {
             names.iter().position(|c| c == coordinate).ok_or_else(|| {
                 bad(
                     field,
@@ -283,7 +283,7 @@ impl Task {
                 )
             })
         };
-        let finite = |field: &str, v: f64| -> Result<f64, LibraryError> {
+        let finite = |field: &str, v: f64| -> Result<f64, TaskError> {
             if v.is_finite() {
                 Ok(v)
             } else {
@@ -299,7 +299,7 @@ impl Task {
                 format!("{} must be 1 to 100000 steps", spec.horizon),
             ));
         }
-        let sigma = |model: &str| -> Result<f64, LibraryError> {
+        let sigma = |model: &str| -> Result<f64, TaskError> {
             match spec.sigma {
                 Some(s) if s.is_finite() && s > 0.0 => Ok(s),
                 Some(s) => Err(bad("sigma", format!("{s} must be positive and finite"))),
@@ -364,7 +364,7 @@ impl Task {
                 ),
             ));
         }
-        let terms = |field: &str, specs: &[TermSpec]| -> Result<Vec<Term>, LibraryError> {
+        let terms = |field: &str, specs: &[TermSpec]| -> Result<Vec<Term>, TaskError> {
             specs
                 .iter()
                 .map(|t| {
@@ -436,51 +436,19 @@ impl Task {
 impl Task {
     /// `Err` unless the task's sizes (its state and, when it has them, its control limits) are `scene`'s:
     /// a task is checked against its own scene file, and this is for a task used with another scene.
-    pub fn check_scene(&self, scene: &Scene) -> Result<(), LibraryError> {
+    pub fn check_scene(&self, scene: &Scene) -> Result<(), TaskError> {
         let limits = self
             .control_limits
             .as_ref()
             .map_or(scene.n_controls, |l| l.lower.len());
         if self.x0.len() != scene.n_state() || limits != scene.n_controls {
-            return Err(LibraryError::SceneMismatch(format!(
+            return Err(TaskError::SceneMismatch(format!(
                 "task {} has {} state entries and {limits} controls, the scene {} and {}",
                 self.name,
                 self.x0.len(),
                 scene.n_state(),
                 scene.n_controls
             )));
-        }
-        Ok(())
-    }
-
-    /// `Err` naming the reason when the task cannot have a library of controllers on `scene`: the scene
-    /// has no control to feed back, or the cost rewards nothing (no state term, so every trajectory's
-    /// best is to do nothing).
-    pub fn check_for_library(&self, scene: &Scene) -> Result<(), LibraryError> {
-        let refuse = |field: &str, problem: &str| {
-            Err(LibraryError::Task {
-                task: self.name.clone(),
-                field: field.to_string(),
-                problem: problem.to_string(),
-            })
-        };
-        if scene.n_controls == 0 {
-            return refuse(
-                "",
-                "the scene has no actuated joint: a library stores feedback controllers and there is nothing to control",
-            );
-        }
-        let weighs = self
-            .cost
-            .running
-            .iter()
-            .chain(&self.cost.final_terms)
-            .any(|t| t.linear != 0.0 || t.quadratic != 0.0);
-        if !weighs {
-            return refuse(
-                "running",
-                "the cost rewards nothing (no running or final term with a non-zero weight): the best control is none, and a library of it is empty of purpose",
-            );
         }
         Ok(())
     }
@@ -495,8 +463,8 @@ impl Success {
         x0: &[f64],
         periods: &[Option<f64>],
         names: &[String],
-        bad: &dyn Fn(&str, String) -> LibraryError,
-    ) -> Result<Self, LibraryError> {
+        bad: &dyn Fn(&str, String) -> TaskError,
+    ) -> Result<Self, TaskError> {
         let n = names.len();
         let rates = Success::rewarded(cost, n);
         let min_rate = match spec.min_rate {
@@ -686,9 +654,9 @@ pub struct ProblemFile {
 
 impl ProblemFile {
     /// Parse a scene file and its tasks (every task table strictly: unknown keys are refused).
-    pub fn from_toml_str(text: &str) -> Result<Self, LibraryError> {
+    pub fn from_toml_str(text: &str) -> Result<Self, TaskError> {
         let mut table: toml::Table = text.parse().map_err(|e: toml::de::Error| {
-            LibraryError::Dynamics(dynamics::DynamicsError::Parse(e.to_string()))
+            TaskError::Dynamics(dynamics::DynamicsError::Parse(e.to_string()))
         })?;
         let tasks = match table.remove("task") {
             None => BTreeMap::new(),
@@ -696,7 +664,7 @@ impl ProblemFile {
                 let tasks: toml::Table =
                     value
                         .try_into()
-                        .map_err(|e: toml::de::Error| LibraryError::Task {
+                        .map_err(|e: toml::de::Error| TaskError::Spec {
                             task: String::new(),
                             field: "task".into(),
                             problem: format!("must be tables [task.NAME]: {e}"),
@@ -708,7 +676,7 @@ impl ProblemFile {
                     let spec: TaskSpec = serde_path_to_error::deserialize(value).map_err(
                         |e: serde_path_to_error::Error<toml::de::Error>| {
                             let path = e.path().to_string();
-                            LibraryError::Task {
+                            TaskError::Spec {
                                 task: name.clone(),
                                 field: if path == "." { String::new() } else { path },
                                 problem: e.into_inner().message().to_string(),
@@ -744,15 +712,15 @@ impl ProblemFile {
     }
 
     /// Read and parse a scene file.
-    pub fn load(path: &std::path::Path) -> Result<Self, LibraryError> {
-        let io = |source| LibraryError::Io {
+    pub fn load(path: &std::path::Path) -> Result<Self, TaskError> {
+        let io = |source| TaskError::Io {
             path: path.display().to_string(),
             source,
         };
         // Refused by size before it is read: a scene file is small (dynamics::MAX_SCENE_TEXT).
         let size = std::fs::metadata(path).map_err(io)?.len();
         if size > dynamics::MAX_SCENE_TEXT as u64 {
-            return Err(LibraryError::Dynamics(dynamics::DynamicsError::Parse(
+            return Err(TaskError::Dynamics(dynamics::DynamicsError::Parse(
                 format!(
                     "{}: {size} bytes, over the {} of a scene file (dynamics::MAX_SCENE_TEXT)",
                     path.display(),
@@ -765,7 +733,7 @@ impl ProblemFile {
     }
 
     /// The task called `name`, or with `None` the file's only task.
-    pub fn task(&self, name: Option<&str>) -> Result<Task, LibraryError> {
+    pub fn task(&self, name: Option<&str>) -> Result<Task, TaskError> {
         let listed = || {
             if self.tasks.is_empty() {
                 "the file has no [task.NAME] table".to_string()
@@ -780,7 +748,7 @@ impl ProblemFile {
             Some(name) => self
                 .tasks
                 .get_key_value(name)
-                .ok_or_else(|| LibraryError::Task {
+                .ok_or_else(|| TaskError::Spec {
                     task: name.to_string(),
                     field: String::new(),
                     problem: format!("no such task ({})", listed()),
@@ -790,7 +758,7 @@ impl ProblemFile {
                 match (it.next(), it.next()) {
                     (Some(only), None) => only,
                     _ => {
-                        return Err(LibraryError::Task {
+                        return Err(TaskError::Spec {
                             task: String::new(),
                             field: String::new(),
                             problem: format!("name the task to use ({})", listed()),

@@ -6,7 +6,7 @@ use thiserror::Error;
 
 /// Why a step of the task failed.
 #[derive(Debug, Error)]
-pub enum TaskError {
+pub enum StepError {
     /// The simulator refused the input or the derivatives.
     #[error(transparent)]
     Dynamics(#[from] DynamicsError),
@@ -54,7 +54,7 @@ impl SceneDynamics {
 }
 
 impl Dynamics for SceneDynamics {
-    type Error = TaskError;
+    type Error = StepError;
     type Data = StepData;
 
     fn state_dim(&self) -> usize {
@@ -76,13 +76,13 @@ impl Dynamics for SceneDynamics {
         x: &[f64],
         u: &[f64],
         next: &mut [f64],
-    ) -> Result<(), TaskError> {
+    ) -> Result<(), StepError> {
         if let Some(near) = near {
             data.warm_start_from(near);
         }
         let s = self.model.step(data, x, u)?;
         if s.info.status != ncp::Status::Converged {
-            return Err(TaskError::NotConverged(s.info.status));
+            return Err(StepError::NotConverged(s.info.status));
         }
         next.copy_from_slice(&s.x_next);
         Ok(())
@@ -95,20 +95,20 @@ impl Dynamics for SceneDynamics {
         _u: &[f64],
         fx: &mut [f64],
         fu: &mut [f64],
-    ) -> Result<(), TaskError> {
+    ) -> Result<(), StepError> {
         let d = self.model.calc_diff(data)?;
         fx.copy_from_slice(&d.fx);
         fu.copy_from_slice(&d.fu);
         Ok(())
     }
 
-    fn second_order(&self) -> Option<&dyn SecondOrder<StepData, Error = TaskError>> {
+    fn second_order(&self) -> Option<&dyn SecondOrder<StepData, Error = StepError>> {
         Some(self)
     }
 }
 
 impl SecondOrder<StepData> for SceneDynamics {
-    type Error = TaskError;
+    type Error = StepError;
 
     fn bytes_per_knot(&self) -> usize {
         self.model.second_order_bytes()
@@ -119,7 +119,7 @@ impl SecondOrder<StepData> for SceneDynamics {
         data: &mut StepData,
         _x: &[f64],
         _u: &[f64],
-    ) -> Result<(), TaskError> {
+    ) -> Result<(), StepError> {
         Ok(self.model.calc_diff2_prepare(data)?)
     }
 
@@ -132,7 +132,7 @@ impl SecondOrder<StepData> for SceneDynamics {
         fx: &mut [f64],
         fu: &mut [f64],
         hess: &mut [f64],
-    ) -> Result<(), TaskError> {
+    ) -> Result<(), StepError> {
         let d = self.model.calc_diff2(data, c, hess)?;
         fx.copy_from_slice(&d.fx);
         fu.copy_from_slice(&d.fu);

@@ -7,9 +7,9 @@
 //! scaffolding: sigma doubled, each solve warm-started from the last, until a solve feels the contact
 //! and uses it, then halved back).
 
-use crate::error::LibraryError;
+use crate::error::TaskError;
 use crate::problem::TaskCost;
-use crate::task::SceneDynamics;
+use crate::scene_dynamics::SceneDynamics;
 use ddp::{Ddp, DdpSettings, Solution};
 use dynamics::{
     Complementarity, ConstraintRow, Constraints, Kinematics, Scene, Side, Simulator, StepSettings,
@@ -65,7 +65,7 @@ pub fn contact_felt(
     cost: &TaskCost,
     x0: &[f64],
     controls: &[Vec<f64>],
-) -> Result<bool, LibraryError> {
+) -> Result<bool, TaskError> {
     let scene = sim.scene().clone();
     let Some(needed) = needed_pairs(&scene, cost) else {
         return Ok(true);
@@ -140,18 +140,16 @@ impl<'a> ReachCost<'a> {
         scene: &'a Scene,
         pair: usize,
         weight: f64,
-    ) -> Result<Self, LibraryError> {
+    ) -> Result<Self, TaskError> {
         let row = |positive: bool| {
             scene
                 .rows()
                 .iter()
                 .position(|r| *r == ConstraintRow::FrictionEdge { pair, positive })
-                .ok_or_else(|| {
-                    LibraryError::Invalid(format!("the scene has no contact pair {pair}"))
-                })
+                .ok_or_else(|| TaskError::Invalid(format!("the scene has no contact pair {pair}")))
         };
         if !(weight.is_finite() && weight >= 0.0) {
-            return Err(LibraryError::Invalid(format!(
+            return Err(TaskError::Invalid(format!(
                 "a reaching weight must be finite and non-negative, not {weight}"
             )));
         }
@@ -287,18 +285,15 @@ impl ContactProblem<'_> {
         settings: StepSettings,
         cost: &C,
         controls: &[Vec<f64>],
-    ) -> Result<Solution, LibraryError> {
+    ) -> Result<Solution, TaskError> {
         let dynamics = SceneDynamics::new(Simulator::new(self.scene.clone(), settings)?);
         ddp.solve(&dynamics, cost, self.x0, controls)
-            .map_err(|source| LibraryError::Optimiser {
-                trajectory: 0,
-                source,
-            })
+            .map_err(|source| TaskError::Optimiser { solve: 0, source })
     }
 
     /// Whether the rollout of `controls` from the start, under `settings`, feels the contact the task
     /// needs ([`contact_felt`] on a fresh simulator of the scene).
-    fn felt(&self, settings: StepSettings, controls: &[Vec<f64>]) -> Result<bool, LibraryError> {
+    fn felt(&self, settings: StepSettings, controls: &[Vec<f64>]) -> Result<bool, TaskError> {
         let mut probe = Simulator::new(self.scene.clone(), settings)?;
         contact_felt(&mut probe, self.cost, self.x0, controls)
     }
@@ -313,7 +308,7 @@ impl ContactProblem<'_> {
         &self,
         start: Solution,
         stage: impl FnMut(f64, &Solution, Option<bool>),
-    ) -> Result<ContactSearch, LibraryError> {
+    ) -> Result<ContactSearch, TaskError> {
         if self.felt(*self.settings, &start.controls)? {
             return Ok(ContactSearch {
                 solution: start,
@@ -347,7 +342,7 @@ impl ContactProblem<'_> {
     /// the contact under `settings` and costs a percent less than `start` replaces it; otherwise `start` is
     /// kept. Works for the hard model as well as the smoothed ones (the pull needs no action at a
     /// distance).
-    pub fn reach_for_contact(&self, start: Solution) -> Result<Reach, LibraryError> {
+    pub fn reach_for_contact(&self, start: Solution) -> Result<Reach, TaskError> {
         let untouched = start.cost;
         let mut tries = Vec::new();
         let steps = start.controls.len() as f64 + 1.0;
@@ -363,10 +358,7 @@ impl ContactProblem<'_> {
             max_iterations: self.ddp.settings().max_iterations.min(REACH_PULL_PASSES),
             ..self.ddp.settings().clone()
         })
-        .map_err(|source| LibraryError::Optimiser {
-            trajectory: 0,
-            source,
-        })?;
+        .map_err(|source| TaskError::Optimiser { solve: 0, source })?;
         for (d0, pair) in apart {
             let weight = REACH_PULL * (1.0 + untouched.abs()) / (0.5 * d0 * d0 * steps);
             let pull = ReachCost::new(self.cost, self.scene, pair, weight)?;
@@ -397,9 +389,9 @@ impl ContactProblem<'_> {
         &self,
         start: Solution,
         mut stage: impl FnMut(f64, &Solution, Option<bool>),
-    ) -> Result<Continuation, LibraryError> {
+    ) -> Result<Continuation, TaskError> {
         let sigma = noise_scale(self.settings.model).ok_or_else(|| {
-            LibraryError::Invalid("the hard model has no noise scale to continue in".into())
+            TaskError::Invalid("the hard model has no noise scale to continue in".into())
         })?;
         let at = |s: f64| StepSettings {
             model: match self.settings.model {
