@@ -11,26 +11,16 @@
 #[global_allocator]
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
-mod bench_ddp;
-mod bench_dynamics;
-mod bench_library;
-mod bench_ncp;
-mod bench_viewer;
+// The command-line plumbing over the crates (`tools`), the experiments that compute the documented
+// results (`experiments`), the speed tables (`benchmarks`), and the generated sections of the docs they
+// rewrite (`docs`): experiments and benchmarks use tools and docs, never the other way round.
 mod benchmarks;
-mod diagnose;
-mod distance;
-mod draw;
-mod evaluate;
-mod examples;
-mod figures;
-mod jsonl;
-mod lcp;
-mod optimize;
-mod reproduce;
-mod seeds;
-mod step;
-mod train;
-mod view;
+mod docs;
+mod experiments;
+mod tools;
+
+use experiments::{diagnose, examples, figures, reproduce, seeds};
+use tools::{distance, evaluate, jsonl, lcp, optimize, step, train, view};
 
 use clap::{Parser, Subcommand};
 
@@ -158,5 +148,79 @@ fn main() -> anyhow::Result<()> {
         Command::Diagnose(args) => diagnose::run(&args),
         Command::Benchmarks(args) => benchmarks::run(&args),
         Command::View(args) => view::run(&args),
+    }
+}
+
+/// The three stream commands on the same bytes (each command's own tests are in its file).
+#[cfg(test)]
+mod streams {
+    #[derive(clap::Parser)]
+    struct LcpCli {
+        #[command(flatten)]
+        args: crate::lcp::Args,
+    }
+
+    type Answer<'a> = dyn FnMut(&str) -> Result<String, String> + 'a;
+
+    /// Lines of `input` that get an answer: all but the blank ones (UTF-8 and only white space).
+    fn answered(input: &[u8]) -> usize {
+        let mut parts: Vec<&[u8]> = input.split(|&b| b == b'\n').collect();
+        if parts.last().is_some_and(|p| p.is_empty()) {
+            parts.pop();
+        }
+        parts
+            .iter()
+            .filter(|p| !std::str::from_utf8(p).is_ok_and(|s| s.trim().is_empty()))
+            .count()
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(48))]
+        #[test]
+        fn no_byte_string_crashes_a_stream_command(
+            chunks in proptest::collection::vec(
+                proptest::prop_oneof![
+                    proptest::collection::vec(proptest::num::u8::ANY, 0..40),
+                    proptest::sample::select(vec![
+                        br#"{"x":[-0.7,-0.5,0,0,0,0],"u":[0,0]}"#.to_vec(),
+                        br#"{"x":[1e308,-1e308,0,0,0,0],"u":[1e308,0]}"#.to_vec(),
+                        br#"{"a":[1,0.5],"pose_a":[0,0,0],"b":[1e-300,0.5],"pose_b":[3,0,0]}"#.to_vec(),
+                        br#"{"a":[1e200,1e-200],"pose_a":[0,0,0],"b":[0.7,0.5],"pose_b":[0,0,0]}"#.to_vec(),
+                        br#"{"M":[[0,-1],[1,0]],"q":[-1,-1]}"#.to_vec(),
+                        br#"{"M":[[1e308]],"q":[-1e308]}"#.to_vec(),
+                        b"\xff\xfe\x00".to_vec(),
+                        b"   ".to_vec(),
+                    ]),
+                ],
+                0..8,
+            ),
+        ) {
+            let input = chunks.join(&b'\n');
+            let expected = answered(&input);
+            let lcp = <LcpCli as clap::Parser>::parse_from(["lcp"]).args;
+            let mut sim = dynamics::Simulator::new(
+                task::ProblemFile::builtin().scene,
+                dynamics::StepSettings::default(),
+            )
+            .unwrap();
+            let mut answers: Vec<Box<Answer<'_>>> = vec![
+                Box::new(|l| crate::distance::answer_line(l, true)),
+                Box::new(|l| crate::lcp::answer_line(l, &lcp)),
+                Box::new(|l| {
+                    crate::step::answer_line(&mut sim, l, crate::step::Answers::Derivatives)
+                }),
+            ];
+            for answer in &mut answers {
+                let mut out = Vec::new();
+                crate::jsonl::filter_with(&input[..], &mut out, answer).unwrap();
+                let text = String::from_utf8(out).unwrap();
+                proptest::prop_assert_eq!(text.lines().count(), expected);
+                for line in text.lines() {
+                    let v: serde_json::Value = serde_json::from_str(line).unwrap();
+                    proptest::prop_assert!(!line.contains("null"), "{}", line);
+                    proptest::prop_assert!(v.is_object());
+                }
+            }
+        }
     }
 }

@@ -237,7 +237,7 @@ pub fn answer_line(sim: &mut Simulator, line: &str, answers: Answers) -> Result<
         fu: der.as_ref().map(|d| rows(&d.fu, nu.max(1))),
         hessian: hessian.as_ref().map(|h| rows(h, nx + nu)),
     };
-    crate::jsonl::finite_line(&answer)
+    crate::tools::jsonl::finite_line(&answer)
 }
 
 pub fn run_step(args: &StepArgs) -> anyhow::Result<()> {
@@ -247,7 +247,7 @@ pub fn run_step(args: &StepArgs) -> anyhow::Result<()> {
         (false, true) => Answers::Derivatives,
         (false, false) => Answers::Step,
     };
-    crate::jsonl::filter(|line| answer_line(&mut sim, line, answers))
+    crate::tools::jsonl::filter(|line| answer_line(&mut sim, line, answers))
 }
 
 /// Steps at most in one `simulate` run (about 3 minutes of the finger at 20 us a step).

@@ -6,7 +6,8 @@
 //! run's spin over its last quarter, its contacts per half turn, and a picture of its last 20 s in
 //! configuration space.
 
-use crate::figures::{Run, both, draw_cycle_2d, register_font};
+use crate::experiments::draw::{both, register_font};
+use crate::experiments::figures::{Run, draw_cycle_2d};
 use anyhow::Context;
 use ddp::{Ddp, DdpSettings};
 use dynamics::{Complementarity, Simulator, StepSettings};
@@ -348,7 +349,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         args.out.display()
     );
     if !args.no_docs && args.seconds == SECONDS {
-        crate::reproduce::write_docs(
+        crate::experiments::recipe::write_docs(
             &args.docs,
             "diagnose",
             "cargo xtask diagnose",

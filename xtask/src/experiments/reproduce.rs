@@ -3,11 +3,12 @@
 //! on the smoothed and the hard system at two time steps with and without kicks, and a summary of paper
 //! against ours. Everything lands in one output folder.
 
+use crate::experiments::recipe::{SECONDS, on_four_worlds, write_docs};
 use anyhow::Context;
 use ddp::{Ddp, DdpSettings};
 use dynamics::{Complementarity, Scene, Simulator, StepSettings};
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
-use library::{Evaluation, EvaluationSettings, Library, LibrarySettings, evaluate};
+use library::{Evaluation, EvaluationSettings, Library, LibrarySettings};
 use serde::Serialize;
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -35,122 +36,6 @@ pub struct Args {
     /// minute each on two cores). `cargo xtask seeds` adds the paper's recipe and the ablations.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=64))]
     seeds: u64,
-}
-
-/// Simulated seconds per closed-loop run of the documented results.
-pub(crate) const SECONDS: f64 = 200.0;
-
-/// A short fingerprint of everything the documented results depend on that a code change can alter
-/// without anyone rerunning `reproduce`: the default and the paper's library settings, the evaluation's
-/// defaults, the step. docs/results.md carries the stamp of the run that wrote it, and a test
-/// fails when it no longer matches.
-pub(crate) fn stamp() -> String {
-    // The settings as the finger's results use them: on the built-in file's spin task. A setting only a
-    // target task reads (the growth's sharpening) leaves the finger's numbers as they are.
-    let task = task::ProblemFile::builtin_task().1;
-    let finger = |s: LibrarySettings| {
-        let mut v = serde_json::to_value(s.for_task(&task)).expect("settings serialise");
-        if let Some(o) = v.as_object_mut() {
-            o.remove("growth_sharpening");
-        }
-        v
-    };
-    let inputs = serde_json::json!({
-        "default": finger(LibrarySettings::default()),
-        "paper": finger(LibrarySettings::paper()),
-        "evaluation": EvaluationSettings {
-            x0: task.x0.clone(),
-            ..EvaluationSettings::default()
-        },
-        // Not the library file's format version: it changes how a library is written, not what it
-        // holds or how its policy runs.
-        "seeds": crate::seeds::SEEDS,
-        "seconds": SECONDS,
-        // The step itself (how penetration is recovered, issue 27): new physics, new numbers.
-        "step": dynamics::StepSettings::default(),
-    });
-    format!("{:08x}", crc32fast::hash(inputs.to_string().as_bytes()))
-}
-
-/// The line a generated section of docs/results.md starts with.
-pub(crate) fn stamp_line() -> String {
-    format!(
-        "(recipe stamp {}: the settings these numbers were computed with; a test checks it against the code)",
-        stamp()
-    )
-}
-
-/// Rewrite docs/results.md's section `name` with `body` (headings demoted below the page's) and copy the
-/// PNGs of `figures` into docs/figures.
-pub(crate) fn write_docs(
-    docs: &std::path::Path,
-    name: &str,
-    command: &str,
-    body: &str,
-    figures: &[PathBuf],
-) -> anyhow::Result<()> {
-    write_section(docs, name, command, &stamp_line(), "##", body, figures)
-}
-
-/// [`write_docs`] with the section's own stamp line, its headings demoted by `demote` (`#`s put in front
-/// of each).
-pub(crate) fn write_section(
-    docs: &std::path::Path,
-    name: &str,
-    command: &str,
-    stamp_line: &str,
-    demote: &str,
-    body: &str,
-    figures: &[PathBuf],
-) -> anyhow::Result<()> {
-    let demoted: String = body
-        .lines()
-        .map(|l| {
-            if l.starts_with('#') {
-                format!("{demote}{l}\n")
-            } else {
-                format!("{l}\n")
-            }
-        })
-        .collect();
-    crate::benchmarks::replace_section(
-        &docs.join("results.md"),
-        name,
-        command,
-        &format!("{stamp_line}\n\n{demoted}"),
-    )?;
-    let dir = docs.join("figures");
-    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
-    for f in figures {
-        if let Some(file) = f.file_name() {
-            std::fs::copy(f, dir.join(file))
-                .with_context(|| format!("copying {} to {}", f.display(), dir.display()))?;
-        }
-    }
-    Ok(())
-}
-
-/// The library's policy on the worlds of `cargo xtask evaluate` (its own model and the hard one, at its
-/// time step and at 0.03), without and with kicks: `(world, h, kicks, evaluation)`.
-pub(crate) fn on_four_worlds(
-    lib: &Library,
-    seconds: f64,
-) -> anyhow::Result<Vec<(String, f64, bool, Evaluation)>> {
-    let policy = lib.policy()?;
-    let mut runs = Vec::new();
-    for (world, model, h) in crate::evaluate::worlds(lib) {
-        for kicks in [false, true] {
-            let settings = EvaluationSettings {
-                model,
-                h,
-                seconds,
-                kick_every: if kicks { 10.0 } else { 0.0 },
-                ..EvaluationSettings::default()
-            };
-            runs.push((world.clone(), h, kicks, evaluate(lib, &policy, &settings)?));
-        }
-    }
-    Ok(runs)
 }
 
 #[derive(Serialize)]
@@ -208,7 +93,7 @@ struct Summary {
     closed_loop: Vec<ClosedLoop>,
     /// The default recipe over library seeds 1 to `--seeds` (seed 1: the default library of
     /// `closed_loop`), on the four worlds with and without kicks.
-    seeds: Vec<crate::seeds::SeedRun>,
+    seeds: Vec<crate::experiments::seeds::SeedRun>,
     /// Simulated seconds per closed-loop run.
     run_seconds: f64,
     seconds: f64,
@@ -361,7 +246,10 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
 }
 
 /// The default recipe's libraries of seeds 2 to `--seeds`, each on the four worlds, on two threads.
-fn further_seeds(args: &Args, bars: &MultiProgress) -> anyhow::Result<Vec<crate::seeds::SeedRun>> {
+fn further_seeds(
+    args: &Args,
+    bars: &MultiProgress,
+) -> anyhow::Result<Vec<crate::experiments::seeds::SeedRun>> {
     let jobs: Vec<u64> = (2..=args.seeds).collect();
     if jobs.is_empty() {
         return Ok(Vec::new());
@@ -379,7 +267,12 @@ fn further_seeds(args: &Args, bars: &MultiProgress) -> anyhow::Result<Vec<crate:
             ..LibrarySettings::default()
         };
         let lib = Library::build(&task::ProblemFile::builtin(), None, &settings, |_, _| {})?;
-        let runs = crate::seeds::runs_of(seed, crate::seeds::DEFAULT_RECIPE, &lib, args.seconds);
+        let runs = crate::experiments::seeds::runs_of(
+            seed,
+            crate::experiments::seeds::DEFAULT_RECIPE,
+            &lib,
+            args.seconds,
+        );
         bar.inc(1);
         runs
     });
@@ -401,7 +294,7 @@ struct Evaluated {
     mismatched: Vec<Mismatched>,
     closed_loop: Vec<ClosedLoop>,
     /// For the default library, its closed-loop runs as those of the seed sweep's first seed.
-    seed_runs: Vec<crate::seeds::SeedRun>,
+    seed_runs: Vec<crate::experiments::seeds::SeedRun>,
 }
 
 fn evaluate_built(args: &Args, lib: Library, secs: f64) -> anyhow::Result<Evaluated> {
@@ -422,7 +315,7 @@ fn evaluate_built(args: &Args, lib: Library, secs: f64) -> anyhow::Result<Evalua
     lib.save(&args.out.join(file))?;
     if sigma == 0.1 {
         println!("drawing the figures ...");
-        crate::figures::write_all(&lib, &args.out.join("figures"))?;
+        crate::experiments::figures::write_all(&lib, &args.out.join("figures"))?;
         // Kicks beyond the training's (variance 4, std 2): where does the policy break?
         let policy = lib.policy()?;
         for kick_std in [2.0, 8.0, 32.0, 128.0, 256.0] {
@@ -449,9 +342,9 @@ fn evaluate_built(args: &Args, lib: Library, secs: f64) -> anyhow::Result<Evalua
     let mut seed_runs = Vec::new();
     for (world, h, kicks, evaluation) in on_four_worlds(&lib, args.seconds)? {
         if sigma == 0.1 {
-            seed_runs.push(crate::seeds::SeedRun {
+            seed_runs.push(crate::experiments::seeds::SeedRun {
                 seed: lib.settings.seed,
-                recipe: crate::seeds::DEFAULT_RECIPE.into(),
+                recipe: crate::experiments::seeds::DEFAULT_RECIPE.into(),
                 world: world.clone(),
                 h,
                 kicks,
@@ -509,7 +402,7 @@ fn finish(
     start: Instant,
     (optimised, annealing): (Vec<Optimised>, Vec<Annealed>),
     evaluated: Vec<Evaluated>,
-    seeds: Vec<crate::seeds::SeedRun>,
+    seeds: Vec<crate::experiments::seeds::SeedRun>,
 ) -> anyhow::Result<()> {
     let mut larger_kicks = Vec::new();
     let mut mismatched = Vec::new();
@@ -690,7 +583,7 @@ fn report(s: &Summary) -> String {
                     "{}/{} ({})",
                     e.resumed,
                     e.kicks,
-                    crate::evaluate::seconds(e.resume_time)
+                    crate::tools::evaluate::seconds(e.resume_time)
                 )
             } else {
                 "-".into()
@@ -702,7 +595,11 @@ fn report(s: &Summary) -> String {
         t,
         "\n## Over library seeds (`seeds` in summary.json)\n\nThe default recipe with library seeds 1-{last} (`cargo xtask reproduce --seeds N` for more; each further seed builds one more library). `cargo xtask seeds` runs seeds 1-8 against the paper's recipe and three ablations (its section below).\n"
     );
-    crate::seeds::seed_rows(&mut t, &s.seeds, &[crate::seeds::DEFAULT_RECIPE]);
+    crate::experiments::seeds::seed_rows(
+        &mut t,
+        &s.seeds,
+        &[crate::experiments::seeds::DEFAULT_RECIPE],
+    );
     let _ = writeln!(
         t,
         "\n## Figures (the default library at sigma = 0.1, seed 1)\n\n![Fig. 2: the contact surface](figures/fig2_contact_surface.png)\n\n![Fig. 3: the library's states](figures/fig3_library_states.png)\n\n![Fig. 4: the limit cycle in configuration space](figures/fig4_limit_cycle.png)\n\n![Fig. 5: one cycle in frames](figures/fig5_frames.png)"
@@ -726,9 +623,9 @@ mod tests {
                 .find(&format!("<!-- END {section} -->"))
                 .unwrap_or_else(|| panic!("docs/results.md's section {section} has no end"));
             assert!(
-                text[at..at + end].contains(&super::stamp_line()),
+                text[at..at + end].contains(&crate::experiments::recipe::stamp_line()),
                 "docs/results.md's {section} section is stale (its recipe stamp is not {}): run `cargo xtask {section}`",
-                super::stamp()
+                crate::experiments::recipe::stamp()
             );
         }
     }

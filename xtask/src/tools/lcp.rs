@@ -132,11 +132,11 @@ pub fn answer_line(line: &str, args: &Args) -> Result<String, String> {
         status: s.info.status,
         residual: s.info.residual,
     };
-    crate::jsonl::finite_line(&answer)
+    crate::tools::jsonl::finite_line(&answer)
 }
 
 pub fn run(args: &Args) -> anyhow::Result<()> {
-    crate::jsonl::filter(|line| answer_line(line, args))
+    crate::tools::jsonl::filter(|line| answer_line(line, args))
 }
 
 #[cfg(test)]

@@ -1,11 +1,58 @@
-//! Drawing any scene (its bodies at a state, its half-planes and fixed ellipses) into a plotters chart,
-//! for the figures of `cargo xtask figures` and `cargo xtask examples`.
+//! Drawing for every picture of the experiments: the bundled font, the PNG-and-SVG writer ([`both`]),
+//! and any scene (its bodies at a state, its half-planes and fixed ellipses) in a plotters chart.
 
-use crate::figures::err;
+use anyhow::anyhow;
 use dynamics::{Kinematics, Scene};
+use plotters::coord::Shift;
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use std::f64::consts::PI;
+use std::path::Path;
+
+static FONT: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");
+
+pub(crate) fn register_font() -> anyhow::Result<()> {
+    plotters::style::register_font("sans-serif", FontStyle::Normal, FONT)
+        .map_err(|_| anyhow!("the bundled font does not load"))
+}
+
+pub(crate) fn err<E: std::fmt::Debug>(e: E) -> anyhow::Error {
+    anyhow!("drawing: {e:?}")
+}
+
+/// Draw with `f` into `name.png` and `name.svg` under `dir`.
+pub(crate) fn both(
+    dir: &Path,
+    name: &str,
+    size: (u32, u32),
+    f: impl Fn(&DrawingArea<BitMapBackend, Shift>) -> anyhow::Result<()>,
+    g: impl Fn(&DrawingArea<SVGBackend, Shift>) -> anyhow::Result<()>,
+) -> anyhow::Result<()> {
+    // Each picture whole or not at all: the PNG drawn into a temporary file beside it and renamed, the SVG
+    // drawn into memory and written atomically (a failed draw never leaves half a figure).
+    let png = dir.join(format!("{name}.png"));
+    let partial = dir.join(format!(".{name}.{}.partial.png", std::process::id()));
+    let drawn = (|| {
+        let root = BitMapBackend::new(&partial, size).into_drawing_area();
+        root.fill(&WHITE).map_err(err)?;
+        f(&root)?;
+        root.present().map_err(err)
+    })()
+    .and_then(|()| std::fs::rename(&partial, &png).map_err(anyhow::Error::from));
+    if drawn.is_err() {
+        let _ = std::fs::remove_file(&partial);
+    }
+    drawn?;
+    let mut text = String::new();
+    {
+        let root = SVGBackend::with_string(&mut text, size).into_drawing_area();
+        root.fill(&WHITE).map_err(err)?;
+        g(&root)?;
+        root.present().map_err(err)?;
+    }
+    crate::write_file(dir.join(format!("{name}.svg")), text)?;
+    Ok(())
+}
 
 /// A 2-D chart in world coordinates.
 pub(crate) type WorldChart<'a, DB> =
@@ -234,7 +281,7 @@ mod tests {
     #[test]
     fn the_window_holds_the_ground_and_the_block_of_the_pushing_scene() {
         let problem =
-            task::ProblemFile::from_toml_str(include_str!("../../scenes/pushing.toml")).unwrap();
+            task::ProblemFile::from_toml_str(include_str!("../../../scenes/pushing.toml")).unwrap();
         let task = problem.task(Some("push")).unwrap();
         let (xr, yr) = bounds(&problem.scene, std::slice::from_ref(&task.x0), 1.5);
         assert!(yr.start < -0.05 && yr.end > 0.4, "{yr:?}");

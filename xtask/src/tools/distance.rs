@@ -59,11 +59,11 @@ pub fn answer_line(line: &str, derivatives: bool) -> Result<String, String> {
         gradient: d.map(|d| d.gradient),
         hessian: d.map(|d| d.hessian),
     };
-    crate::jsonl::finite_line(&answer)
+    crate::tools::jsonl::finite_line(&answer)
 }
 
 pub fn run(args: &Args) -> anyhow::Result<()> {
-    crate::jsonl::filter(|line| answer_line(line, args.derivatives))
+    crate::tools::jsonl::filter(|line| answer_line(line, args.derivatives))
 }
 
 #[cfg(test)]

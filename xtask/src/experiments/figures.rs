@@ -3,7 +3,8 @@
 //! states (Fig. 3), a closed-loop limit cycle coloured by contact impulse (Fig. 4), and frames of the
 //! controlled finger (Fig. 5).
 
-use anyhow::{Context, anyhow};
+use crate::experiments::draw::{both, err, register_font};
+use anyhow::Context;
 use dynamics::{Constraints, Kinematics, Scene, Simulator, StepSettings};
 use library::{Library, Policy};
 use plotters::coord::Shift;
@@ -22,51 +23,6 @@ pub struct Args {
     /// Output folder.
     #[arg(long, default_value = "results/figures")]
     out: PathBuf,
-}
-
-static FONT: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
-
-pub(crate) fn register_font() -> anyhow::Result<()> {
-    plotters::style::register_font("sans-serif", FontStyle::Normal, FONT)
-        .map_err(|_| anyhow!("the bundled font does not load"))
-}
-
-pub(crate) fn err<E: std::fmt::Debug>(e: E) -> anyhow::Error {
-    anyhow!("drawing: {e:?}")
-}
-
-/// Draw with `f` into `name.png` and `name.svg` under `dir`.
-pub(crate) fn both(
-    dir: &Path,
-    name: &str,
-    size: (u32, u32),
-    f: impl Fn(&DrawingArea<BitMapBackend, Shift>) -> anyhow::Result<()>,
-    g: impl Fn(&DrawingArea<SVGBackend, Shift>) -> anyhow::Result<()>,
-) -> anyhow::Result<()> {
-    // Each picture whole or not at all: the PNG drawn into a temporary file beside it and renamed, the SVG
-    // drawn into memory and written atomically (a failed draw never leaves half a figure).
-    let png = dir.join(format!("{name}.png"));
-    let partial = dir.join(format!(".{name}.{}.partial.png", std::process::id()));
-    let drawn = (|| {
-        let root = BitMapBackend::new(&partial, size).into_drawing_area();
-        root.fill(&WHITE).map_err(err)?;
-        f(&root)?;
-        root.present().map_err(err)
-    })()
-    .and_then(|()| std::fs::rename(&partial, &png).map_err(anyhow::Error::from));
-    if drawn.is_err() {
-        let _ = std::fs::remove_file(&partial);
-    }
-    drawn?;
-    let mut text = String::new();
-    {
-        let root = SVGBackend::with_string(&mut text, size).into_drawing_area();
-        root.fill(&WHITE).map_err(err)?;
-        g(&root)?;
-        root.present().map_err(err)?;
-    }
-    crate::write_file(dir.join(format!("{name}.svg")), text)?;
-    Ok(())
 }
 
 /// Points `(theta1, theta2, theta3)` of the contact surface, `theta3` in `[0, pi)`: for each (theta3,
@@ -451,7 +407,7 @@ fn draw_frames<DB: DrawingBackend>(
             .build_cartesian_2d(-2.9..1.3, -3.8..0.8)
             .map_err(err)?;
         for i in 0..scene.bodies.len() {
-            crate::draw::draw_body(&mut chart, scene, &kin, i, BLUE.mix(0.25))?;
+            crate::experiments::draw::draw_body(&mut chart, scene, &kin, i, BLUE.mix(0.25))?;
         }
         let q = &x[..n];
         if let Ok(c) = Constraints::new(scene, &kin, q)
@@ -561,7 +517,7 @@ pub fn write_task(lib: &Library, dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
         traces.push(closed_loop(lib, &policy, (model, task.h), &task.x0, steps)?.states);
     }
     let holds = lib.progress()?.forward.is_none();
-    let files = crate::examples::task_pictures(
+    let files = crate::experiments::task_pictures::task_pictures(
         "task",
         &format!("task {}", task.name),
         holds,

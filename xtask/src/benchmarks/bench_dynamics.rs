@@ -312,10 +312,10 @@ fn scenes_table(finger_states: &[Vec<f64>]) -> anyhow::Result<String> {
     let mut out = String::from(
         "\nScenes of any size (logistic, sigma = 0.1, h = 0.05; median over 8 states with a link on the ellipse (pushing: on the block), warm-started; the Hessian of c^T f over (x, u) for a fixed c): the scene files under scenes/.\n\n| scene | coordinates / controls / rows | step (ns) | step + exact fx, fu (ns) | + Hessian of c^T f (ns) |\n|---|---:|---:|---:|---:|\n",
     );
-    let three = Scene::from_toml_str(include_str!("../../scenes/three_link_finger.toml"))?;
-    let two = Scene::from_toml_str(include_str!("../../scenes/two_fingers.toml"))?;
+    let three = Scene::from_toml_str(include_str!("../../../scenes/three_link_finger.toml"))?;
+    let two = Scene::from_toml_str(include_str!("../../../scenes/two_fingers.toml"))?;
     let at = |f: &dyn Fn(f64) -> Vec<f64>| (0..8).map(|i| f(i as f64 * 0.4)).collect::<Vec<_>>();
-    let pushing = Scene::from_toml_str(include_str!("../../scenes/pushing.toml"))?;
+    let pushing = Scene::from_toml_str(include_str!("../../../scenes/pushing.toml"))?;
     // Pushing: states of its task's optimal trajectory, the finger on the block, the block on the ground.
     let pushed = [
         [

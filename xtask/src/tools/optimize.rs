@@ -2,7 +2,7 @@
 //! the paper's, by default) or on the unicycle benchmark, one line per pass behind a progress bar, the
 //! trajectory and its linear policy as JSON.
 
-use crate::step::SimArgs;
+use crate::tools::step::SimArgs;
 use anyhow::Context;
 use ddp::problems::Unicycle;
 use ddp::{ControlLimits, Ddp, DdpSettings, Iteration, Method, Regularisation, Solution};

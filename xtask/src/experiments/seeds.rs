@@ -6,6 +6,7 @@
 //! from. About twenty-four library builds: minutes, where `cargo xtask reproduce` (one seed) takes about
 //! one.
 
+use crate::experiments::recipe::SEEDS;
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
 use library::{Evaluation, Library, LibrarySettings};
 use serde::Serialize;
@@ -20,7 +21,7 @@ pub struct Args {
     #[arg(long, default_value_t = SEEDS, value_parser = clap::value_parser!(u64).range(1..=64))]
     seeds: u64,
     /// Simulated seconds per closed-loop run.
-    #[arg(long, default_value_t = crate::reproduce::SECONDS)]
+    #[arg(long, default_value_t = crate::experiments::recipe::SECONDS)]
     seconds: f64,
     /// Output folder (seeds.md, seeds.json).
     #[arg(long, default_value = "results")]
@@ -33,9 +34,6 @@ pub struct Args {
     #[arg(long)]
     no_docs: bool,
 }
-
-/// Library seeds of the documented sweep.
-pub(crate) const SEEDS: u64 = 8;
 
 #[derive(Serialize)]
 struct Summary {
@@ -77,15 +75,15 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     if args.no_docs {
         return Ok(());
     }
-    if args.seeds != SEEDS || args.seconds != crate::reproduce::SECONDS {
+    if args.seeds != SEEDS || args.seconds != crate::experiments::recipe::SECONDS {
         println!(
             "{}/results.md left alone: it documents the default sweep ({SEEDS} seeds, {} s per run)",
             args.docs.display(),
-            crate::reproduce::SECONDS
+            crate::experiments::recipe::SECONDS
         );
         return Ok(());
     }
-    crate::reproduce::write_docs(&args.docs, "seeds", "cargo xtask seeds", &text, &[])?;
+    crate::experiments::recipe::write_docs(&args.docs, "seeds", "cargo xtask seeds", &text, &[])?;
     println!(
         "rewrote the section \"seeds\" of {}/results.md",
         args.docs.display()
@@ -116,7 +114,7 @@ pub(crate) fn runs_of(
     lib: &Library,
     seconds: f64,
 ) -> anyhow::Result<Vec<SeedRun>> {
-    Ok(crate::reproduce::on_four_worlds(lib, seconds)?
+    Ok(crate::experiments::recipe::on_four_worlds(lib, seconds)?
         .into_iter()
         .map(|(world, h, kicks, evaluation)| SeedRun {
             seed,

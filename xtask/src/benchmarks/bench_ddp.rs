@@ -409,7 +409,7 @@ fn scenes_pass_table() -> anyhow::Result<String> {
     // The two spin tasks' costs (-(the ellipse's angle) + 0.05 |u|^2); the three-link finger from a
     // start of its own, bent further than its task's.
     let (finger, spin) = ProblemFile::builtin_task();
-    let three = ProblemFile::from_toml_str(include_str!("../../scenes/three_link_finger.toml"))?;
+    let three = ProblemFile::from_toml_str(include_str!("../../../scenes/three_link_finger.toml"))?;
     let three_spin = three.task(Some("spin"))?;
     let cases = [
         ("finger (SCENE.md)", finger, spin.x0.clone(), spin.cost),
@@ -427,12 +427,12 @@ fn scenes_pass_table() -> anyhow::Result<String> {
     for (name, text, task) in [
         (
             "two fingers (two_fingers.toml, its task turn)",
-            include_str!("../../scenes/two_fingers.toml"),
+            include_str!("../../../scenes/two_fingers.toml"),
             "turn",
         ),
         (
             "pushing (pushing.toml, its task push)",
-            include_str!("../../scenes/pushing.toml"),
+            include_str!("../../../scenes/pushing.toml"),
             "push",
         ),
     ] {

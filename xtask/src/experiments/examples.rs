@@ -4,12 +4,11 @@
 //! the generated section of docs/results.md. By default the three example scenes under scenes/; with
 //! `--scene FILE --task NAME`, any scene file's task.
 
-use crate::draw;
-use crate::figures::{both, err, register_font};
+use crate::experiments::draw::register_font;
+use crate::experiments::task_pictures::task_pictures;
 use anyhow::Context;
 use ddp::{Ddp, DdpSettings};
 use library::{Evaluation, EvaluationSettings, Library, LibrarySettings, evaluate};
-use plotters::prelude::*;
 use serde::Serialize;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -84,56 +83,56 @@ fn examples() -> Vec<Example> {
         ex(
             "finger",
             "scenes/finger.toml",
-            include_str!("../../scenes/finger.toml"),
+            include_str!("../../../scenes/finger.toml"),
             "spin",
             "the paper's task: a two-link finger spins an anchored ellipse by flicking it",
         ),
         ex(
             "mirrored_finger",
             "scenes/mirrored_finger.toml",
-            include_str!("../../scenes/mirrored_finger.toml"),
+            include_str!("../../../scenes/mirrored_finger.toml"),
             "spin_back",
             "a task with a negative direction: the finger mirrored left to right spins the ellipse clockwise (its cost +theta3)",
         ),
         ex(
             "mirrored_turn",
             "scenes/mirrored_finger.toml",
-            include_str!("../../scenes/mirrored_finger.toml"),
+            include_str!("../../../scenes/mirrored_finger.toml"),
             "turn",
             "a target task for one finger, which can only push: the mirrored finger turns the ellipse to -1.0 rad and holds it there",
         ),
         ex(
             "three_link",
             "scenes/three_link_finger.toml",
-            include_str!("../../scenes/three_link_finger.toml"),
+            include_str!("../../../scenes/three_link_finger.toml"),
             "spin",
             "a three-link finger spins the ellipse (the paper's task; 4 joints, 3 controls, 2 contact pairs)",
         ),
         ex(
             "two_fingers",
             "scenes/two_fingers.toml",
-            include_str!("../../scenes/two_fingers.toml"),
+            include_str!("../../../scenes/two_fingers.toml"),
             "turn",
             "two two-link fingers mounted either side of the ellipse turn it to 0.5 rad and hold it there (the Control Suite's finger-turn task with two fingers; 5 joints, 4 controls, 2 contact pairs)",
         ),
         ex(
             "pushing",
             "scenes/pushing.toml",
-            include_str!("../../scenes/pushing.toml"),
+            include_str!("../../../scenes/pushing.toml"),
             "push",
             "a two-link finger pushes a free block resting on the ground 0.6 to the right, in the vertical plane (free body, ground contact with friction)",
         ),
         ex(
             "slider_push",
             "scenes/slider_push.toml",
-            include_str!("../../scenes/slider_push.toml"),
+            include_str!("../../../scenes/slider_push.toml"),
             "push",
             "a contact out of reach: a fork on a slider, both prongs starting 0.45 from a block, pushes it 0.5 along the ground and can push it back (one actuator, no periodic coordinate)",
         ),
         ex(
             "roll_block",
             "scenes/roll_block.toml",
-            include_str!("../../scenes/roll_block.toml"),
+            include_str!("../../../scenes/roll_block.toml"),
             "roll",
             "a block reoriented on the ground: a two-link finger turns a block lying on the ground a half turn over",
         ),
@@ -348,7 +347,7 @@ fn run_example(
     );
     let seed_list: Vec<u64> = (1..=seeds).collect();
     let runs = crate::on_two_threads(&seed_list, |&seed| -> anyhow::Result<(SeedRun, Library)> {
-        let settings = crate::train::defaults_for(&task, seed);
+        let settings = crate::tools::train::defaults_for(&task, seed);
         let start = Instant::now();
         let lib = Library::build(&problem, Some(&e.task), &settings, |_, _| {})?;
         let build_seconds = start.elapsed().as_secs_f64();
@@ -361,14 +360,19 @@ fn run_example(
             traces: Vec::new(),
         };
         let policy = lib.policy()?;
-        for (w, (name, model, h)) in crate::evaluate::worlds(&lib).into_iter().enumerate() {
+        for (w, (name, model, h)) in crate::tools::evaluate::worlds(&lib).into_iter().enumerate() {
             let calm = evaluated(&lib, &policy, &task, (model, h), seconds, (0.0, 0))?;
             let kicks = (KICK_EVERY, KICK_SEED_BASE + seed);
             let kicked = evaluated(&lib, &policy, &task, (model, h), seconds, kicks)?;
             if w < 2 {
                 let steps = (seconds / h).round() as usize;
-                let trace =
-                    crate::figures::closed_loop(&lib, &policy, (model, h), &task.x0, steps)?;
+                let trace = crate::experiments::figures::closed_loop(
+                    &lib,
+                    &policy,
+                    (model, h),
+                    &task.x0,
+                    steps,
+                )?;
                 run.traces.push(trace.states);
             }
             run.worlds.push(WorldRun {
@@ -423,25 +427,6 @@ fn run_example(
     ))
 }
 
-/// The entries the pictures follow: the rewarded coordinate of a progress task, else every position
-/// target (`(index, name, target)`).
-fn watched(scene: &dynamics::Scene, task: &Task) -> Vec<(usize, String, Option<f64>)> {
-    let names = scene.state_names();
-    let mut out: Vec<(usize, String, Option<f64>)> = Vec::new();
-    let n = scene.n_dof();
-    for t in task.cost.running.iter().chain(&task.cost.final_terms) {
-        if t.index >= n || out.iter().any(|o| o.0 == t.index) {
-            continue;
-        }
-        out.push((
-            t.index,
-            names[t.index].clone(),
-            (t.quadratic != 0.0).then_some(t.target),
-        ));
-    }
-    out
-}
-
 fn pictures(
     e: &Example,
     scene: &dynamics::Scene,
@@ -461,170 +446,6 @@ fn pictures(
         &traces,
         out,
     )
-}
-
-/// Two pictures of a task's closed loops under `out`: `{file}_time` (the watched entry over time, per
-/// seed, solid on the smoothed world and dashed on the hard one) and `{file}_frames` (eight frames of the
-/// first run: the first four seconds when the task `holds` a target, else the last four). Returns the
-/// PNGs' paths (SVGs are written beside them).
-pub(crate) fn task_pictures(
-    file: &str,
-    title: &str,
-    holds: bool,
-    scene: &dynamics::Scene,
-    task: &Task,
-    runs: &[(u64, &[Vec<Vec<f64>>])],
-    out: &Path,
-) -> anyhow::Result<Vec<PathBuf>> {
-    register_font()?;
-    let watched = watched(scene, task);
-    let time_name = format!("{file}_time");
-    both(
-        out,
-        &time_name,
-        (900, 450),
-        |root| time_plot(root, title, task, &watched, runs),
-        |root| time_plot(root, title, task, &watched, runs),
-    )?;
-    let frames_name = format!("{file}_frames");
-    let states = &runs[0].1[0];
-    both(
-        out,
-        &frames_name,
-        (1200, 640),
-        |root| frames(root, title, holds, scene, task, states),
-        |root| frames(root, title, holds, scene, task, states),
-    )?;
-    Ok(vec![
-        out.join(format!("{time_name}.png")),
-        out.join(format!("{frames_name}.png")),
-    ])
-}
-
-fn time_plot<DB: DrawingBackend>(
-    root: &DrawingArea<DB, plotters::coord::Shift>,
-    title: &str,
-    task: &Task,
-    watched: &[(usize, String, Option<f64>)],
-    runs: &[(u64, &[Vec<Vec<f64>>])],
-) -> anyhow::Result<()> {
-    let (i, name, target) = watched
-        .first()
-        .cloned()
-        .ok_or_else(|| anyhow::anyhow!("the task weighs no position"))?;
-    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-    for (_, traces) in runs {
-        for trace in traces.iter() {
-            for x in trace {
-                lo = lo.min(x[i]);
-                hi = hi.max(x[i]);
-            }
-        }
-    }
-    if let Some(t) = target {
-        lo = lo.min(t);
-        hi = hi.max(t);
-    }
-    let pad = 0.05 * (hi - lo).max(1e-3);
-    let t_end = runs[0].1[0].len().saturating_sub(1) as f64 * task.h;
-    let mut chart = ChartBuilder::on(root)
-        .caption(
-            format!(
-                "{title}: {name} in closed loop from x0, {} seeds (solid: smoothed world, dashed: hard)",
-                runs.len()
-            ),
-            ("sans-serif", 14),
-        )
-        .margin(10)
-        .x_label_area_size(35)
-        .y_label_area_size(50)
-        .build_cartesian_2d(0.0..t_end, lo - pad..hi + pad)
-        .map_err(err)?;
-    chart
-        .configure_mesh()
-        .x_desc("t (s)")
-        .y_desc(name.as_str())
-        .draw()
-        .map_err(err)?;
-    if let Some(t) = target {
-        chart
-            .draw_series(LineSeries::new(
-                [(0.0, t), (t_end, t)],
-                BLACK.mix(0.5).stroke_width(1),
-            ))
-            .map_err(err)?;
-    }
-    for (s, (seed, traces)) in runs.iter().enumerate() {
-        let colour = Palette99::pick(s).to_rgba();
-        for (w, trace) in traces.iter().enumerate() {
-            let points: Vec<(f64, f64)> = trace
-                .iter()
-                .enumerate()
-                .map(|(k, x)| (k as f64 * task.h, x[i]))
-                .collect();
-            if w == 0 {
-                chart
-                    .draw_series(LineSeries::new(points, colour.stroke_width(2)))
-                    .map_err(err)?
-                    .label(format!("seed {seed}"))
-                    .legend(move |(x, y)| {
-                        PathElement::new([(x, y), (x + 20, y)], colour.stroke_width(2))
-                    });
-            } else {
-                chart
-                    .draw_series(DashedLineSeries::new(points, 6, 4, colour.stroke_width(1)))
-                    .map_err(err)?;
-            }
-        }
-    }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()
-        .map_err(err)?;
-    Ok(())
-}
-
-/// Eight frames of the first run on the smoothed world: the first four seconds for a task that `holds`
-/// targets (the approach), the last four for a progress task (the steady motion).
-fn frames<DB: DrawingBackend>(
-    root: &DrawingArea<DB, plotters::coord::Shift>,
-    title: &str,
-    holds: bool,
-    scene: &dynamics::Scene,
-    task: &Task,
-    states: &[Vec<f64>],
-) -> anyhow::Result<()> {
-    let count = 8;
-    let span = ((4.0 / task.h).round() as usize).min(states.len() - 1);
-    let first = if holds { 0 } else { states.len() - 1 - span };
-    let picked: Vec<usize> = (0..count).map(|k| first + k * span / (count - 1)).collect();
-    let window: Vec<Vec<f64>> = picked.iter().map(|&k| states[k].clone()).collect();
-    root.titled(
-        &format!(
-            "{title}: the first run on the smoothed world, {} frames {:.2} s apart",
-            count,
-            span as f64 * task.h / (count - 1) as f64
-        ),
-        ("sans-serif", 16),
-    )
-    .map_err(err)?;
-    let panels = root.margin(30, 5, 5, 5).split_evenly((2, count / 2));
-    let (w, h) = panels[0].dim_in_pixel();
-    let (xr, yr) = draw::bounds(scene, &window, w as f64 / h.max(1) as f64);
-    for (panel, &k) in panels.iter().zip(&picked) {
-        let mut chart = ChartBuilder::on(panel)
-            .caption(
-                format!("t = {:.2} s", k as f64 * task.h),
-                ("sans-serif", 12),
-            )
-            .build_cartesian_2d(xr.clone(), yr.clone())
-            .map_err(err)?;
-        draw::draw_static(&mut chart, scene)?;
-        draw::draw_bodies(&mut chart, scene, &states[k])?;
-    }
-    Ok(())
 }
 
 fn report(results: &[ExampleResult], seconds: f64) -> String {
@@ -787,7 +608,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         && args.seeds == SEEDS
         && args.seconds == SECONDS;
     if documented && !args.no_docs {
-        crate::reproduce::write_section(
+        crate::docs::write_section(
             &args.docs,
             "examples",
             "cargo xtask examples",

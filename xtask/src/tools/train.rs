@@ -15,7 +15,7 @@ pub struct Args {
     out: PathBuf,
     /// Contact model of the optimiser's dynamics [default: the task's with --task, else logistic].
     #[arg(long, value_enum)]
-    model: Option<crate::step::ModelArg>,
+    model: Option<crate::tools::step::ModelArg>,
     /// Noise scale of the smoothed models [default: the task's with --task when its model has one, else
     /// 0.1].
     #[arg(long)]
@@ -95,7 +95,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     }
     Library::check_destination(&args.out)
         .with_context(|| format!("--out {} cannot be written", args.out.display()))?;
-    let (problem, source) = crate::step::problem_file(args.scene.as_deref())?;
+    let (problem, source) = crate::tools::step::problem_file(args.scene.as_deref())?;
     let task = problem
         .task(args.task.as_deref())
         .with_context(|| format!("scene {source}"))?;
@@ -105,7 +105,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         LibrarySettings::default()
     }
     .for_task(&task);
-    let model = crate::step::contact_model(args.model, args.sigma, Some(&task))?;
+    let model = crate::tools::step::contact_model(args.model, args.sigma, Some(&task))?;
     // The default recipe's shape fitted to the budget; flags given override it.
     let fitted = base.clone().fitted(args.trajectories);
     let exploration = match fitted.exploration {
