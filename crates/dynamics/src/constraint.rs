@@ -41,31 +41,42 @@ pub struct ContactImpulse {
 impl ContactImpulse {
     /// Each pair's impulse from the step's row impulses `lambda` (the order of [`Scene::rows`]) and the
     /// pairs' frames.
-    pub(crate) fn of(
+    pub(crate) fn of_into(
         scene: &Scene,
         lambda: &[f64],
         frames: &[ContactFrame],
-    ) -> Vec<ContactImpulse> {
-        let mut edges = vec![[0.0; 2]; scene.contacts.len()];
+        out: &mut Vec<ContactImpulse>,
+    ) {
+        // Each pair's two edge impulses, held in `normal` (plus) and `tangent` (minus) until combined.
+        out.clear();
+        out.resize(
+            scene.contacts.len(),
+            ContactImpulse {
+                normal: 0.0,
+                tangent: 0.0,
+                on_b: [0.0; 2],
+            },
+        );
         for (row, l) in scene.rows().iter().zip(lambda) {
             if let ConstraintRow::FrictionEdge { pair, positive } = *row {
-                edges[pair][usize::from(!positive)] = *l;
+                let edge = &mut out[pair];
+                *(if positive {
+                    &mut edge.normal
+                } else {
+                    &mut edge.tangent
+                }) = *l;
             }
         }
-        edges
-            .iter()
-            .zip(&scene.contacts)
-            .zip(frames)
-            .map(|((&[plus, minus], pair), frame)| {
-                let (normal, tangent) = (plus + minus, pair.friction * (plus - minus));
-                let [nx, ny] = frame.normal;
-                ContactImpulse {
-                    normal,
-                    tangent,
-                    on_b: [normal * nx - tangent * ny, normal * ny + tangent * nx],
-                }
-            })
-            .collect()
+        for ((impulse, pair), frame) in out.iter_mut().zip(&scene.contacts).zip(frames) {
+            let (plus, minus) = (impulse.normal, impulse.tangent);
+            let (normal, tangent) = (plus + minus, pair.friction * (plus - minus));
+            let [nx, ny] = frame.normal;
+            *impulse = ContactImpulse {
+                normal,
+                tangent,
+                on_b: [normal * nx - tangent * ny, normal * ny + tangent * nx],
+            };
+        }
     }
 }
 
@@ -83,10 +94,33 @@ pub struct Constraints<T = f64> {
 impl<T: Ring> Constraints<T> {
     /// Evaluate every row at the configuration `kin` (positions `q`).
     pub fn new(scene: &Scene, kin: &Kinematics<T>, q: &[T]) -> Result<Self, DynamicsError> {
+        let mut cons = Constraints {
+            d: Vec::with_capacity(scene.n_constraints()),
+            jacobian: Vec::with_capacity(scene.n_constraints() * scene.n_dof()),
+            contacts: Vec::with_capacity(scene.contacts.len()),
+        };
+        cons.update(scene, kin, q)?;
+        Ok(cons)
+    }
+
+    /// [`Constraints::new`] in place: the same vectors refilled, without allocating once they have the
+    /// scene's sizes (a step's data keeps one).
+    pub fn update(
+        &mut self,
+        scene: &Scene,
+        kin: &Kinematics<T>,
+        q: &[T],
+    ) -> Result<(), DynamicsError> {
         let n = scene.n_dof();
         let (zero, one) = (T::from(0.0), T::from(1.0));
-        let mut d = Vec::with_capacity(scene.n_constraints());
-        let mut jacobian = Vec::with_capacity(scene.n_constraints() * n);
+        let Constraints {
+            d,
+            jacobian,
+            contacts,
+        } = self;
+        d.clear();
+        jacobian.clear();
+        contacts.clear();
         for (j, c) in scene.coordinates.iter().enumerate() {
             if let Some([lo, hi]) = c.limits {
                 d.push(q[j] + (-lo));
@@ -95,7 +129,6 @@ impl<T: Ring> Constraints<T> {
                 jacobian.extend((0..n).map(|k| if k == j { -one } else { zero }));
             }
         }
-        let mut contacts = Vec::with_capacity(scene.contacts.len());
         for pair in &scene.contacts {
             // An ellipse side's shape and pose: a body's from the kinematics, a fixed one's constant.
             let ellipse = |side: Side| match side {
@@ -159,10 +192,6 @@ impl<T: Ring> Constraints<T> {
             d.push(c.distance);
             d.push(c.distance);
         }
-        Ok(Constraints {
-            d,
-            jacobian,
-            contacts,
-        })
+        Ok(())
     }
 }

@@ -63,19 +63,41 @@ pub struct Kinematics<T = f64> {
 impl<T: Ring> Kinematics<T> {
     /// Forward kinematics (parents come before children in a scene).
     pub fn new(scene: &Scene, q: &[T]) -> Self {
+        let mut kin = Kinematics {
+            phi: Vec::new(),
+            hinge: Vec::new(),
+            centre: Vec::new(),
+            axis: Vec::new(),
+        };
+        kin.update(scene, q);
+        kin
+    }
+
+    /// [`Kinematics::new`] in place: the same vectors refilled, without allocating once they have the
+    /// scene's sizes (a step's data keeps one).
+    pub fn update(&mut self, scene: &Scene, q: &[T]) {
         let nb = scene.bodies.len();
         let zero = T::from(0.0);
-        let (mut phi, mut hinge, mut centre) =
-            (vec![zero; nb], vec![[zero; 2]; nb], vec![[zero; 2]; nb]);
+        let Kinematics {
+            phi,
+            hinge,
+            centre,
+            axis,
+        } = self;
+        phi.clear();
+        phi.resize(nb, zero);
+        hinge.clear();
+        hinge.resize(nb, [zero; 2]);
+        centre.clear();
+        centre.resize(nb, [zero; 2]);
         let slides = scene
             .coordinates
             .iter()
             .any(|c| matches!(c.kind, CoordinateKind::Slide { .. }));
-        let mut axis = if !slides {
-            Vec::new()
-        } else {
-            vec![[zero; 2]; scene.n_dof()]
-        };
+        axis.clear();
+        if slides {
+            axis.resize(scene.n_dof(), [zero; 2]);
+        }
         for (i, b) in scene.bodies.iter().enumerate() {
             // The parent's frame (the world's for a root body), then the joint's coordinates in order:
             // slides move the origin along their axes, an angle turns the frame.
@@ -101,12 +123,6 @@ impl<T: Ring> Kinematics<T> {
             phi[i] = angle.unwrap_or(zero);
             hinge[i] = origin;
             centre[i] = add(hinge[i], rotate(phi[i], b.centre));
-        }
-        Kinematics {
-            phi,
-            hinge,
-            centre,
-            axis,
         }
     }
 
@@ -154,8 +170,16 @@ impl<T: Ring> Kinematics<T> {
     /// The mass matrix `M(q) = sum_i m_i Jc_i^T Jc_i + I_i Jw_i^T Jw_i` (row-major `n x n`; `Jw` is one for
     /// the turning coordinates that move body `i`, zero for the sliding ones).
     pub fn mass_matrix(&self, scene: &Scene) -> Vec<T> {
+        let mut M = Vec::new();
+        self.mass_matrix_into(scene, &mut M);
+        M
+    }
+
+    /// [`Kinematics::mass_matrix`] into `M` (resized to `n x n`; no allocation once it has that size).
+    pub fn mass_matrix_into(&self, scene: &Scene, M: &mut Vec<T>) {
         let n = scene.n_dof();
-        let mut M = vec![T::from(0.0); n * n];
+        M.clear();
+        M.resize(n * n, T::from(0.0));
         for (i, b) in scene.bodies.iter().enumerate() {
             for r in 0..n {
                 let Some(lr) = self.lever(scene, r, i, self.centre[i]) else {
@@ -180,7 +204,6 @@ impl<T: Ring> Kinematics<T> {
                 M[r * n + c] = M[c * n + r];
             }
         }
-        M
     }
 
     /// Column `j` of the Jacobian of the material point of `body` at `p`, if coordinate `j` moves the body:
@@ -200,13 +223,27 @@ impl<T: Ring> Kinematics<T> {
 
     /// The generalised forces of a step: `r(q, v) + B u`, the controls acting on their actuated joints.
     pub fn applied_forces(&self, scene: &Scene, v: &[T], u: &[T]) -> Vec<T> {
-        let mut r = self.bias_forces(scene, v);
+        let mut r = Vec::new();
+        self.applied_forces_into(scene, v, u, &mut r, &mut ForceScratch::default());
+        r
+    }
+
+    /// [`Kinematics::applied_forces`] into `r`, with the bias forces' per-body velocities in `scratch`
+    /// (no allocation once both have the scene's sizes).
+    pub fn applied_forces_into(
+        &self,
+        scene: &Scene,
+        v: &[T],
+        u: &[T],
+        r: &mut Vec<T>,
+        scratch: &mut ForceScratch<T>,
+    ) {
+        self.bias_forces_into(scene, v, r, scratch);
         for (j, c) in scene.coordinates.iter().enumerate() {
             if let Some(k) = c.actuator {
                 r[j] += u[k];
             }
         }
-        r
     }
 
     /// Bias forces `r(q, v)`: gravity on every centre, `-damping * v` on every coordinate, and the Coriolis
@@ -215,36 +252,51 @@ impl<T: Ring> Kinematics<T> {
     /// `omega perp(a_j)` for a sliding one (`omega` the angular velocity of its body's parent). In the plane
     /// the rotational inertia adds no velocity term.
     pub fn bias_forces(&self, scene: &Scene, v: &[T]) -> Vec<T> {
+        let mut r = Vec::new();
+        self.bias_forces_into(scene, v, &mut r, &mut ForceScratch::default());
+        r
+    }
+
+    /// [`Kinematics::bias_forces`] into `r` (see [`Kinematics::applied_forces_into`]).
+    pub fn bias_forces_into(
+        &self,
+        scene: &Scene,
+        v: &[T],
+        r: &mut Vec<T>,
+        scratch: &mut ForceScratch<T>,
+    ) {
         let n = scene.n_dof();
         let zero = T::from(0.0);
-        let mut r: Vec<T> = scene
-            .coordinates
-            .iter()
-            .zip(v)
-            .map(|(c, vj)| *vj * (-c.damping))
-            .collect();
+        r.clear();
+        r.extend(
+            scene
+                .coordinates
+                .iter()
+                .zip(v)
+                .map(|(c, vj)| *vj * (-c.damping)),
+        );
         // Frame origins' velocities: the origin of body j is a point of j's parent, moved along the
         // joint's own sliding axes.
-        let origin_velocity: Vec<[T; 2]> = scene
-            .bodies
-            .iter()
-            .enumerate()
-            .map(|(j, b)| {
-                let mut w = match b.parent {
-                    None => [zero; 2],
-                    Some(p) => self.point_velocity(scene, p, self.hinge[j], v),
-                };
-                for c in b.coordinates.clone() {
-                    if let CoordinateKind::Slide { .. } = scene.coordinates[c].kind {
-                        w[0] += v[c] * self.axis[c][0];
-                        w[1] += v[c] * self.axis[c][1];
-                    }
+        let ForceScratch {
+            origin_velocity,
+            omega,
+        } = scratch;
+        origin_velocity.clear();
+        origin_velocity.extend(scene.bodies.iter().enumerate().map(|(j, b)| {
+            let mut w = match b.parent {
+                None => [zero; 2],
+                Some(p) => self.point_velocity(scene, p, self.hinge[j], v),
+            };
+            for c in b.coordinates.clone() {
+                if let CoordinateKind::Slide { .. } = scene.coordinates[c].kind {
+                    w[0] += v[c] * self.axis[c][0];
+                    w[1] += v[c] * self.axis[c][1];
                 }
-                w
-            })
-            .collect();
+            }
+            w
+        }));
         // Each body's angular velocity (needed by sliding coordinates only).
-        let mut omega = Vec::new();
+        omega.clear();
         if !self.axis.is_empty() {
             for b in &scene.bodies {
                 let mut w = b.parent.map_or(zero, |p| omega[p]);
@@ -284,6 +336,22 @@ impl<T: Ring> Kinematics<T> {
                 }
             }
         }
-        r
+    }
+}
+
+/// The per-body velocities [`Kinematics::bias_forces_into`] works in, kept between calls so that it does
+/// not allocate.
+#[derive(Debug, Clone)]
+pub struct ForceScratch<T = f64> {
+    origin_velocity: Vec<[T; 2]>,
+    omega: Vec<T>,
+}
+
+impl<T> Default for ForceScratch<T> {
+    fn default() -> Self {
+        ForceScratch {
+            origin_velocity: Vec::new(),
+            omega: Vec::new(),
+        }
     }
 }

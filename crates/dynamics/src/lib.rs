@@ -45,7 +45,7 @@ pub use derivative::{
 };
 pub use error::{DynamicsError, SceneProblem};
 pub use jet::{Jet, Jet1};
-pub use kinematics::{Kinematics, Ring, Scalar};
+pub use kinematics::{ForceScratch, Kinematics, Ring, Scalar};
 pub use scene::{
     Body, BodySpec, ConstraintRow, ContactPair, ContactSpec, Coordinate, CoordinateKind,
     DENSITY_RANGE, Fixed, FixedSpec, JointKind, JointSpec, MAX_BODIES, MAX_CONTACTS, MAX_DAMPING,

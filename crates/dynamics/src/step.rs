@@ -197,6 +197,36 @@ pub struct StepData {
     pub(crate) derivatives: Option<crate::derivative::StepDerivatives>,
     /// What the second derivatives of `step` keep besides its first ([`Model::calc_diff2_prepare`]).
     pub(crate) second: Option<crate::derivative::SecondOrderParts>,
+    /// The ingredients [`Model::step`] assembles its problem from, kept so that the next step refills
+    /// them without allocating.
+    ingredients: Ingredients,
+    /// The solve's and the correction's scratch space, likewise.
+    solve: SolveScratch,
+}
+
+/// The ingredients of a step ([`Model::step`]), sized by the first step and refilled by every later one:
+/// the kinematics, `M`, `r + B u`, the rows and the buffers of the mixed LCP.
+#[derive(Debug, Default)]
+struct Ingredients {
+    kin: Option<Kinematics<f64>>,
+    M: Vec<f64>,
+    r: Vec<f64>,
+    forces: crate::kinematics::ForceScratch<f64>,
+    cons: Option<Constraints<f64>>,
+    /// The last problem's `M` and `q`, given back for the next one.
+    lcp: (Vec<f64>, Vec<f64>),
+    /// The drag check's Cholesky factor and `W`.
+    drag: (Vec<f64>, Vec<f64>),
+}
+
+/// The scratch space of a step's solve: the rows' NCP functions, the iterate, the position correction
+/// and its matrices.
+#[derive(Debug, Default)]
+struct SolveScratch {
+    functions: Vec<NcpFunction>,
+    z: Vec<f64>,
+    correction: Vec<f64>,
+    correcting: CorrectionScratch<f64>,
 }
 
 impl StepData {
@@ -334,6 +364,8 @@ impl Model {
             step: None,
             derivatives: None,
             second: None,
+            ingredients: Ingredients::default(),
+            solve: SolveScratch::default(),
         }
     }
 
@@ -409,31 +441,12 @@ impl Model {
 
     /// The mixed LCP of the step from `x` under `u`, with the start-of-step quantities.
     pub fn problem(&self, x: &[f64], u: &[f64]) -> Result<(LinearMcp, Constraints), DynamicsError> {
-        self.problem_with(x, u, None)
-    }
-
-    /// [`Model::problem`] with optional extra generalised forces (checked by the caller).
-    pub(crate) fn problem_with(
-        &self,
-        x: &[f64],
-        u: &[f64],
-        forces: Option<&[f64]>,
-    ) -> Result<(LinearMcp, Constraints), DynamicsError> {
-        let scene = &self.scene;
-        let n = scene.n_dof();
-        check("x", x, scene.n_state())?;
-        check("u", u, scene.n_controls)?;
-        let (q, v) = x.split_at(n);
-        let kin = Kinematics::new(scene, q);
-        let mut M = kin.mass_matrix(scene);
-        self.check_drag(&M)?;
-        self.with_drag(&mut M);
-        let mut r = kin.applied_forces(scene, v, u);
-        for (r, f) in r.iter_mut().zip(forces.unwrap_or_default()) {
-            *r += f;
-        }
-        let cons = Constraints::new(scene, &kin, q)?;
-        self.assemble_problem(v, &M, &r, cons)
+        check("x", x, self.scene.n_state())?;
+        check("u", u, self.scene.n_controls)?;
+        let mut ing = Ingredients::default();
+        let problem = self.ingredients_into(&mut ing, &[], x, u)?;
+        let cons = ing.cons.expect("filled by ingredients_into");
+        Ok((problem, cons))
     }
 
     /// A row's distance as the step's constraint velocity sees it: `max(d, -recovery)`
@@ -508,14 +521,39 @@ impl Model {
         jacobian: &[T],
         d: &[T],
     ) -> Vec<T> {
+        let mut dq = Vec::new();
+        self.position_correction_into(M, jacobian, d, &mut dq, &mut CorrectionScratch::default());
+        dq
+    }
+
+    /// [`Model::position_correction`] into `dq`, its working matrices in `scratch` (no allocation once
+    /// they have grown to the penetrated constraints' count).
+    pub(crate) fn position_correction_into<T: Ring>(
+        &self,
+        M: impl Fn(usize) -> T,
+        jacobian: &[T],
+        d: &[T],
+        dq: &mut Vec<T>,
+        scratch: &mut CorrectionScratch<T>,
+    ) {
         let n = self.scene.n_dof();
         let zero = T::from(0.0);
+        dq.clear();
+        dq.resize(n, zero);
         let depth = match self.settings.recovery {
             Some(r) if r.is_finite() => r,
-            _ => return vec![zero; n],
+            _ => return,
         };
+        let CorrectionScratch {
+            active,
+            jp,
+            rhs,
+            l,
+            y,
+            a,
+        } = scratch;
         // The penetrated constraints: (row, second row of the pair if any).
-        let mut active: Vec<(usize, Option<usize>)> = Vec::new();
+        active.clear();
         let rows = self.scene.rows();
         let mut k = 0;
         while k < rows.len() {
@@ -526,12 +564,14 @@ impl Model {
             k += if pair { 2 } else { 1 };
         }
         if active.is_empty() {
-            return vec![zero; n];
+            return;
         }
         let p = active.len();
         // J_P (p x n): a pair's normal row is the mean of its two edges.
-        let mut jp = vec![zero; p * n];
-        let mut rhs = vec![zero; p];
+        jp.clear();
+        jp.resize(p * n, zero);
+        rhs.clear();
+        rhs.resize(p, zero);
         for (a, &(k, other)) in active.iter().enumerate() {
             for j in 0..n {
                 jp[a * n + j] = match other {
@@ -542,7 +582,8 @@ impl Model {
             rhs[a] = -(d[k] + depth);
         }
         // Y = M^-1 J_P^T (n x p, column a at y[a n..]), by Cholesky of M.
-        let mut l: Vec<T> = (0..n * n).map(M).collect();
+        l.clear();
+        l.extend((0..n * n).map(M));
         // W = M + sum_b (m_b rho_b^2 - I_b) t_b t_b^T: each body turns as a ring of its largest semi-axis.
         for (b, body) in self.scene.bodies.iter().enumerate() {
             let rho = body.shape.a().max(body.shape.b());
@@ -554,15 +595,17 @@ impl Model {
                 }
             }
         }
-        if !cholesky_in_place(&mut l, n) {
-            return vec![zero; n];
+        if !cholesky_in_place(l, n) {
+            return;
         }
-        let mut y = jp.clone();
+        y.clear();
+        y.extend_from_slice(jp);
         for col in y.chunks_exact_mut(n) {
-            cholesky_solve(&l, n, col);
+            cholesky_solve(l, n, col);
         }
         // A = J_P Y + eps I, solved by Gaussian elimination without pivoting (A is positive definite).
-        let mut a = vec![zero; p * p];
+        a.clear();
+        a.resize(p * p, zero);
         for r in 0..p {
             for c in 0..p {
                 let mut e = zero;
@@ -601,15 +644,11 @@ impl Model {
             }
             rhs[r] = rhs[r] / a[r * p + r];
         }
-        let mut dq: Vec<T> = (0..n)
-            .map(|i| {
-                let mut e = zero;
-                for c in 0..p {
-                    e += y[c * n + i] * rhs[c];
-                }
-                e
-            })
-            .collect();
+        for (i, e) in dq.iter_mut().enumerate() {
+            for c in 0..p {
+                *e += y[c * n + i] * rhs[c];
+            }
+        }
         // |dq|_W^2 = mu^T J_P dq (W dq = J_P^T mu); past the trust region, dq is shortened onto it.
         let mut norm = zero;
         for (r, &mu) in rhs.iter().enumerate() {
@@ -621,11 +660,10 @@ impl Model {
         }
         if norm.value() > budget.value() {
             let shrink = (budget / norm).square_root();
-            for e in &mut dq {
+            for e in dq.iter_mut() {
                 *e = *e * shrink;
             }
         }
-        dq
     }
 
     /// Implicit drag ([`Drag::Implicit`]): `M + h D` in place of `M` in the step's equations (with `r`
@@ -644,6 +682,16 @@ impl Model {
     /// `S = W^T W`, at most its trace `|W|_F^2`: that bound settles the usual case in a few flops, and the
     /// eigenvalue itself is computed only when the bound is above `2 / h`.
     pub(crate) fn check_drag<T: Ring>(&self, M: &[T]) -> Result<(), DynamicsError> {
+        self.check_drag_in(M, &mut (Vec::new(), Vec::new()))
+    }
+
+    /// [`Model::check_drag`] with its Cholesky factor and `W` in `scratch` (no allocation once they have
+    /// the scene's size, unless the bound calls for the eigenvalue).
+    fn check_drag_in<T: Ring>(
+        &self,
+        M: &[T],
+        (l, w): &mut (Vec<f64>, Vec<f64>),
+    ) -> Result<(), DynamicsError> {
         let h = self.settings.h;
         let scene = &self.scene;
         if self.settings.drag == Drag::Implicit
@@ -653,13 +701,15 @@ impl Model {
         }
         let n = scene.n_dof();
         // Cholesky in place (lower), then W = L^-1 D^1/2 column by column.
-        let mut l: Vec<f64> = M.iter().map(Ring::value).collect();
-        if !cholesky_in_place(&mut l, n) {
+        l.clear();
+        l.extend(M.iter().map(Ring::value));
+        if !cholesky_in_place(l, n) {
             return Err(DynamicsError::Unsupported(
                 "the mass matrix is not positive definite at this state",
             ));
         }
-        let mut w = vec![0.0; n * n];
+        w.clear();
+        w.resize(n * n, 0.0);
         for (c, coordinate) in scene.coordinates.iter().enumerate() {
             let root = coordinate.damping.sqrt();
             if root == 0.0 {
@@ -676,7 +726,7 @@ impl Model {
         if h * w.iter().map(|e| e * e).sum::<f64>() <= 2.0 {
             return Ok(());
         }
-        let w = nalgebra::DMatrix::from_row_slice(n, n, &w);
+        let w = nalgebra::DMatrix::from_row_slice(n, n, w);
         let s = w.transpose() * w;
         let eigen = s.clone().symmetric_eigen();
         let (k, lambda) = eigen.eigenvalues.iter().copied().enumerate().fold(
@@ -705,12 +755,28 @@ impl Model {
         r: &[f64],
         cons: Constraints,
     ) -> Result<(LinearMcp, Constraints), DynamicsError> {
+        let problem = self.assemble_into(v, M, r, &cons, (Vec::new(), Vec::new()))?;
+        Ok((problem, cons))
+    }
+
+    /// [`Model::assemble_problem`] in the buffers `(a, b)` of an earlier problem (no allocation once they
+    /// have its size).
+    fn assemble_into(
+        &self,
+        v: &[f64],
+        M: &[f64],
+        r: &[f64],
+        cons: &Constraints,
+        (mut a, mut b): (Vec<f64>, Vec<f64>),
+    ) -> Result<LinearMcp, DynamicsError> {
         let n = self.scene.n_dof();
         let m = cons.d.len();
         let h = self.settings.h;
         let dim = n + m;
-        let mut a = vec![0.0; dim * dim];
-        let mut b = vec![0.0; dim];
+        a.clear();
+        a.resize(dim * dim, 0.0);
+        b.clear();
+        b.resize(dim, 0.0);
         for i in 0..n {
             for j in 0..n {
                 a[i * dim + j] = M[i * n + j];
@@ -726,7 +792,7 @@ impl Model {
             }
             b[n + k] = self.recovered(cons.d[k]) / h;
         }
-        Ok((LinearMcp::from_row_major(n, a, b)?, cons))
+        Ok(LinearMcp::from_row_major(n, a, b)?)
     }
 
     /// How far the answer `z` of the step's problem leaves a row's constraint broken at the end of the step:
@@ -749,7 +815,8 @@ impl Model {
 
     /// One step from `x` under the controls `u`, with `data`'s applied forces, started from its warm
     /// start; the step is kept in `data` (for [`Model::derivatives`], and its solution as the next warm
-    /// start) and returned.
+    /// start) and returned. Its ingredients and scratch space live in `data` too: after the first step,
+    /// a step of a smoothed model allocates nothing (tests/alloc).
     #[tracing::instrument(name = "dynamics.step", level = "debug", skip_all)]
     pub fn step<'d>(
         &self,
@@ -758,34 +825,83 @@ impl Model {
         u: &[f64],
     ) -> Result<&'d Step, DynamicsError> {
         self.check_data(data)?;
-        let forces = (!data.forces.is_empty()).then_some(&data.forces[..]);
-        let problem = self.problem_with(x, u, forces)?;
-        self.solve_into(data, x, u, problem)?;
+        let scene = &self.scene;
+        check("x", x, scene.n_state())?;
+        check("u", u, scene.n_controls)?;
+        let mut ing = std::mem::take(&mut data.ingredients);
+        let problem = self.ingredients_into(&mut ing, &data.forces, x, u);
+        let solved = problem.and_then(|problem| {
+            let cons = ing.cons.as_ref().expect("filled by ingredients_into");
+            self.solve_into(data, x, u, problem, cons)
+        });
+        let solved = solved.map(|problem| ing.lcp = problem.into_row_major());
+        data.ingredients = ing;
+        solved?;
         Ok(data.step.as_ref().expect("stored by solve_into"))
     }
 
+    /// The step's ingredients at `x` under `u` and the applied `forces` (empty: none) refilled in `ing`,
+    /// and its mixed LCP assembled in `ing`'s buffers ([`Model::problem`] without allocating). `x` and
+    /// `u` were checked.
+    fn ingredients_into(
+        &self,
+        ing: &mut Ingredients,
+        forces: &[f64],
+        x: &[f64],
+        u: &[f64],
+    ) -> Result<LinearMcp, DynamicsError> {
+        let scene = &self.scene;
+        let (q, v) = x.split_at(scene.n_dof());
+        let kin = match &mut ing.kin {
+            Some(kin) => {
+                kin.update(scene, q);
+                kin
+            }
+            None => ing.kin.insert(Kinematics::new(scene, q)),
+        };
+        kin.mass_matrix_into(scene, &mut ing.M);
+        self.check_drag_in(&ing.M, &mut ing.drag)?;
+        self.with_drag(&mut ing.M);
+        kin.applied_forces_into(scene, v, u, &mut ing.r, &mut ing.forces);
+        for (r, f) in ing.r.iter_mut().zip(forces) {
+            *r += f;
+        }
+        let cons = match &mut ing.cons {
+            Some(cons) => {
+                cons.update(scene, kin, q)?;
+                cons
+            }
+            None => ing.cons.insert(Constraints::new(scene, kin, q)?),
+        };
+        self.assemble_into(v, &ing.M, &ing.r, cons, std::mem::take(&mut ing.lcp))
+    }
+
     /// Solve the step's mixed LCP from `data`'s warm start and keep the step, its point and its solution
-    /// in `data`; returns the problem (whose matrix the derivatives reuse). `x` and `u` were checked.
+    /// in `data` (refilling the vectors of the step it held); returns the problem (whose matrix the
+    /// derivatives reuse). `x` and `u` were checked.
     pub(crate) fn solve_into(
         &self,
         data: &mut StepData,
         x: &[f64],
         u: &[f64],
-        (problem, cons): (LinearMcp, Constraints),
+        problem: LinearMcp,
+        cons: &Constraints,
     ) -> Result<LinearMcp, DynamicsError> {
         let n = self.scene.n_dof();
         let m = cons.d.len();
-        data.step = None;
+        let mut holder = data.step.take();
         data.derivatives = None;
         data.second = None;
-        let mut z = match &data.warm {
-            Some(w) if w.len() == n + m => w.clone(),
+        let scratch = &mut data.solve;
+        let z = &mut scratch.z;
+        z.clear();
+        match &data.warm {
+            Some(w) if w.len() == n + m => z.extend_from_slice(w),
             _ => {
-                let mut z = vec![0.0; n + m];
-                z[..n].copy_from_slice(&x[n..]);
-                z
+                z.extend_from_slice(&x[n..]);
+                z.resize(n + m, 0.0);
             }
-        };
+        }
         let sigmas = |sigma: f64| -> Vec<f64> {
             match &self.covariance {
                 None => vec![sigma; m],
@@ -795,56 +911,107 @@ impl Model {
         let info = match self.settings.model {
             Complementarity::Hard => {
                 let s = lemke(&problem, &LemkeSettings::default())?;
-                z = s.z;
+                z.copy_from_slice(&s.z);
                 s.info
             }
             Complementarity::Logistic { sigma } => {
-                let functions: Vec<NcpFunction> = sigmas(sigma)
-                    .into_iter()
-                    .map(|sigma| NcpFunction::Logistic { sigma })
-                    .collect();
+                let functions = &mut scratch.functions;
+                functions.clear();
+                match &self.covariance {
+                    None => functions.resize(m, NcpFunction::Logistic { sigma }),
+                    Some(_) => functions.extend(
+                        sigmas(sigma)
+                            .into_iter()
+                            .map(|sigma| NcpFunction::Logistic { sigma }),
+                    ),
+                }
                 // The model's settings rule, whichever model of these sizes created the data.
                 if data.newton.settings() != &self.settings.newton {
                     data.newton = NewtonSolver::new(self.settings.newton)?;
                 }
-                data.newton.solve_in_place(&problem, &functions, &mut z)?
+                data.newton.solve_in_place(&problem, functions, z)?
             }
             Complementarity::Normal { sigma } => {
-                let s = self.erm.solve(&problem, &sigmas(sigma), &z)?;
-                z = s.z;
+                let s = self.erm.solve(&problem, &sigmas(sigma), z)?;
+                z.copy_from_slice(&s.z);
                 s.info
             }
         };
         let h = self.settings.h;
         let mut info = info;
-        if info.status == ncp::Status::Converged && self.violation(&problem, &z) > STEP_TOLERANCE {
+        if info.status == ncp::Status::Converged && self.violation(&problem, z) > STEP_TOLERANCE {
             info.status = ncp::Status::Violated;
         }
         // M is the problem's leading block (implicit drag included), read in place.
         let (dim, a) = (n + m, problem.m_row_major());
-        let correction =
-            self.position_correction(|e| a[(e / n) * dim + e % n], &cons.jacobian, &cons.d);
-        let mut x_next = vec![0.0; 2 * n];
-        for i in 0..n {
-            x_next[i] = x[i] + correction[i] + h * z[i];
-            x_next[n + i] = z[i];
+        let correction = &mut scratch.correction;
+        self.position_correction_into(
+            |e| a[(e / n) * dim + e % n],
+            &cons.jacobian,
+            &cons.d,
+            correction,
+            &mut scratch.correcting,
+        );
+        let step = holder.get_or_insert_with(|| Step {
+            x_next: Vec::new(),
+            lambda: Vec::new(),
+            d: Vec::new(),
+            contacts: Vec::new(),
+            impulses: Vec::new(),
+            info,
+        });
+        step.x_next.clear();
+        step.x_next
+            .extend((0..n).map(|i| x[i] + correction[i] + h * z[i]));
+        step.x_next.extend_from_slice(&z[..n]);
+        step.lambda.clear();
+        step.lambda.extend_from_slice(&z[n..]);
+        step.d.clear();
+        step.d.extend_from_slice(&cons.d);
+        step.contacts.clear();
+        step.contacts.extend_from_slice(&cons.contacts);
+        ContactImpulse::of_into(
+            &self.scene,
+            &step.lambda,
+            &cons.contacts,
+            &mut step.impulses,
+        );
+        step.info = info;
+        match &mut data.warm {
+            Some(w) => std::mem::swap(w, z),
+            None => data.warm = Some(z.clone()),
         }
-        let lambda = z[n..].to_vec();
-        data.warm = Some(z);
-        let impulses = ContactImpulse::of(&self.scene, &lambda, &cons.contacts);
         data.x.clear();
         data.x.extend_from_slice(x);
         data.u.clear();
         data.u.extend_from_slice(u);
-        data.step = Some(Step {
-            x_next,
-            lambda,
-            d: cons.d,
-            contacts: cons.contacts,
-            impulses,
-            info,
-        });
+        data.step = holder;
         Ok(problem)
+    }
+}
+
+/// The working matrices of [`Model::position_correction_into`]: the penetrated constraints, `J_P`, the
+/// right-hand side, the Cholesky factor of `W`, `W^-1 J_P^T` and `A`.
+#[derive(Debug)]
+pub(crate) struct CorrectionScratch<T> {
+    active: Vec<(usize, Option<usize>)>,
+    jp: Vec<T>,
+    rhs: Vec<T>,
+    l: Vec<T>,
+    y: Vec<T>,
+    a: Vec<T>,
+}
+
+impl<T> Default for CorrectionScratch<T> {
+    fn default() -> Self {
+        CorrectionScratch {
+            active: Vec::new(),
+            jp: Vec::new(),
+            rhs: Vec::new(),
+            l: Vec::new(),
+            y: Vec::new(),
+            a: Vec::new(),
+        }
     }
 }
 

@@ -95,6 +95,12 @@ impl LinearMcp {
         Ok(LinearMcp { n, n_free, m, q })
     }
 
+    /// `M` row-major and `q`, given back (to be refilled for the next problem of the same size without
+    /// allocating, [`LinearMcp::from_row_major`]).
+    pub fn into_row_major(self) -> (Vec<f64>, Vec<f64>) {
+        (self.m, self.q)
+    }
+
     /// `M` as a faer matrix.
     pub fn matrix(&self) -> Mat<f64> {
         Mat::from_fn(self.n, self.n, |i, j| self.m[i * self.n + j])

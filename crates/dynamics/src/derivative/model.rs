@@ -376,10 +376,10 @@ impl Model {
         for (r, f) in r.iter_mut().zip(source.data().forces()) {
             *r += f;
         }
-        let problem = self.assemble_problem(&x[n..], &M, &r, cons)?;
+        let (problem, cons) = self.assemble_problem(&x[n..], &M, &r, cons)?;
         let problem = match source {
-            Source::Stored(_) => problem.0,
-            Source::Solve(data) => self.solve_into(data, x, u, problem)?,
+            Source::Stored(_) => problem,
+            Source::Solve(data) => self.solve_into(data, x, u, problem, &cons)?,
         };
         let step = source
             .data()

@@ -1,0 +1,86 @@
+//! Steady state allocates nothing (issue 29): a counting global allocator (allocation-counter, counting
+//! on the calling thread) around the calls that run every step of a rollout, once the data they fill
+//! has been sized by a first pass over the same work.
+
+use dynamics::{Complementarity, Model, StepData, StepSettings};
+use task::ProblemFile;
+
+/// The task's start and `steps` controls that swing the actuators both ways (so that contacts open and
+/// close along the way).
+fn rollout_of(file: &str, task: &str, steps: usize) -> (Model, Vec<f64>, Vec<Vec<f64>>) {
+    let problem = ProblemFile::from_toml_str(file).expect("a scene file of the repository");
+    let task = problem.task(Some(task)).expect("its task");
+    let model = Model::new(
+        problem.scene.clone(),
+        StepSettings {
+            model: task.model.complementarity(),
+            h: task.h,
+            ..StepSettings::default()
+        },
+    )
+    .expect("the task's model");
+    let m = problem.scene.n_controls;
+    let controls = (0..steps)
+        .map(|k| {
+            (0..m)
+                .map(|a| 0.8 * ((0.21 * k as f64) + a as f64).sin())
+                .collect()
+        })
+        .collect();
+    (model, task.x0.clone(), controls)
+}
+
+/// Roll `controls` out from `x0` with `model` in `data`; the final state.
+fn roll(model: &Model, data: &mut StepData, x0: &[f64], controls: &[Vec<f64>], x: &mut Vec<f64>) {
+    x.clear();
+    x.extend_from_slice(x0);
+    for u in controls {
+        let step = model.step(data, x, u).expect("a step of the rollout");
+        x.copy_from_slice(&step.x_next);
+    }
+}
+
+/// A rollout's steps, after a first rollout sized the data, allocate nothing: the step's ingredients
+/// (kinematics, mass matrix, forces, rows, the mixed LCP), the solve's iterate and NCP functions, the
+/// position correction and the step it returns are all refilled in place.
+fn steps_allocate_nothing(file: &str, task: &str) {
+    let (model, x0, controls) = rollout_of(file, task, 200);
+    assert!(matches!(
+        model.settings().model,
+        Complementarity::Logistic { .. }
+    ));
+    let mut data = model.create_data();
+    let mut x = Vec::with_capacity(x0.len());
+    roll(&model, &mut data, &x0, &controls, &mut x);
+    let first = x.clone();
+    // The same rollout again, from the last one's warm starts: the same buffers suffice.
+    let info = allocation_counter::measure(|| roll(&model, &mut data, &x0, &controls, &mut x));
+    assert_eq!(
+        info.count_total, 0,
+        "{task}: {} allocations ({} bytes) over 200 steps",
+        info.count_total, info.bytes_total
+    );
+    // It did the work: the state moved, and the same rollout gives the same end to solver tolerance.
+    assert!(x.iter().zip(&x0).any(|(a, b)| (a - b).abs() > 1e-3));
+    for (a, b) in x.iter().zip(&first) {
+        assert!((a - b).abs() < 1e-6, "{a} against {b}");
+    }
+}
+
+#[test]
+fn the_counter_counts_this_thread_s_allocations() {
+    let info = allocation_counter::measure(|| {
+        std::hint::black_box(vec![0.0f64; 8]);
+    });
+    assert_eq!(info.count_total, 1);
+}
+
+#[test]
+fn a_finger_step_allocates_nothing_in_steady_state() {
+    steps_allocate_nothing(include_str!("../../scenes/finger.toml"), "spin");
+}
+
+#[test]
+fn a_pushing_step_allocates_nothing_in_steady_state() {
+    steps_allocate_nothing(include_str!("../../scenes/pushing.toml"), "push");
+}
