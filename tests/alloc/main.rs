@@ -84,3 +84,38 @@ fn a_finger_step_allocates_nothing_in_steady_state() {
 fn a_pushing_step_allocates_nothing_in_steady_state() {
     steps_allocate_nothing(include_str!("../../scenes/pushing.toml"), "push");
 }
+
+/// The optimiser's own passes allocate nothing: on the unicycle, whose dynamics and cost allocate
+/// nothing, a solve of nine passes allocates exactly what one of three does (the workspace, the
+/// solution), for full DDP and for iLQR alike.
+#[test]
+fn an_optimiser_pass_allocates_nothing_of_its_own() {
+    use ddp::problems::Unicycle;
+    use ddp::{Ddp, DdpSettings, Method};
+    for method in [Method::Full, Method::GaussNewton] {
+        let solve = |passes: usize| {
+            // A tolerance no pass meets: every solve runs its whole pass budget.
+            let ddp = Ddp::new(DdpSettings {
+                max_iterations: passes,
+                tol_cost: 1e-300,
+                method,
+                ..DdpSettings::default()
+            })
+            .expect("settings");
+            let (x0, zero) = (Unicycle::X0.to_vec(), vec![vec![0.0; 2]; 75]);
+            let mut ran = 0;
+            let info = allocation_counter::measure(|| {
+                let cost = Unicycle::benchmark_cost();
+                let s = ddp.solve(&Unicycle { dt: 0.1 }, &cost, &x0, &zero);
+                ran = s.expect("the unicycle solves").iterations.len();
+            });
+            (info.count_total, ran)
+        };
+        let ((three, ran3), (nine, ran9)) = (solve(3), solve(9));
+        assert_eq!((ran3, ran9), (3, 9), "{method:?}");
+        assert_eq!(
+            three, nine,
+            "{method:?}: {three} allocations in 3 passes, {nine} in 9"
+        );
+    }
+}

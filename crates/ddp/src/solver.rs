@@ -16,6 +16,10 @@ use std::sync::{Arc, Mutex};
 /// this has converged rather than failed.
 pub const RESOLUTION: f64 = 1e-10;
 
+/// Pass records a solve reserves room for up front (its pass limit, up to this many): within them a pass
+/// of the optimiser allocates nothing of its own; the dynamics' and the cost's calls are theirs.
+const RESERVED_RECORDS: usize = 4096;
+
 /// Why the optimiser stopped.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub enum Status {
@@ -232,7 +236,8 @@ impl Ddp {
         let mut mu = s.mu_init;
         let mut dmu = 1.0f64;
         let mut first_alpha = 0usize;
-        let mut iterations = Vec::new();
+        // One record per pass, reserved up front so that a pass allocates nothing of its own.
+        let mut iterations = Vec::with_capacity(s.max_iterations.min(RESERVED_RECORDS));
         let mut record = |iterations: &mut Vec<Iteration>, it: Iteration| {
             observe(&it);
             iterations.push(it);

@@ -828,13 +828,15 @@ impl Model {
         let scene = &self.scene;
         check("x", x, scene.n_state())?;
         check("u", u, scene.n_controls)?;
+        // Taken out while the solve writes the rest of the data, put back whatever happens.
         let mut ing = std::mem::take(&mut data.ingredients);
-        let problem = self.ingredients_into(&mut ing, &data.forces, x, u);
-        let solved = problem.and_then(|problem| {
-            let cons = ing.cons.as_ref().expect("filled by ingredients_into");
-            self.solve_into(data, x, u, problem, cons)
-        });
-        let solved = solved.map(|problem| ing.lcp = problem.into_row_major());
+        let solved = self
+            .ingredients_into(&mut ing, &data.forces, x, u)
+            .and_then(|problem| {
+                let cons = ing.cons.as_ref().expect("filled by ingredients_into");
+                self.solve_into(data, x, u, problem, cons)
+            })
+            .map(|problem| ing.lcp = problem.into_row_major());
         data.ingredients = ing;
         solved?;
         Ok(data.step.as_ref().expect("stored by solve_into"))
