@@ -199,7 +199,7 @@ pub struct StepData {
     pub(crate) second: Option<crate::derivative::SecondOrderParts>,
     /// The ingredients [`Model::step`] assembles its problem from, kept so that the next step refills
     /// them without allocating.
-    ingredients: Ingredients,
+    ingredients: StepIngredients,
     /// The solve's and the correction's scratch space, likewise.
     solve: SolveScratch,
 }
@@ -207,7 +207,7 @@ pub struct StepData {
 /// The ingredients of a step ([`Model::step`]), sized by the first step and refilled by every later one:
 /// the kinematics, `M`, `r + B u`, the rows and the buffers of the mixed LCP.
 #[derive(Debug, Default)]
-struct Ingredients {
+struct StepIngredients {
     kin: Option<Kinematics<f64>>,
     M: Vec<f64>,
     r: Vec<f64>,
@@ -364,7 +364,7 @@ impl Model {
             step: None,
             derivatives: None,
             second: None,
-            ingredients: Ingredients::default(),
+            ingredients: StepIngredients::default(),
             solve: SolveScratch::default(),
         }
     }
@@ -443,7 +443,7 @@ impl Model {
     pub fn problem(&self, x: &[f64], u: &[f64]) -> Result<(LinearMcp, Constraints), DynamicsError> {
         check("x", x, self.scene.n_state())?;
         check("u", u, self.scene.n_controls)?;
-        let mut ing = Ingredients::default();
+        let mut ing = StepIngredients::default();
         let problem = self.ingredients_into(&mut ing, &[], x, u)?;
         let cons = ing.cons.expect("filled by ingredients_into");
         Ok((problem, cons))
@@ -847,7 +847,7 @@ impl Model {
     /// `u` were checked.
     fn ingredients_into(
         &self,
-        ing: &mut Ingredients,
+        ing: &mut StepIngredients,
         forces: &[f64],
         x: &[f64],
         u: &[f64],
