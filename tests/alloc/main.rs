@@ -6,14 +6,23 @@ use dynamics::{Complementarity, Model, StepData, StepSettings};
 use task::ProblemFile;
 
 /// The task's start and `steps` controls that swing the actuators both ways (so that contacts open and
-/// close along the way).
-fn rollout_of(file: &str, task: &str, steps: usize) -> (Model, Vec<f64>, Vec<Vec<f64>>) {
+/// close along the way), on the task's model or on hard contact.
+fn rollout_of(
+    file: &str,
+    task: &str,
+    steps: usize,
+    hard: bool,
+) -> (Model, Vec<f64>, Vec<Vec<f64>>) {
     let problem = ProblemFile::from_toml_str(file).expect("a scene file of the repository");
     let task = problem.task(Some(task)).expect("its task");
     let model = Model::new(
         problem.scene.clone(),
         StepSettings {
-            model: task.model.complementarity(),
+            model: if hard {
+                Complementarity::Hard
+            } else {
+                task.model.complementarity()
+            },
             h: task.h,
             ..StepSettings::default()
         },
@@ -41,14 +50,10 @@ fn roll(model: &Model, data: &mut StepData, x0: &[f64], controls: &[Vec<f64>], x
 }
 
 /// A rollout's steps, after a first rollout sized the data, allocate nothing: the step's ingredients
-/// (kinematics, mass matrix, forces, rows, the mixed LCP), the solve's iterate and NCP functions, the
-/// position correction and the step it returns are all refilled in place.
-fn steps_allocate_nothing(file: &str, task: &str) {
-    let (model, x0, controls) = rollout_of(file, task, 200);
-    assert!(matches!(
-        model.settings().model,
-        Complementarity::Logistic { .. }
-    ));
+/// (kinematics, mass matrix, forces, rows, the mixed LCP), the solve's iterate and NCP functions (or
+/// Lemke's workspace), the position correction and the step it returns are all refilled in place.
+fn steps_allocate_nothing(file: &str, task: &str, hard: bool) {
+    let (model, x0, controls) = rollout_of(file, task, 200, hard);
     let mut data = model.create_data();
     let mut x = Vec::with_capacity(x0.len());
     roll(&model, &mut data, &x0, &controls, &mut x);
@@ -57,7 +62,7 @@ fn steps_allocate_nothing(file: &str, task: &str) {
     let info = allocation_counter::measure(|| roll(&model, &mut data, &x0, &controls, &mut x));
     assert_eq!(
         info.count_total, 0,
-        "{task}: {} allocations ({} bytes) over 200 steps",
+        "{task} (hard: {hard}): {} allocations ({} bytes) over 200 steps",
         info.count_total, info.bytes_total
     );
     // It did the work: the state moved, and the same rollout gives the same end to solver tolerance.
@@ -77,12 +82,16 @@ fn the_counter_counts_this_thread_s_allocations() {
 
 #[test]
 fn a_finger_step_allocates_nothing_in_steady_state() {
-    steps_allocate_nothing(include_str!("../../scenes/finger.toml"), "spin");
+    for hard in [false, true] {
+        steps_allocate_nothing(include_str!("../../scenes/finger.toml"), "spin", hard);
+    }
 }
 
 #[test]
 fn a_pushing_step_allocates_nothing_in_steady_state() {
-    steps_allocate_nothing(include_str!("../../scenes/pushing.toml"), "push");
+    for hard in [false, true] {
+        steps_allocate_nothing(include_str!("../../scenes/pushing.toml"), "push", hard);
+    }
 }
 
 /// The optimiser's own passes allocate nothing: on the unicycle, whose dynamics and cost allocate

@@ -13,10 +13,10 @@ use crate::constraint::{Constraints, ContactFrame, ContactImpulse};
 use crate::error::DynamicsError;
 use crate::kinematics::{Kinematics, Ring};
 use crate::scene::ConstraintRow;
-use crate::scene::Scene;
+use crate::scene::{CoordinateKind, Scene};
 use ncp::{
-    ErmSettings, ErmSolver, Info, LemkeSettings, LinearMcp, NcpFunction, NewtonSettings,
-    NewtonSolver, lemke,
+    ErmSettings, ErmSolver, Info, LemkeSettings, LemkeWorkspace, LinearMcp, NcpFunction,
+    NewtonSettings, NewtonSolver, lemke_in_place,
 };
 use serde::{Deserialize, Serialize};
 
@@ -219,10 +219,11 @@ struct StepIngredients {
     drag: (Vec<f64>, Vec<f64>),
 }
 
-/// The scratch space of a step's solve: the rows' NCP functions, the iterate, the position correction
-/// and its matrices.
+/// The scratch space of a step's solve: Lemke's workspace, the rows' NCP functions, the iterate, the
+/// position correction and its matrices.
 #[derive(Debug, Default)]
 struct SolveScratch {
+    lemke: LemkeWorkspace,
     functions: Vec<NcpFunction>,
     z: Vec<f64>,
     correction: Vec<f64>,
@@ -588,9 +589,12 @@ impl Model {
         for (b, body) in self.scene.bodies.iter().enumerate() {
             let rho = body.shape.a().max(body.shape.b());
             let extra = T::from(body.mass * rho * rho - body.inertia);
-            let turns = self.scene.turning_coordinates(b);
-            for &j in &turns {
-                for &k in &turns {
+            // The angles that turn body b (Scene::turning_coordinates, read in place).
+            let turns = |j: &usize| {
+                self.scene.coordinates[*j].kind == CoordinateKind::Angle && self.scene.moves(*j, b)
+            };
+            for j in (0..n).filter(turns) {
+                for k in (0..n).filter(turns) {
                     l[j * n + k] += extra;
                 }
             }
@@ -815,8 +819,8 @@ impl Model {
 
     /// One step from `x` under the controls `u`, with `data`'s applied forces, started from its warm
     /// start; the step is kept in `data` (for [`Model::derivatives`], and its solution as the next warm
-    /// start) and returned. Its ingredients and scratch space live in `data` too: after the first step,
-    /// a step of a smoothed model allocates nothing (tests/alloc).
+    /// start) and returned. Its ingredients and scratch space live in `data` too: after the first steps,
+    /// a logistic or hard step allocates nothing (tests/alloc; the normal model's ERM solve does).
     #[tracing::instrument(name = "dynamics.step", level = "debug", skip_all)]
     pub fn step<'d>(
         &self,
@@ -912,9 +916,7 @@ impl Model {
         };
         let info = match self.settings.model {
             Complementarity::Hard => {
-                let s = lemke(&problem, &LemkeSettings::default())?;
-                z.copy_from_slice(&s.z);
-                s.info
+                lemke_in_place(&problem, &LemkeSettings::default(), &mut scratch.lemke, z)?
             }
             Complementarity::Logistic { sigma } => {
                 let functions = &mut scratch.functions;

@@ -29,6 +29,10 @@ const INITIAL_CELLS: usize = 4;
 const MAX_EVALUATIONS: usize = 20_000;
 /// Narrowest interval the branch and bound splits, in radians.
 const MIN_CELL: f64 = 1e-13;
+/// Intervals the branch and bound holds at once, at most: it splits the last one it took, so it holds the
+/// initial cells plus one per halving, and `2 pi` halves to [`MIN_CELL`] in 46. Held on the call stack,
+/// the certification allocates nothing.
+const MAX_OPEN_CELLS: usize = 64;
 
 /// One body as the gap sees it: squared semi-axes and orientation, or a single point (zero axes).
 #[derive(Debug, Clone, Copy)]
@@ -243,7 +247,8 @@ impl Gap {
         let curvature_min = self.a.rho_min + self.b.rho_min;
         let curvature_max = self.a.rho_max + self.b.rho_max + self.centre_distance;
         let mut runner_up: Option<GapJet> = None;
-        let mut stack: Vec<(GapJet, GapJet)> = Vec::with_capacity(64);
+        let mut stack = [(best, best); MAX_OPEN_CELLS];
+        let mut open = 0;
         let origin = best.phi;
         let mut left = best;
         for k in 1..=INITIAL_CELLS {
@@ -254,11 +259,14 @@ impl Gap {
                 // The same angle as the start, one turn on: reuse its values exactly.
                 right = GapJet { phi, ..best };
             }
-            stack.push((left, right));
+            stack[open] = (left, right);
+            open += 1;
             left = right;
         }
         let mut certified = true;
-        while let Some((l, r)) = stack.pop() {
+        while open > 0 {
+            open -= 1;
+            let (l, r) = stack[open];
             if lower_bound(&l, &r, curvature_min) >= best.f - tol
                 || self.convex_lower_bound(&l, &r, curvature_max) >= best.f - tol
             {
@@ -284,8 +292,14 @@ impl Gap {
                     best = local;
                 }
             }
-            stack.push((l, mid));
-            stack.push((mid, r));
+            if open + 2 > MAX_OPEN_CELLS {
+                // Past the halving bound: cannot happen above MIN_CELL, never a panic if it did.
+                certified = false;
+                break;
+            }
+            stack[open] = (l, mid);
+            stack[open + 1] = (mid, r);
+            open += 2;
         }
         // A second minimiser within rounding of the best one, away from it, makes the witnesses ambiguous.
         let tie = runner_up.is_some_and(|r| r.f - best.f <= tol * 16.0)

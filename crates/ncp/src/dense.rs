@@ -81,6 +81,15 @@ enum Backend {
     },
 }
 
+/// The hand-written factors workspace in `slot` for `n x n` matrices, made when it holds none of that size
+/// (kept by a caller that factors matrices of one size over and over).
+pub(crate) fn sized(slot: &mut Option<DenseLu>, n: usize) -> &mut DenseLu {
+    if slot.as_ref().is_none_or(|l| l.dim() != n) {
+        *slot = Some(DenseLu::new(n, LinearSolver::Hand));
+    }
+    slot.as_mut().expect("made above")
+}
+
 impl DenseLu {
     /// Workspace for `n x n` matrices with the chosen back end.
     pub fn new(n: usize, solver: LinearSolver) -> Self {

@@ -7,9 +7,9 @@
 //! (a positive row scaling changes neither the solutions nor `z`), and the final basis is refined by one
 //! solve of its linear system with the original data, so the answer is exact to rounding.
 
-use crate::dense::{DenseLu, LinearSolver, inf_norm};
+use crate::dense::{DenseLu, LinearSolver, inf_norm, sized};
 use crate::error::NcpError;
-use crate::problem::{LinearMcp, Mcp};
+use crate::problem::{FreeBlock, LinearMcp, Mcp, Reduced};
 use crate::solution::{Info, Solution, Status};
 use serde::{Deserialize, Serialize};
 
@@ -56,6 +56,37 @@ impl Default for LemkeSettings {
 /// must be non-singular) and Lemke's method solves the rest. `Err(Infeasible)` on ray termination.
 #[tracing::instrument(name = "ncp.lemke", level = "debug", skip_all)]
 pub fn lemke(problem: &LinearMcp, settings: &LemkeSettings) -> Result<Solution, NcpError> {
+    let mut z = vec![0.0; problem.dim()];
+    let mut work = LemkeWorkspace::default();
+    let info = lemke_in_place(problem, settings, &mut work, &mut z)?;
+    Ok(Solution { w: work.w, z, info })
+}
+
+/// Lemke's working storage: the reduced problem, the basis and its factors, the pivots kept in product
+/// form, the ratio test's ties, the final refinement. Kept between solves ([`lemke_in_place`]), it makes a
+/// solve allocate nothing once it has seen the problem's size (a hard step's data keeps one).
+#[derive(Debug, Default)]
+pub struct LemkeWorkspace {
+    reduced: Reduced,
+    /// The free block's factors.
+    free: FreeBlock,
+    covering: Vec<f64>,
+    /// The best answer so far and one attempt's.
+    best: Vec<f64>,
+    lambda: Vec<f64>,
+    attempt: AttemptScratch,
+    /// `w = M z + q` of the answer.
+    w: Vec<f64>,
+}
+
+/// [`lemke`] in `work`, the answer written into `z` (the problem's size; its entries are not read): the
+/// same answer, to the last bit, without allocating once `work` has seen a problem of this size.
+pub fn lemke_in_place(
+    problem: &LinearMcp,
+    settings: &LemkeSettings,
+    work: &mut LemkeWorkspace,
+    z: &mut [f64],
+) -> Result<Info, NcpError> {
     settings.validate()?;
     let rows = problem.dim() - problem.n_free();
     if rows > settings.max_size {
@@ -65,52 +96,64 @@ pub fn lemke(problem: &LinearMcp, settings: &LemkeSettings) -> Result<Solution, 
             max: settings.max_size,
         });
     }
-    let reduced = problem.reduce()?;
-    let lcp = reduced.lcp();
+    if z.len() != problem.dim() {
+        return Err(NcpError::Dimension {
+            what: "z",
+            got: z.len(),
+            expected: problem.dim(),
+        });
+    }
+    let LemkeWorkspace {
+        reduced,
+        free,
+        covering,
+        best,
+        lambda,
+        attempt: scratch,
+        w,
+    } = work;
+    problem.reduce_into(reduced, free)?;
+    let (m, q) = (&reduced.a[..], &reduced.b[..]);
     // Ray termination proves infeasibility in exact arithmetic; in floating point a nearly singular M can
     // end on a ray that does not exist. Before saying "infeasible", retry with other covering vectors (the
     // row scales, then ones, then seeded random multiples of them).
-    let c = lcp.q().len();
-    if let Some(row) = infeasible_row(lcp.m_row_major(), lcp.q()) {
-        return Err(NcpError::InfeasibleRow {
-            row,
-            q: lcp.q()[row],
-        });
+    let c = q.len();
+    if let Some(row) = infeasible_row(m, q) {
+        return Err(NcpError::InfeasibleRow { row, q: q[row] });
     }
     // Judged row by row in the equilibrated problem (each row divided by its largest entry), so that a
     // row scaled by 1e-8 is held to the same standard as one scaled by 1e8.
     let accuracy = 1e-10;
     let mut total = 0;
     let mut rays = 0;
-    // The best answer so far: (residual, lambda, finished).
-    let mut best: Option<(f64, Vec<f64>, bool)> = None;
+    // The best answer so far (in `best`): (residual, finished).
+    let mut found: Option<(f64, bool)> = None;
     for attempt in 0..4u64 {
-        let covering: Vec<f64> = match attempt {
-            0 => vec![1.0; c],
+        covering.clear();
+        match attempt {
+            0 => covering.resize(c, 1.0),
             1 => {
                 // d = 1: undo the row scale.
-                let m = lcp.m_row_major();
-                (0..c)
-                    .map(|i| {
-                        let r = m[i * c..(i + 1) * c]
-                            .iter()
-                            .fold(lcp.q()[i].abs(), |s, v| s.max(v.abs()));
-                        row_scale(r)
-                    })
-                    .collect()
+                covering.extend((0..c).map(|i| {
+                    let r = m[i * c..(i + 1) * c]
+                        .iter()
+                        .fold(q[i].abs(), |s, v| s.max(v.abs()));
+                    row_scale(r)
+                }));
             }
             _ => {
                 let mut rng = crate::rng::SplitMix64::new(attempt);
-                (0..c).map(|_| rng.uniform(0.5, 2.0)).collect()
+                covering.extend((0..c).map(|_| rng.uniform(0.5, 2.0)));
             }
-        };
-        match lemke_lcp(lcp.m_row_major(), lcp.q(), settings.max_pivots, &covering) {
-            Attempt::Solved(lambda, pivots, finished) => {
+        }
+        match lemke_lcp(m, q, settings.max_pivots, covering, scratch, lambda) {
+            Attempt::Solved(pivots, finished) => {
                 total += pivots;
-                let residual = equilibrated_residual(lcp.m_row_major(), lcp.q(), &lambda);
+                let residual = equilibrated_residual(m, q, lambda);
                 let good = residual <= accuracy;
-                if best.as_ref().is_none_or(|b| residual < b.0) {
-                    best = Some((residual, lambda, finished));
+                if found.is_none_or(|b| residual < b.0) {
+                    found = Some((residual, finished));
+                    std::mem::swap(best, lambda);
                 }
                 if good || !finished {
                     break;
@@ -123,7 +166,7 @@ pub fn lemke(problem: &LinearMcp, settings: &LemkeSettings) -> Result<Solution, 
             Attempt::Breakdown(pivots) => total += pivots,
         }
     }
-    let Some((residual, lambda, finished)) = best else {
+    let Some((residual, finished)) = found else {
         // Every attempt ended on a ray (or broke down): report infeasibility only if one saw a ray.
         return Err(if rays > 0 {
             NcpError::Infeasible { pivots: total }
@@ -131,10 +174,10 @@ pub fn lemke(problem: &LinearMcp, settings: &LemkeSettings) -> Result<Solution, 
             NcpError::Unsupported("Lemke's method broke down numerically on every covering vector")
         });
     };
-    let pivots = total;
-    let z = reduced.expand(&lambda);
-    let mut w = vec![0.0; z.len()];
-    problem.evaluate(&z, &mut w, None);
+    reduced.expand_into(best, z);
+    w.clear();
+    w.resize(z.len(), 0.0);
+    problem.evaluate(z, w, None);
     let status = if !finished {
         Status::MaxIterations
     } else if residual <= accuracy {
@@ -142,16 +185,11 @@ pub fn lemke(problem: &LinearMcp, settings: &LemkeSettings) -> Result<Solution, 
     } else {
         Status::Inaccurate
     };
-    let residual = complementarity_residual(problem.n_free(), &z, &w);
-    Ok(Solution {
-        z,
-        w,
-        info: Info {
-            status,
-            iterations: pivots,
-            residual,
-            evaluations: 1,
-        },
+    Ok(Info {
+        status,
+        iterations: total,
+        residual: complementarity_residual(problem.n_free(), z, w),
+        evaluations: 1,
     })
 }
 
@@ -185,26 +223,91 @@ pub fn complementarity_residual(n_free: usize, z: &[f64], w: &[f64]) -> f64 {
         .fold(eq, |m, (a, b)| m.max(a.min(*b).abs()))
 }
 
-/// Lemke on a plain LCP (row-major `m`); returns `z`, the pivot count, and whether it finished.
+/// One attempt's working storage ([`lemke_lcp`]).
+#[derive(Debug, Default)]
+struct AttemptScratch {
+    /// Row scales, the scaled right-hand side, the basis.
+    s: Vec<f64>,
+    rhs: Vec<f64>,
+    basis: Vec<usize>,
+    /// The basis matrix, its factors, a column, the basic solution and the entering column.
+    lu: Option<DenseLu>,
+    b: Vec<f64>,
+    col: Vec<f64>,
+    x: Vec<f64>,
+    a: Vec<f64>,
+    /// The pivots since the last factorisation in product form: each one's row and entering column.
+    eta_rows: Vec<usize>,
+    eta_columns: Vec<f64>,
+    /// Hashes of the bases seen (with their leaving variable), and the sorted basis being hashed.
+    seen: std::collections::HashSet<u64>,
+    key: Vec<usize>,
+    /// The ratio test's eligible rows, its ties, the tied rows of `B^-1` and the ties still alive.
+    eligible: Vec<usize>,
+    ties: Vec<usize>,
+    tie_rows: Vec<f64>,
+    alive: Vec<usize>,
+    /// The refinement's support, system and answer, and its factors by support size.
+    support: Vec<usize>,
+    system: Vec<f64>,
+    solution: Vec<f64>,
+    refined: Vec<f64>,
+    refine_lu: Vec<Option<DenseLu>>,
+}
+
+/// Lemke on a plain LCP (row-major `m`), its `z` written into `z` (resized to `q`'s length); returns the
+/// pivot count and whether it finished.
 ///
 /// The revised form: the tableau is never updated in place. Each pivot factors the current basis matrix
 /// from the original data and solves for the basic solution and the entering column, so rounding errors do
 /// not accumulate over the thousands of pivots of Murty's family or through nearly singular `M`.
-fn lemke_lcp(m: &[f64], q: &[f64], max_pivots: usize, covering: &[f64]) -> Attempt {
+fn lemke_lcp(
+    m: &[f64],
+    q: &[f64],
+    max_pivots: usize,
+    covering: &[f64],
+    scratch: &mut AttemptScratch,
+    z: &mut Vec<f64>,
+) -> Attempt {
     let n = q.len();
+    z.clear();
+    z.resize(n, 0.0);
     if q.iter().all(|&v| v >= 0.0) {
-        return Attempt::Solved(vec![0.0; n], 0, true);
+        return Attempt::Solved(0, true);
     }
+    let AttemptScratch {
+        s,
+        rhs,
+        basis,
+        lu,
+        b,
+        col,
+        x,
+        a,
+        eta_rows,
+        eta_columns,
+        seen,
+        key,
+        eligible,
+        ties,
+        tie_rows,
+        alive,
+        support,
+        system,
+        solution,
+        refined,
+        refine_lu,
+    } = scratch;
     // Row i of the system: w~_i - s_i (M z)_i - z0 = s_i q_i with w~_i = s_i w_i, i.e. covering vector d_i = 1 / s_i, the
     // row's largest entry times `covering[i]`. Variables: w (0..n), z (n..2n), z0 (2n).
-    let s: Vec<f64> = (0..n)
-        .map(|i| {
-            let r = m[i * n..(i + 1) * n]
-                .iter()
-                .fold(q[i].abs(), |a, v| a.max(v.abs()));
-            row_scale(r) / covering[i]
-        })
-        .collect();
+    s.clear();
+    s.extend((0..n).map(|i| {
+        let r = m[i * n..(i + 1) * n]
+            .iter()
+            .fold(q[i].abs(), |a, v| a.max(v.abs()));
+        row_scale(r) / covering[i]
+    }));
+    let s = &s[..];
     let z0 = 2 * n;
     let column = |var: usize, out: &mut [f64]| {
         for i in 0..n {
@@ -218,39 +321,45 @@ fn lemke_lcp(m: &[f64], q: &[f64], max_pivots: usize, covering: &[f64]) -> Attem
             };
         }
     };
-    let rhs: Vec<f64> = (0..n).map(|i| s[i] * q[i]).collect();
-    let mut basis: Vec<usize> = (0..n).collect();
-    let mut lu = DenseLu::new(n, LinearSolver::Hand);
-    let mut b = vec![0.0; n * n];
-    let mut col = vec![0.0; n];
-    let mut x = vec![0.0; n];
-    let mut a = vec![0.0; n];
+    rhs.clear();
+    rhs.extend((0..n).map(|i| s[i] * q[i]));
+    basis.clear();
+    basis.extend(0..n);
+    let lu = sized(lu, n);
+    b.clear();
+    b.resize(n * n, 0.0);
+    for v in [&mut *col, &mut *x, &mut *a] {
+        v.clear();
+        v.resize(n, 0.0);
+    }
     // The basis is factored from the original data every `REFACTOR` pivots (or after a small pivot); the
     // pivots in between are kept in product form, one eta column each
     // (O(n) to apply), so that some n pivots cost O(n^3) in all rather than a factorisation each, O(n^4).
-    let mut etas: Vec<(usize, Vec<f64>)> = Vec::new();
+    eta_rows.clear();
+    eta_columns.clear();
     let mut since_refactor = usize::MAX;
     let mut entering = z0;
     let mut pivots = 0;
-    let mut seen = std::collections::HashSet::new();
+    seen.clear();
     loop {
         if since_refactor >= REFACTOR {
             for (r, &var) in basis.iter().enumerate() {
-                column(var, &mut col);
+                column(var, col);
                 for i in 0..n {
                     b[i * n + r] = col[i];
                 }
             }
-            if lu.factor(&b).is_err() {
+            if lu.factor(b).is_err() {
                 // A singular basis only arises from rounding; let the caller retry with another covering
                 // vector.
                 return Attempt::Breakdown(pivots);
             }
-            etas.clear();
+            eta_rows.clear();
+            eta_columns.clear();
             since_refactor = 0;
         }
-        x.copy_from_slice(&rhs);
-        solve_basis(&mut lu, &etas, &mut x);
+        x.copy_from_slice(rhs);
+        solve_basis(lu, eta_rows, eta_columns, x);
         if !x.iter().all(|v| v.is_finite()) {
             return Attempt::Breakdown(pivots);
         }
@@ -262,8 +371,8 @@ fn lemke_lcp(m: &[f64], q: &[f64], max_pivots: usize, covering: &[f64]) -> Attem
                 *v = 0.0;
             }
         }
-        column(entering, &mut a);
-        solve_basis(&mut lu, &etas, &mut a);
+        column(entering, a);
+        solve_basis(lu, eta_rows, eta_columns, a);
         if !a.iter().all(|v| v.is_finite()) {
             return Attempt::Breakdown(pivots);
         }
@@ -273,9 +382,8 @@ fn lemke_lcp(m: &[f64], q: &[f64], max_pivots: usize, covering: &[f64]) -> Attem
         let sign = if first { -1.0 } else { 1.0 };
         let a_max = a.iter().fold(0.0f64, |acc, v| acc.max(v.abs()));
         let tol = 1e-12 * a_max.max(1.0);
-        let eligible: Vec<usize> = (0..n)
-            .filter(|&i| if first { a[i] < 0.0 } else { a[i] > tol })
-            .collect();
+        eligible.clear();
+        eligible.extend((0..n).filter(|&i| if first { a[i] < 0.0 } else { a[i] > tol }));
         if eligible.is_empty() {
             return Attempt::Ray(pivots);
         }
@@ -285,27 +393,22 @@ fn lemke_lcp(m: &[f64], q: &[f64], max_pivots: usize, covering: &[f64]) -> Attem
             .map(|&i| ratio(i))
             .fold(f64::INFINITY, f64::min);
         let near = |v: f64| (v - best).abs() <= 1e-13 * best.abs().max(1e-300);
-        let mut ties: Vec<usize> = eligible
-            .iter()
-            .copied()
-            .filter(|&i| near(ratio(i)))
-            .collect();
+        ties.clear();
+        ties.extend(eligible.iter().copied().filter(|&i| near(ratio(i))));
         if ties.len() > 1 {
             // The lexicographic rule reads the tied rows of B^-1: each by one transposed solve through
             // the pivots kept in product form and the factors (O(n^2) a row), never all of B^-1. (Column
             // by column would cost a solve per column, and degenerate slacks tie for some n columns.)
-            let rows: Vec<Vec<f64>> = ties
-                .iter()
-                .map(|&i| {
-                    let mut y = vec![0.0; n];
-                    y[i] = 1.0;
-                    basis_row(&mut lu, &etas, &mut y);
-                    y
-                })
-                .collect();
-            let mut alive: Vec<usize> = (0..ties.len()).collect();
+            tie_rows.clear();
+            tie_rows.resize(ties.len() * n, 0.0);
+            for (t, y) in tie_rows.chunks_exact_mut(n).enumerate() {
+                y[ties[t]] = 1.0;
+                basis_row(lu, eta_rows, eta_columns, y);
+            }
+            alive.clear();
+            alive.extend(0..ties.len());
             for k in 0..n {
-                let key = |t: usize| rows[t][k] / (sign * a[ties[t]]);
+                let key = |t: usize| tie_rows[t * n + k] / (sign * a[ties[t]]);
                 let least = alive.iter().map(|&t| key(t)).fold(f64::INFINITY, f64::min);
                 let scale = alive.iter().map(|&t| key(t).abs()).fold(0.0f64, f64::max);
                 alive.retain(|&t| key(t) - least <= 1e-11 * scale.max(1e-300));
@@ -313,7 +416,11 @@ fn lemke_lcp(m: &[f64], q: &[f64], max_pivots: usize, covering: &[f64]) -> Attem
                     break;
                 }
             }
-            ties = alive.iter().map(|&t| ties[t]).collect();
+            // The survivors, in order (each at or after its own place).
+            for (k, &t) in alive.iter().enumerate() {
+                ties[k] = ties[t];
+            }
+            ties.truncate(alive.len());
         }
         // Rounding can leave no row within the tolerance of the minimum (a NaN ratio, a tie rule that
         // drops every row): a breakdown of this attempt, never a panic.
@@ -328,46 +435,57 @@ fn lemke_lcp(m: &[f64], q: &[f64], max_pivots: usize, covering: &[f64]) -> Attem
         if a[row].abs() < 1e-8 * a_max {
             since_refactor = REFACTOR;
         }
-        etas.push((row, a.clone()));
+        eta_rows.push(row);
+        eta_columns.extend_from_slice(a);
         // The lexicographic rule cannot cycle in exact arithmetic; rounding can make it. A basis seen before
         // (with the same entering variable) means a cycle.
-        let mut key = basis.clone();
+        key.clear();
+        key.extend_from_slice(basis);
         key.sort_unstable();
         key.push(left);
         // Only a hash of each basis is kept (8 bytes a pivot, whatever n).
-        let key = {
+        let hash = {
             use std::hash::{Hash, Hasher};
             let mut hasher = std::collections::hash_map::DefaultHasher::new();
             key.hash(&mut hasher);
             hasher.finish()
         };
-        if !seen.insert(key) {
+        if !seen.insert(hash) {
             return Attempt::Breakdown(pivots);
         }
         if left == z0 {
             break;
         }
         if pivots >= max_pivots {
-            let z = basic_z(&basis, &mut lu, &mut b, &column, &rhs, n);
-            return Attempt::Solved(z, pivots, false);
+            basic_z(basis, lu, b, &column, rhs, col, x, z);
+            return Attempt::Solved(pivots, false);
         }
         entering = if left < n { left + n } else { left - n };
     }
-    let z = basic_z(&basis, &mut lu, &mut b, &column, &rhs, n);
-    Attempt::Solved(refine(m, q, &basis, z), pivots, true)
+    basic_z(basis, lu, b, &column, rhs, col, x, z);
+    let refine = Refinement {
+        support,
+        system,
+        solution,
+        refined,
+        lus: refine_lu,
+    };
+    refine.run(m, q, basis, z);
+    Attempt::Solved(pivots, true)
 }
 
 /// Pivots between two factorisations of the basis from the original data.
 const REFACTOR: usize = 32;
 
-/// `B^-1 v` in place, with `B` the factored basis followed by the pivots `etas` (each the pivot row and
-/// the entering column in the basis before it).
-fn solve_basis(lu: &mut DenseLu, etas: &[(usize, Vec<f64>)], v: &mut [f64]) {
+/// `B^-1 v` in place, with `B` the factored basis followed by the pivots in product form (row `rows[k]`
+/// and the entering column `columns[k n..(k + 1) n]` in the basis before it).
+fn solve_basis(lu: &mut DenseLu, rows: &[usize], columns: &[f64], v: &mut [f64]) {
     lu.solve(v);
-    for (row, a) in etas {
-        let pivot = v[*row] / a[*row];
+    let n = v.len();
+    for (&row, a) in rows.iter().zip(columns.chunks_exact(n.max(1))) {
+        let pivot = v[row] / a[row];
         for (i, (e, ai)) in v.iter_mut().zip(a).enumerate() {
-            if i == *row {
+            if i == row {
                 *e = pivot;
             } else {
                 *e -= ai * pivot;
@@ -376,96 +494,120 @@ fn solve_basis(lu: &mut DenseLu, etas: &[(usize, Vec<f64>)], v: &mut [f64]) {
     }
 }
 
-/// Row `i` of `B^-1` in place of `y = e_i`, with `B` the factored basis followed by the pivots `etas`:
-/// `e_i^T E_k ... E_1 B_0^-1`, the etas' transposes applied last to first, then `B_0^-T`.
-fn basis_row(lu: &mut DenseLu, etas: &[(usize, Vec<f64>)], y: &mut [f64]) {
-    for (row, a) in etas.iter().rev() {
+/// Row `i` of `B^-1` in place of `y = e_i`, with `B` the factored basis followed by the pivots in product
+/// form: `e_i^T E_k ... E_1 B_0^-1`, the pivots' transposes applied last to first, then `B_0^-T`.
+fn basis_row(lu: &mut DenseLu, rows: &[usize], columns: &[f64], y: &mut [f64]) {
+    let n = y.len();
+    for (&row, a) in rows.iter().zip(columns.chunks_exact(n.max(1))).rev() {
         let others: f64 = y
             .iter()
             .zip(a)
             .enumerate()
-            .filter(|(j, _)| j != row)
+            .filter(|(j, _)| *j != row)
             .map(|(_, (yj, aj))| yj * aj)
             .sum();
-        y[*row] = (y[*row] - others) / a[*row];
+        y[row] = (y[row] - others) / a[row];
     }
     lu.solve_transposed(y);
 }
 
 /// How one run of Lemke's method ended.
 enum Attempt {
-    /// `z`, pivots, and whether `z0` left the basis (false: the pivot limit came first).
-    Solved(Vec<f64>, usize, bool),
+    /// Pivots, and whether `z0` left the basis (false: the pivot limit came first); `z` is written.
+    Solved(usize, bool),
     /// No blocking row: a secondary ray.
     Ray(usize),
     /// A singular basis or a cycle, both from rounding.
     Breakdown(usize),
 }
 
-/// The `z` part of the basic solution of `basis` (zero where the basis matrix is singular).
+/// The `z` part of the basic solution of `basis` into `z` (zero where the basis matrix is singular), with
+/// `b`, `col` and `x` as scratch.
+#[allow(clippy::too_many_arguments)]
 fn basic_z(
     basis: &[usize],
     lu: &mut DenseLu,
     b: &mut [f64],
     column: &impl Fn(usize, &mut [f64]),
     rhs: &[f64],
-    n: usize,
-) -> Vec<f64> {
-    let mut col = vec![0.0; n];
+    col: &mut [f64],
+    x: &mut [f64],
+    z: &mut [f64],
+) {
+    let n = rhs.len();
     for (r, &var) in basis.iter().enumerate() {
-        column(var, &mut col);
+        column(var, col);
         for i in 0..n {
             b[i * n + r] = col[i];
         }
     }
-    let mut z = vec![0.0; n];
+    z.fill(0.0);
     if lu.factor(b).is_err() {
-        return z;
+        return;
     }
-    let mut x = rhs.to_vec();
-    lu.solve(&mut x);
+    x.copy_from_slice(rhs);
+    lu.solve(x);
     for (r, &var) in basis.iter().enumerate() {
         if (n..2 * n).contains(&var) {
             z[var - n] = x[r].max(0.0);
         }
     }
-    z
 }
 
-/// Re-solve `M_SS z_S = -q_S` on the final support `S` with the original data; keep the result if it is at
-/// least as complementary as the tableau's.
-fn refine(m: &[f64], q: &[f64], basis: &[usize], z: Vec<f64>) -> Vec<f64> {
-    let n = q.len();
-    let support: Vec<usize> = basis
-        .iter()
-        .filter(|&&b| (n..2 * n).contains(&b))
-        .map(|b| b - n)
-        .collect();
-    let k = support.len();
-    if k == 0 {
-        return z;
-    }
-    let mut a = vec![0.0; k * k];
-    let mut x = vec![0.0; k];
-    for (r, &i) in support.iter().enumerate() {
-        for (c, &j) in support.iter().enumerate() {
-            a[r * k + c] = m[i * n + j];
+/// The final refinement's scratch: re-solve `M_SS z_S = -q_S` on the final support `S` with the original
+/// data, and keep the result if it is at least as complementary as the tableau's.
+struct Refinement<'a> {
+    support: &'a mut Vec<usize>,
+    system: &'a mut Vec<f64>,
+    solution: &'a mut Vec<f64>,
+    refined: &'a mut Vec<f64>,
+    /// Factors by support size (a step's support changes as contacts open and close).
+    lus: &'a mut Vec<Option<DenseLu>>,
+}
+
+impl Refinement<'_> {
+    fn run(self, m: &[f64], q: &[f64], basis: &[usize], z: &mut [f64]) {
+        let n = q.len();
+        self.support.clear();
+        self.support.extend(
+            basis
+                .iter()
+                .filter(|&&b| (n..2 * n).contains(&b))
+                .map(|b| b - n),
+        );
+        let support = &self.support[..];
+        let k = support.len();
+        if k == 0 {
+            return;
         }
-        x[r] = -q[i];
-    }
-    let mut lu = DenseLu::new(k, LinearSolver::Hand);
-    if lu.factor(&a).is_err() {
-        return z;
-    }
-    lu.solve(&mut x);
-    let mut refined = vec![0.0; n];
-    for (r, &i) in support.iter().enumerate() {
-        refined[i] = x[r].max(0.0);
-    }
-    if lcp_residual(m, q, &refined) <= lcp_residual(m, q, &z) {
-        refined
-    } else {
-        z
+        let (a, x) = (&mut *self.system, &mut *self.solution);
+        a.clear();
+        a.resize(k * k, 0.0);
+        x.clear();
+        x.resize(k, 0.0);
+        for (r, &i) in support.iter().enumerate() {
+            for (c, &j) in support.iter().enumerate() {
+                a[r * k + c] = m[i * n + j];
+            }
+            x[r] = -q[i];
+        }
+        if self.lus.len() <= k {
+            self.lus.resize_with(k + 1, || None);
+        }
+        let lu = sized(&mut self.lus[k], k);
+        if lu.factor(a).is_err() {
+            return;
+        }
+        lu.solve(x);
+        let refined = &mut *self.refined;
+        refined.clear();
+        refined.resize(n, 0.0);
+        for (r, &i) in support.iter().enumerate() {
+            refined[i] = x[r].max(0.0);
+        }
+        if lcp_residual(m, q, refined) <= lcp_residual(m, q, z) {
+            z.copy_from_slice(refined);
+        }
     }
 }
 

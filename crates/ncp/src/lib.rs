@@ -53,7 +53,10 @@ pub use function::{
     NcpFunction, NcpJet, logistic_expected_squared, normal_expected_squared,
     normal_expected_squared_third,
 };
-pub use lemke::{LemkeSettings, complementarity_residual, enumerate_solutions, lemke};
+pub use lemke::{
+    LemkeSettings, LemkeWorkspace, complementarity_residual, enumerate_solutions, lemke,
+    lemke_in_place,
+};
 pub use newton::{NewtonSettings, NewtonSolver};
 pub use problem::{LinearMcp, Mcp, Reduced};
 pub use solution::{Info, Solution, Status};

@@ -4,7 +4,7 @@
 
 #![allow(non_snake_case)]
 
-use crate::dense::{DenseLu, LinearSolver};
+use crate::dense::DenseLu;
 use crate::error::{NcpError, check_finite, check_len};
 use faer::{Mat, MatRef};
 
@@ -133,26 +133,50 @@ impl LinearMcp {
     /// the LCP `0 <= lambda _|_ A lambda + b >= 0` with the Schur complement
     /// `A = M_cc - M_cf M_ff^-1 M_fc` and `b = q_c - M_cf M_ff^-1 q_f`.
     pub fn reduce(&self) -> Result<Reduced, NcpError> {
+        let mut out = Reduced::default();
+        self.reduce_into(&mut out, &mut FreeBlock::default())?;
+        Ok(out)
+    }
+
+    /// [`LinearMcp::reduce`] into `out`, the free block factored in `free` (no allocation once both have
+    /// this problem's sizes).
+    pub(crate) fn reduce_into(
+        &self,
+        out: &mut Reduced,
+        free: &mut FreeBlock,
+    ) -> Result<(), NcpError> {
         let (n, f) = (self.n, self.n_free);
         let c = n - f;
-        let mut lu = DenseLu::new(f, LinearSolver::Hand);
-        let mut mff = vec![0.0; f * f];
+        let FreeBlock { lu, mff, col } = free;
+        let lu = crate::dense::sized(lu, f);
+        mff.clear();
+        mff.resize(f * f, 0.0);
         for i in 0..f {
             mff[i * f..(i + 1) * f].copy_from_slice(&self.m[i * n..i * n + f]);
         }
         if f > 0
-            && let Err(cause) = lu.factor(&mff)
+            && let Err(cause) = lu.factor(mff)
         {
             return Err(NcpError::SingularFreeBlock { n_free: f, cause });
         }
+        let Reduced {
+            n_free,
+            a,
+            b,
+            x_of_lambda,
+            x0,
+        } = out;
+        *n_free = f;
         // Columns of M_ff^-1 [M_fc, q_f]: x = X lambda + x0.
-        let mut x_of_lambda = vec![0.0; f * c];
-        let mut col = vec![0.0; f];
+        x_of_lambda.clear();
+        x_of_lambda.resize(f * c, 0.0);
+        col.clear();
+        col.resize(f, 0.0);
         for j in 0..c {
             for i in 0..f {
                 col[i] = -self.m[i * n + f + j];
             }
-            lu.solve(&mut col);
+            lu.solve(col);
             for i in 0..f {
                 x_of_lambda[i * c + j] = col[i];
             }
@@ -160,10 +184,13 @@ impl LinearMcp {
         for i in 0..f {
             col[i] = -self.q[i];
         }
-        lu.solve(&mut col);
-        let x0 = col;
-        let mut a = vec![0.0; c * c];
-        let mut b = vec![0.0; c];
+        lu.solve(col);
+        x0.clear();
+        x0.extend_from_slice(col);
+        a.clear();
+        a.resize(c * c, 0.0);
+        b.clear();
+        b.resize(c, 0.0);
         for i in 0..c {
             let row = &self.m[(f + i) * n..(f + i + 1) * n];
             for j in 0..c {
@@ -179,14 +206,16 @@ impl LinearMcp {
             }
             b[i] = s;
         }
-        Ok(Reduced {
-            n_free: f,
-            a,
-            b,
-            x_of_lambda,
-            x0,
-        })
+        Ok(())
     }
+}
+
+/// The free block's factors and scratch for [`LinearMcp::reduce_into`].
+#[derive(Debug, Default)]
+pub(crate) struct FreeBlock {
+    lu: Option<DenseLu>,
+    mff: Vec<f64>,
+    col: Vec<f64>,
 }
 
 impl Mcp for LinearMcp {
@@ -219,7 +248,7 @@ impl Mcp for LinearMcp {
 }
 
 /// A mixed LCP with its free variables eliminated (see [`LinearMcp::reduce`]).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct Reduced {
     n_free: usize,
     /// Row-major Schur complement `A` (`c x c`).
@@ -240,17 +269,22 @@ impl Reduced {
 
     /// The full unknown vector `z = [x(lambda); lambda]`.
     pub fn expand(&self, lambda: &[f64]) -> Vec<f64> {
+        let mut z = vec![0.0; self.n_free + self.b.len()];
+        self.expand_into(lambda, &mut z);
+        z
+    }
+
+    /// [`Reduced::expand`] into `z` (of the full problem's size).
+    pub fn expand_into(&self, lambda: &[f64], z: &mut [f64]) {
         let (f, c) = (self.n_free, self.b.len());
-        let mut z = Vec::with_capacity(f + c);
         for i in 0..f {
             let mut s = self.x0[i];
             for j in 0..c {
                 s += self.x_of_lambda[i * c + j] * lambda[j];
             }
-            z.push(s);
+            z[i] = s;
         }
-        z.extend_from_slice(lambda);
-        z
+        z[f..f + c].copy_from_slice(lambda);
     }
 
     /// The reduced problem as a plain LCP.
