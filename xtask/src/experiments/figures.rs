@@ -150,24 +150,21 @@ fn draw_surface<DB: DrawingBackend>(
     Ok(())
 }
 
-fn draw_states<DB: DrawingBackend>(
-    root: &DrawingArea<DB, Shift>,
-    lib: &Library,
-) -> anyhow::Result<()> {
-    let mut chart = ChartBuilder::on(root)
-        .caption(
-            format!(
-                "Fig. 3: the library's {} controller states (theta1, theta2, theta3 mod pi)",
-                lib.entries.len()
-            ),
-            ("sans-serif", 16),
-        )
+/// The finger's joint space `(theta1, theta2, theta3 mod pi)` as a 3-D chart under `caption`, seen at
+/// `(pitch, yaw)`, with its axes drawn and named (Figs. 3 and 4).
+fn joint_space_chart<'a, DB: DrawingBackend>(
+    area: &'a DrawingArea<DB, Shift>,
+    caption: &str,
+    (pitch, yaw): (f64, f64),
+) -> anyhow::Result<JointChart<'a, DB>> {
+    let mut chart = ChartBuilder::on(area)
+        .caption(caption, ("sans-serif", 16))
         .margin(10)
         .build_cartesian_3d(-PI..0.0, -2.2..0.2, 0.0..PI)
         .map_err(err)?;
     chart.with_projection(|mut p| {
-        p.pitch = 0.4;
-        p.yaw = 0.7;
+        p.pitch = pitch;
+        p.yaw = yaw;
         p.scale = 0.85;
         p.into_matrix()
     });
@@ -182,6 +179,29 @@ fn draw_states<DB: DrawingBackend>(
             ("theta3 mod pi (rad)", (0.0, -2.6, 1.2)),
         ],
     )?;
+    Ok(chart)
+}
+
+/// A 3-D chart over the finger's joint space.
+type JointChart<'a, DB> = ChartContext<
+    'a,
+    DB,
+    Cartesian3d<
+        plotters::coord::types::RangedCoordf64,
+        plotters::coord::types::RangedCoordf64,
+        plotters::coord::types::RangedCoordf64,
+    >,
+>;
+
+fn draw_states<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    lib: &Library,
+) -> anyhow::Result<()> {
+    let caption = format!(
+        "Fig. 3: the library's {} controller states (theta1, theta2, theta3 mod pi)",
+        lib.entries.len()
+    );
+    let mut chart = joint_space_chart(root, &caption, (0.4, 0.7))?;
     chart
         .draw_series(lib.entries.iter().map(|e| {
             let t3 = e.x[2].rem_euclid(PI);
@@ -320,30 +340,10 @@ fn draw_cycle_3d<DB: DrawingBackend>(
         .saturating_sub((20.0 / run.h).round() as usize);
     let top = run.impulses[start..].iter().fold(1e-9f64, |m, v| m.max(*v));
     let (left, right) = root.split_horizontally(root.dim_in_pixel().0 as i32 - 130);
-    let mut chart = ChartBuilder::on(&left)
-        .caption(
-            "Fig. 4: the limit cycle's last 20 s in (theta1, theta2, theta3 mod pi) over the contact surface",
-            ("sans-serif", 16),
-        )
-        .margin(10)
-        .build_cartesian_3d(-PI..0.0, -2.2..0.2, 0.0..PI)
-        .map_err(err)?;
-    chart.with_projection(|mut p| {
-        p.pitch = 0.35;
-        p.yaw = 0.8;
-        p.scale = 0.85;
-        p.into_matrix()
-    });
-    chart.configure_axes().draw().map_err(err)?;
-    axis_names(
-        &mut chart,
-        // Beside the edges plotters puts each axis's ticks on (theta1 at theta3 = pi, theta3 at theta1 = 0,
-        // theta2 at theta1 = theta3 = 0).
-        [
-            ("theta1 (rad)", (-2.2, -2.6, PI)),
-            ("theta2 (rad)", (0.0, 0.35, 0.0)),
-            ("theta3 mod pi (rad)", (0.0, -2.6, 1.2)),
-        ],
+    let mut chart = joint_space_chart(
+        &left,
+        "Fig. 4: the limit cycle's last 20 s in (theta1, theta2, theta3 mod pi) over the contact surface",
+        (0.35, 0.8),
     )?;
     chart
         .draw_series(

@@ -472,11 +472,12 @@ impl Model {
         let sigmas: Vec<f64> = match self.state_covariance() {
             Some(_) => {
                 let rows: Vec<f64> = (0..m)
-                    .flat_map(|k| jac[(n + k) * dim..(n + k) * dim + n].to_vec())
+                    .flat_map(|k| jac[(n + k) * dim..(n + k) * dim + n].iter().copied())
                     .collect();
                 self.noise(&rows, m)
             }
-            None => self.noise(&vec![0.0; m * n], m),
+            // A constant noise reads no Jacobian.
+            None => self.noise(&[], m),
         };
         let mut kinds = Vec::with_capacity(m);
         let mut dphi = vec![(0.0, 0.0); m];
