@@ -353,6 +353,7 @@ fn entry(x: Vec<f64>) -> library::Entry {
             hessian: vec![0.0; 36],
             per_period: -std::f64::consts::PI,
         },
+        reach: None,
     }
 }
 
@@ -496,6 +497,75 @@ fn a_concave_value_model_does_not_win_the_ranking_by_extrapolating() {
         .unwrap();
     assert_eq!(policy.nearest_n(&x, 2).unwrap().len(), 2);
     assert_eq!(policy.select(&x).unwrap().0, 1);
+}
+
+#[test]
+fn a_controller_is_passed_over_beyond_its_reach_while_another_reaches() {
+    // The far controller predicts the lower cost at the query and wins; with its reach ended short of
+    // the query the near one is used; with the near one's reach ended short as well, both compete again.
+    let mut near = entry(vec![1.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
+    near.value.cost_to_go = 0.0;
+    let mut far = entry(vec![0.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
+    far.value.cost_to_go = -10.0;
+    let x = [1.2, 0.0, 0.0, 0.0, 0.0, 0.0];
+    let mut entries = vec![far, near];
+    let policy = |entries: &[library::Entry]| {
+        library::Policy::new(entries, 6, 2, 2)
+            .unwrap()
+            .with_neighbours(2)
+            .unwrap()
+    };
+    let mut p = policy(&entries);
+    assert_eq!(p.select(&x).unwrap().0, 0);
+    let to_far = p.distance(&x, 0, 0.0).unwrap();
+    let to_near = p.distance(&x, 1, 0.0).unwrap();
+    assert!(to_far > to_near && to_near > 0.0);
+    p.set_reach(0, 0.9 * to_far).unwrap();
+    assert_eq!(p.select(&x).unwrap().0, 1);
+    // The same from the entries' own reach, as a loaded library has it.
+    entries[0].reach = Some(0.9 * to_far);
+    assert_eq!(policy(&entries).select(&x).unwrap().0, 1);
+    entries[1].reach = Some(0.5 * to_near);
+    assert_eq!(policy(&entries).select(&x).unwrap().0, 0);
+    // Within its reach the far one wins again.
+    entries[0].reach = Some(1.1 * to_far);
+    entries[1].reach = None;
+    assert_eq!(policy(&entries).select(&x).unwrap().0, 0);
+    assert!(p.set_reach(2, 1.0).is_err());
+    assert!(p.set_reach(0, f64::NAN).is_err());
+    assert!(p.set_reach(0, -1.0).is_err());
+    assert!(p.distance(&[0.0; 5], 0, 0.0).is_err());
+}
+
+#[test]
+fn a_law_asking_beyond_the_stored_controls_pays_for_the_excess() {
+    // Two controllers predicting nearly the same cost at the query; the better-predicted one's gain
+    // asks there for a control of 1e4, a thousand times the stored range. Charged at the control
+    // weight for the excess it loses; uncharged (weight 0) it wins, and within the range nothing moves.
+    let mut steep = entry(vec![0.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
+    steep.value.cost_to_go = -1.0;
+    steep.gain = vec![0.0; 12];
+    steep.gain[0] = 1e4;
+    let mut calm = entry(vec![0.5, 0.0, 0.0, 0.0, 0.0, 0.0]);
+    calm.value.cost_to_go = 0.0;
+    calm.gain = vec![0.0; 12];
+    let entries = vec![steep, calm];
+    let policy = library::Policy::new(&entries, 6, 2, 2)
+        .unwrap()
+        .with_neighbours(2)
+        .unwrap();
+    let range = policy.envelope().to_vec();
+    assert_eq!(range, vec![(0.0, 0.5), (-0.0, 0.0)]);
+    let x = [1.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+    let mut u = [0.0; 2];
+    assert_eq!(policy.control(&x, &mut u).unwrap(), 0);
+    assert_eq!(u[0], 1e4);
+    let charged = policy.clone().with_control_weight(0.05).unwrap();
+    assert_eq!(charged.control(&x, &mut u).unwrap(), 1);
+    // At the steep one's own state its law asks for its stored control: no charge, it wins.
+    assert_eq!(charged.select(&[0.0; 6]).unwrap().0, 0);
+    assert!(policy.clone().with_control_weight(-1.0).is_err());
+    assert!(policy.with_control_weight(f64::NAN).is_err());
 }
 
 #[test]

@@ -143,8 +143,13 @@ pub const WORLD_TIME_STEP: f64 = 0.03;
 pub const STALL_ADVANCE: f64 = 0.3;
 /// ... over this many seconds.
 pub const STALL_WINDOW: f64 = 2.0;
-/// Simulated seconds per growth round.
-pub const GROWTH_SECONDS: f64 = 100.0;
+/// Simulated seconds per growth round: [`GROWTH_FIRST_KICK`] unkicked, then nine kicks 10 s apart and
+/// 10 s after the last.
+pub const GROWTH_SECONDS: f64 = 130.0;
+/// When a growth round's closed loop is first kicked: until then it runs the policy from the task's
+/// start as it is, so that growth sees where the unkicked run stalls or misses (a first kick at 10 s
+/// hid a rest the three-link finger's policy came to at 10-12 s on its own world: issue 28).
+pub const GROWTH_FIRST_KICK: f64 = 40.0;
 /// Branches at most per growth round.
 pub const GROWTH_BRANCHES: usize = 20;
 /// The default [`LibrarySettings::growth_sharpening`].
@@ -660,6 +665,7 @@ impl<'a> Build<'a> {
                     converged: sol.status.converged(),
                     cost: sol.cost,
                     value,
+                    reach: None,
                 };
                 if t == 0 {
                     report(&entry);
@@ -901,8 +907,37 @@ fn branched(
         built.append(b);
     }
     for round in 0..s.growth {
-        let grown = grow(task, &mut dynamics, &mut built, length, round, report)?;
+        let grown = grow(
+            task,
+            &mut dynamics,
+            &mut built,
+            length,
+            Round::Kicked(round),
+            report,
+        )?;
         tracing::info!(round, grown, "library growth");
+    }
+    if s.growth > 0 {
+        // Every world the rounds ran on, from the task's start without kicks, with the policy as it
+        // finally is: the rounds after a world's last one changed the policy there too.
+        let worlds = 2 * s.growth_time_steps.len().max(1);
+        for pass in 0..VERIFY_PASSES {
+            let mut grown = 0;
+            for world in 0..worlds {
+                grown += grow(
+                    task,
+                    &mut dynamics,
+                    &mut built,
+                    length,
+                    Round::Nominal(world),
+                    report,
+                )?;
+            }
+            tracing::info!(pass, grown, "library verification");
+            if grown == 0 {
+                break;
+            }
+        }
     }
     Ok(Entries {
         entries: built.entries,
@@ -910,7 +945,59 @@ fn branched(
     })
 }
 
-/// One growth round (see [`Exploration::Branches`]): the number of branches added.
+/// The reach a controller keeps, as a fraction of its distance to the state whose branch it outbid
+/// ([`shrink_shadowing`]): a margin for the policy's whitening, which moves a little as the library grows.
+pub const REACH_SHRINK: f64 = 0.8;
+
+/// After a branch grown from `from`, a state the policy is stuck at (a progress task's stall, where a
+/// target task's policy left it short of its targets), its controllers from `first_new` on: while the
+/// policy still chooses an older controller at `from`, whose value model outbids the branch's solve
+/// there, that controller's reach ends short of `from` ([`REACH_SHRINK`] of its distance), as
+/// simulation-based LQR-trees shrink a funnel to exclude a state its controller failed from. Not for the
+/// state a kick left, from which the policy may have failed anywhere on the way: there the older
+/// controllers may well be right (ending their reach at a target task's start once left the mirrored
+/// finger's turn with a policy that never turned the ellipse). Without it (issue 28,
+/// the three-link finger) two branches in five were never used where they were grown: the policy
+/// stalled again on the same state. At most `neighbours` controllers are shrunk: the branch's own
+/// first controller, at `from` itself, is among the nearest.
+fn shrink_shadowing(
+    policy: &mut Policy,
+    built: &mut Built,
+    from: &[f64],
+    first_new: usize,
+    neighbours: usize,
+) -> Result<(), LibraryError> {
+    for _ in 0..neighbours {
+        let (j, turns) = policy.select(from)?;
+        if j >= first_new {
+            break;
+        }
+        let reach = REACH_SHRINK * policy.distance(from, j, turns)?;
+        policy.set_reach(j, reach)?;
+        built.entries[j].reach = Some(reach);
+    }
+    Ok(())
+}
+
+/// Passes at most of the final check of every growth world from the task's start ([`Round::Nominal`]);
+/// a pass that grows nothing ends it.
+pub const VERIFY_PASSES: usize = 2;
+/// Branches at most per world and pass of that check.
+pub const VERIFY_BRANCHES: usize = 4;
+
+/// A closed loop growth runs: world `w` is the library's own model (even `w`) or hard contact (odd) at
+/// the `w / 2`-th of [`LibrarySettings::growth_time_steps`], in turn.
+#[derive(Debug, Clone, Copy)]
+enum Round {
+    /// A growth round: [`GROWTH_SECONDS`] from the task's start, kicked from [`GROWTH_FIRST_KICK`] on,
+    /// at most [`GROWTH_BRANCHES`] branches.
+    Kicked(usize),
+    /// The final check of world `w`: [`GROWTH_FIRST_KICK`] seconds from the task's start, no kicks,
+    /// at most [`VERIFY_BRANCHES`] branches.
+    Nominal(usize),
+}
+
+/// One growth round (see [`Exploration::Branches`]) or final check: the number of branches added.
 ///
 /// Failure is the task's: for a task that rewards progress, a stall (the progress coordinate advancing
 /// less than [`STALL_ADVANCE`] the rewarded way in [`STALL_WINDOW`] seconds), and a branch starts where
@@ -925,9 +1012,13 @@ fn grow(
     dynamics: &mut SceneDynamics,
     built: &mut Built,
     length: usize,
-    round: usize,
+    kind: Round,
     report: &(dyn Fn(&Entry) + Sync),
 ) -> Result<usize, LibraryError> {
+    let (round, seconds, first_kick_seconds, most) = match kind {
+        Round::Kicked(r) => (r, GROWTH_SECONDS, GROWTH_FIRST_KICK, GROWTH_BRANCHES),
+        Round::Nominal(w) => (w, GROWTH_FIRST_KICK, GROWTH_FIRST_KICK, VERIFY_BRANCHES),
+    };
     let s = task.settings;
     let progress = task.progress;
     let free = progress.coordinate;
@@ -939,7 +1030,8 @@ fn grow(
             &progress,
         )?
         .with_neighbours(s.neighbours)?
-        .with_limits(task.control_limits.clone())
+        .with_limits(task.control_limits.clone())?
+        .with_control_weight(task.cost.control_weight)
     };
     let mut policy = policy_of(built)?;
     // Odd rounds run on hard contact: the policy is meant for the smoothed and the hard world alike.
@@ -979,8 +1071,9 @@ fn grow(
     };
     let mut rng = ChaCha8Rng::seed_from_u64(s.seed);
     rng.set_stream(u64::MAX - round as u64);
-    let steps = (GROWTH_SECONDS / h).round() as usize;
+    let steps = (seconds / h).round() as usize;
     let kick_steps = ((10.0 / h).round() as usize).max(1);
+    let first_kick = ((first_kick_seconds / h).round() as usize).max(1);
     let window = ((STALL_WINDOW / h).round() as usize).max(1);
     // A target task's time bound after a kick (from the start: the first interval).
     let settle = ((task.success.settle / h).round() as usize).clamp(1, kick_steps);
@@ -990,19 +1083,31 @@ fn grow(
     let mut grown = 0;
     // A target task's last perturbed state, the controller used there, and when to judge the way back.
     let mut kicked: Option<(Vec<f64>, usize)> = None;
-    let mut judge_at = kick_steps - 1;
+    let mut judge_at = first_kick - 1;
+    // A final check judges a target task as `evaluate` does without kicks: its worst distance over the
+    // last quarter; a growth round, by the distance when judged.
+    let quarter = match kind {
+        Round::Nominal(_) => steps - steps / 4,
+        Round::Kicked(_) => usize::MAX,
+    };
+    let mut worst = 0.0f64;
     for k in 0..steps {
-        if k > 0 && k % kick_steps == 0 {
+        if k >= first_kick && (k - first_kick).is_multiple_of(kick_steps) {
             task.perturb(&mut x, &mut rng);
             recent.clear();
             kicked = None;
             judge_at = k + settle;
         }
         let i = policy.control(&x, &mut u)?;
+        if k >= quarter {
+            worst = worst.max(task.success.distance(&x));
+        }
+        let judged = |x: &[f64]| task.success.distance(x).max(worst);
         if kicked.is_none() {
             kicked = Some((x.clone(), i));
         }
-        let failed_at: Vec<(Vec<f64>, usize)> = match progress.forward {
+        // (state, controller in use, whether the policy is stuck there): a branch from each.
+        let failed_at: Vec<(Vec<f64>, usize, bool)> = match progress.forward {
             Some(forward) => {
                 recent.push_back(x[free]);
                 if recent.len() > window {
@@ -1010,21 +1115,24 @@ fn grow(
                 }
                 // Stalled: a branch from here, warm-started from the plan of the controller in use.
                 (recent.len() == window && forward * (x[free] - recent[0]) < STALL_ADVANCE)
-                    .then(|| (x.clone(), i))
+                    .then(|| (x.clone(), i, true))
                     .into_iter()
                     .collect()
             }
-            None if k == judge_at && task.success.distance(&x) > task.success.tolerance => {
+            None if k == judge_at && judged(&x) > task.success.tolerance => {
                 // Not back within tolerance in time: a branch from the state the kick left, and one
                 // from where the policy left the task (its first solve reaching for the contact if the
-                // policy let go of it there).
-                kicked.clone().into_iter().chain([(x.clone(), i)]).collect()
+                // policy let go of it there). The policy is stuck at the second; from the first it
+                // may have gone wrong anywhere on the way.
+                (kicked.clone().into_iter().map(|(x, i)| (x, i, false)))
+                    .chain([(x.clone(), i, true)])
+                    .collect()
             }
             None => Vec::new(),
         };
         let grown_before = grown;
-        for (from, i) in failed_at {
-            if grown == GROWTH_BRANCHES {
+        for (from, i, stuck) in failed_at {
+            if grown == most {
                 break;
             }
             let (trajectory, offset) = (i / s.keep, i % s.keep);
@@ -1035,20 +1143,24 @@ fn grow(
             };
             let branch = task.chain(
                 branch_dynamics,
-                from,
+                from.clone(),
                 plan,
                 length,
                 false,
                 |_, _| {},
                 report,
             )?;
+            let first_new = built.entries.len();
             built.append(branch);
             policy = policy_of(built)?;
+            if stuck {
+                shrink_shadowing(&mut policy, built, &from, first_new, s.neighbours)?;
+            }
             recent.clear();
             grown += 1;
         }
         if grown > grown_before {
-            if grown == GROWTH_BRANCHES {
+            if grown == most {
                 break;
             }
             policy.control(&x, &mut u)?;
@@ -1060,4 +1172,68 @@ fn grow(
         x = step.x_next;
     }
     Ok(grown)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A controller at `x` (2 joints' state, 4 entries) with cost-to-go `v` and no gain.
+    fn entry(x: [f64; 4], v: f64) -> Entry {
+        Entry {
+            x: x.to_vec(),
+            u: vec![0.0],
+            gain: vec![0.0; 4],
+            passes: 1,
+            converged: true,
+            cost: v,
+            value: LocalValue {
+                cost_to_go: v,
+                gradient: vec![0.0; 4],
+                hessian: vec![0.0; 16],
+                per_period: 0.0,
+            },
+            reach: None,
+        }
+    }
+
+    #[test]
+    fn a_branch_is_chosen_where_it_was_grown_and_only_the_outbidding_controllers_lose_reach() {
+        // Three old controllers around `from`: two predict less than the branch's solve there (they
+        // outbid it), one more. The branch's controller sits at `from` itself.
+        let from = [0.0, 0.0, 0.0, 0.0];
+        let mut built = Built {
+            entries: vec![
+                entry([0.5, 0.0, 0.0, 0.0], -3.0),
+                entry([0.0, 0.7, 0.0, 0.0], -2.0),
+                entry([0.0, 0.0, 0.4, 0.0], 5.0),
+                entry([3.0, 3.0, 3.0, 3.0], -9.0),
+            ],
+            plans: Vec::new(),
+        };
+        let first_new = built.entries.len();
+        built.entries.push(entry(from, 0.0));
+        let fresh = |built: &Built| {
+            Policy::new(&built.entries, 4, 1, 3)
+                .unwrap()
+                .with_neighbours(4)
+                .unwrap()
+        };
+        let mut policy = fresh(&built);
+        assert_eq!(policy.select(&from).unwrap().0, 0);
+        shrink_shadowing(&mut policy, &mut built, &from, first_new, 4).unwrap();
+        assert_eq!(policy.select(&from).unwrap().0, first_new);
+        // The same from the entries' reach, as the next policy and the library file have it.
+        assert_eq!(fresh(&built).select(&from).unwrap().0, first_new);
+        for (i, e) in built.entries.iter().enumerate() {
+            match i {
+                0 | 1 => {
+                    let r = e.reach.unwrap();
+                    let d = policy.distance(&from, i, 0.0).unwrap();
+                    assert!((r - REACH_SHRINK * d).abs() <= 1e-12 * d, "{i}: {r} {d}");
+                }
+                _ => assert_eq!(e.reach, None, "{i}"),
+            }
+        }
+    }
 }

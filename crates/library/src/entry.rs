@@ -22,6 +22,11 @@ pub struct Entry {
     /// The trajectory's local model of the cost-to-go around `x` (what [`crate::Policy`] ranks nearby
     /// controllers by).
     pub value: LocalValue,
+    /// How far from `x` the policy may use this controller, in the policy's whitened distance
+    /// ([`crate::Policy::distance`]); `None`: anywhere. Growth sets it where this controller's value
+    /// model outbid, at a state the policy failed from, the branch grown there: that state is then
+    /// outside its reach (the funnel shrinking of simulation-based LQR-trees).
+    pub reach: Option<f64>,
 }
 
 /// The second-order model of the cost-to-go around a stored state `x_s`, extended to the library's full

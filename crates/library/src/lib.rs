@@ -11,9 +11,9 @@ mod file;
 mod policy;
 
 pub use build::{
-    Entries, Exploration, GROWTH_BRANCHES, GROWTH_SECONDS, GROWTH_SHARPENING, HORIZON_DOUBLINGS,
-    LONGEST_HORIZON, LibrarySettings, MAX_NEIGHBOURS, STALL_ADVANCE, STALL_WINDOW, WORLD_TIME_STEP,
-    build_entries,
+    Entries, Exploration, GROWTH_BRANCHES, GROWTH_FIRST_KICK, GROWTH_SECONDS, GROWTH_SHARPENING,
+    HORIZON_DOUBLINGS, LONGEST_HORIZON, LibrarySettings, MAX_NEIGHBOURS, REACH_SHRINK,
+    STALL_ADVANCE, STALL_WINDOW, VERIFY_BRANCHES, VERIFY_PASSES, WORLD_TIME_STEP, build_entries,
 };
 pub use entry::{Entry, LocalValue};
 pub use error::LibraryError;

@@ -115,6 +115,13 @@ pub struct Policy {
     neighbours: usize,
     /// Bounds the controls are saturated to (the task's control limits), if any.
     limits: Option<ddp::ControlLimits>,
+    /// Each stored controller's reach ([`Entry::reach`]) squared; infinite where unlimited.
+    reach: Vec<f64>,
+    /// The range of each control over the stored controllers: a law asking beyond it extrapolates.
+    envelope: Vec<(f64, f64)>,
+    /// The task's control weight `w` (running cost `w |u|^2` a step) the ranking charges a law for the
+    /// part of its control beyond [`Self::envelope`] ([`Policy::with_control_weight`]; 0: no charge).
+    control_weight: f64,
 }
 
 /// Whole periods `p` in `x` (rounded down; 0 without a period, `p = 0`).
@@ -285,6 +292,20 @@ impl Policy {
             values: entries.iter().map(|e| e.value.convexified()).collect(),
             neighbours: 1,
             limits: None,
+            reach: entries
+                .iter()
+                .map(|e| e.reach.map_or(f64::INFINITY, |r| r * r))
+                .collect(),
+            envelope: (0..m)
+                .map(|a| {
+                    entries
+                        .iter()
+                        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), e| {
+                            (lo.min(e.u[a]), hi.max(e.u[a]))
+                        })
+                })
+                .collect(),
+            control_weight: 0.0,
         })
     }
 
@@ -323,6 +344,43 @@ impl Policy {
         }
         self.neighbours = neighbours;
         Ok(self)
+    }
+
+    /// The same policy charging each law it ranks for the controls it asks beyond the range the stored
+    /// controllers use (per control, [`Policy::envelope`]): `w` times the squared excess, `w` the task's
+    /// control weight. A linear law far from its state can ask for controls no trajectory used (a
+    /// near-singular expansion's gain of 4e4 asked 1e4 of the three-link finger, whose trajectories use
+    /// a few tens); its value model, linear in the state, does not see that cost. Within the range
+    /// nothing changes. `Err` unless `w` is finite and at least zero.
+    pub fn with_control_weight(mut self, w: f64) -> Result<Self, LibraryError> {
+        if !(w.is_finite() && w >= 0.0) {
+            return Err(LibraryError::Setting {
+                name: "control_weight",
+                value: w,
+                expected: "finite and at least zero",
+            });
+        }
+        self.control_weight = w;
+        Ok(self)
+    }
+
+    /// The range `(lowest, highest)` of each control over the stored controllers.
+    pub fn envelope(&self) -> &[(f64, f64)] {
+        &self.envelope
+    }
+
+    /// Limit stored controller `i` to states within whitened distance `radius` of its own (see
+    /// [`Entry::reach`]; the caller keeps the entry's copy in step). `Err` for an index out of range or
+    /// a radius that is negative or NaN.
+    pub fn set_reach(&mut self, i: usize, radius: f64) -> Result<(), LibraryError> {
+        if i >= self.reach.len() || radius.is_nan() || radius < 0.0 {
+            return Err(LibraryError::Invalid(format!(
+                "reach {radius} for controller {i} of {}",
+                self.reach.len()
+            )));
+        }
+        self.reach[i] = radius * radius;
+        Ok(())
     }
 
     /// How many nearest controllers the policy compares.
@@ -387,6 +445,44 @@ impl Policy {
             .collect())
     }
 
+    /// The whitened distance from stored state `i` to `x`, `turns` whole periods of the free angle on:
+    /// the distance the policy's nearest neighbours are ranked by.
+    pub fn distance(&self, x: &[f64], i: usize, turns: f64) -> Result<f64, LibraryError> {
+        crate::check("x", x, self.n)?;
+        if i >= self.states.len() {
+            return Err(LibraryError::Invalid(format!(
+                "controller {i} of {}",
+                self.states.len()
+            )));
+        }
+        let mut d = vec![0.0; self.n];
+        self.offset(x, i, turns, &mut d);
+        Ok(self.whitened_squared(&d).sqrt())
+    }
+
+    /// `|L^-1 d|^2`.
+    fn whitened_squared(&self, d: &[f64]) -> f64 {
+        forward(&self.chol, self.n, d).iter().map(|y| y * y).sum()
+    }
+
+    /// `w` times the squared excess of controller `i`'s law at offset `d` beyond [`Self::envelope`].
+    fn extrapolation_charge(&self, i: usize, d: &[f64]) -> f64 {
+        if self.control_weight == 0.0 {
+            return 0.0;
+        }
+        let k = &self.gains[i];
+        let excess: f64 = (self.controls[i].iter().zip(&self.envelope))
+            .enumerate()
+            .map(|(a, (u, (lo, hi)))| {
+                let row = &k[a * self.n..(a + 1) * self.n];
+                let law = row.iter().zip(d).fold(*u, |s, (k, d)| s + k * d);
+                let e = (law - hi).max(lo - law).max(0.0);
+                e * e
+            })
+            .sum();
+        self.control_weight * excess
+    }
+
     /// `x - x_i` with the free angle taken `turns` whole periods back, into `d`.
     fn offset(&self, x: &[f64], i: usize, turns: f64, d: &mut [f64]) {
         for ((d, a), b) in d.iter_mut().zip(x).zip(&self.states[i]) {
@@ -398,7 +494,10 @@ impl Policy {
     /// The stored controller the policy uses at `x` and the whole periods between them: the nearest
     /// (eq. 20), or among the [`Policy::neighbours`] nearest the one whose local value model predicts
     /// the lowest cost-to-go at `x` (ties to the nearer). The models are ranked convexified
-    /// ([`LocalValue::convexified`]), so that none wins by extrapolating negative curvature.
+    /// ([`LocalValue::convexified`]), so that none wins by extrapolating negative curvature, plus the
+    /// charge for controls beyond the stored range ([`Policy::with_control_weight`]); a controller
+    /// whose reach ([`Entry::reach`]) ends short of `x` is passed over while one of the candidates
+    /// reaches it (else they all compete).
     pub fn select(&self, x: &[f64]) -> Result<(usize, f64), LibraryError> {
         Ok(self.choose(x)?.0)
     }
@@ -409,11 +508,21 @@ impl Policy {
         let mut d = vec![0.0; self.n];
         let mut best = (f64::INFINITY, candidates[0]);
         if candidates.len() > 1 {
-            for &(i, turns) in &candidates {
-                self.offset(x, i, turns, &mut d);
-                let v = self.values[i].predict(&d, turns);
-                if v < best.0 {
-                    best = (v, (i, turns));
+            // (prediction, within reach) of each candidate.
+            let ranked: Vec<(f64, bool)> = candidates
+                .iter()
+                .map(|&(i, turns)| {
+                    self.offset(x, i, turns, &mut d);
+                    let v = self.values[i].predict(&d, turns) + self.extrapolation_charge(i, &d);
+                    let within =
+                        self.reach[i].is_infinite() || self.whitened_squared(&d) <= self.reach[i];
+                    (v, within)
+                })
+                .collect();
+            let any_within = ranked.iter().any(|r| r.1);
+            for (&c, &(v, within)) in candidates.iter().zip(&ranked) {
+                if (within || !any_within) && v < best.0 {
+                    best = (v, c);
                 }
             }
         }
