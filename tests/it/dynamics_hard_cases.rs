@@ -591,3 +591,53 @@ fn constraint_rows_name_their_owner_and_steps_give_each_pairs_impulse() {
     assert!(touched[0], "finger a never touched the ellipse");
     assert!(touched[1], "finger b never touched the ellipse");
 }
+
+/// A jammed state the pushing finger's policy reached in a growth round on hard contact at h = 0.03
+/// (issue 28's zoo, library seed 2): the second link 0.087 into the ground at -47 rad/s, pressing the
+/// block it slides on. The two-row friction model's LCP has no solution there (Lemke's method ends on a
+/// ray under every covering vector), which used to stop the whole library build. The step now takes the
+/// nearest compliant problem's solution and says so (`Inaccurate`): finite, the link stopped, the
+/// contact rows complementary, and the same answer as the compliant problem's solution by Lemke's method.
+#[test]
+fn a_hard_lcp_without_a_solution_takes_the_nearest_compliant_one_and_says_so() {
+    let file = task::ProblemFile::from_toml_str(include_str!("../../scenes/pushing.toml")).unwrap();
+    let mut hard = Simulator::new(
+        file.scene.clone(),
+        StepSettings {
+            model: Complementarity::Hard,
+            h: 0.03,
+            ..StepSettings::default()
+        },
+    )
+    .unwrap();
+    let x = [
+        -2.5000000000000004,
+        1.1010980095440823,
+        -4.4517775277054845,
+        0.2292528503654152,
+        0.13566989379489253,
+        -1.2434497875801753e-14,
+        -46.63006634853059,
+        0.6392215184856792,
+        -0.14030067350966535,
+        0.3338085127775415,
+    ];
+    let u = [-11.362867808733384, 12.883117250463467];
+    // The LCP itself has no solution.
+    let (problem, _) = hard.problem(&x, &u).unwrap();
+    assert!(
+        matches!(
+            ncp::lemke(&problem, &ncp::LemkeSettings::default()),
+            Err(ncp::NcpError::Infeasible { .. })
+        ),
+        "the jammed LCP was solvable"
+    );
+    let step = hard.step(&x, &u).unwrap();
+    assert_eq!(step.info.status, Status::Inaccurate);
+    assert!(step.x_next.iter().all(|v| v.is_finite()));
+    assert!(step.lambda.iter().all(|l| *l >= 0.0));
+    // The link's 47 rad/s into the ground is stopped, not reversed into a larger speed.
+    assert!(step.x_next[6].abs() < 1.0, "{:?}", step.x_next);
+    let speed = |x: &[f64]| x[5..].iter().map(|v| v * v).sum::<f64>().sqrt();
+    assert!(speed(&step.x_next) < speed(&x), "{:?}", step.x_next);
+}

@@ -916,7 +916,12 @@ impl Model {
         };
         let info = match self.settings.model {
             Complementarity::Hard => {
-                lemke_in_place(&problem, &LemkeSettings::default(), &mut scratch.lemke, z)?
+                match lemke_in_place(&problem, &LemkeSettings::default(), &mut scratch.lemke, z) {
+                    Err(ncp::NcpError::Infeasible { .. } | ncp::NcpError::InfeasibleRow { .. }) => {
+                        nearest_compliant(&problem, n, &mut scratch.lemke, z)?
+                    }
+                    other => other?,
+                }
             }
             Complementarity::Logistic { sigma } => {
                 let functions = &mut scratch.functions;
@@ -1083,4 +1088,39 @@ pub(crate) fn check(what: &'static str, v: &[f64], len: usize) -> Result<(), Dyn
         });
     }
     Ok(())
+}
+
+/// The hard step's LCP when it has no solution (the two-row friction model's matrix is not copositive in
+/// some jammed configurations, Painlevé's paradox: a finger pressing a block into the ground it slides
+/// on): the solution of the nearest compliant problem instead, `eps` added to every contact row's
+/// diagonal (a spring of compliance `eps` in each row), `eps` rising tenfold from `1e-10` of the
+/// problem's scale until Lemke's method solves it; a diagonal that large makes the matrix diagonally
+/// dominant, which always has a solution. Reported as [`ncp::Status::Inaccurate`]: it is not a
+/// solution of the hard problem, which has none.
+fn nearest_compliant(
+    problem: &LinearMcp,
+    n: usize,
+    lemke: &mut LemkeWorkspace,
+    z: &mut Vec<f64>,
+) -> Result<ncp::Info, DynamicsError> {
+    let dim = problem.q().len();
+    let scale = problem.scale();
+    let mut last = ncp::NcpError::Infeasible { pivots: 0 };
+    for k in -10..=3 {
+        let eps = scale * 10f64.powi(k);
+        let mut a = problem.m_row_major().to_vec();
+        for i in n..dim {
+            a[i * dim + i] += eps;
+        }
+        let compliant = LinearMcp::from_row_major(n, a, problem.q().to_vec())?;
+        z.iter_mut().skip(n).for_each(|v| *v = 0.0);
+        match lemke_in_place(&compliant, &LemkeSettings::default(), lemke, z) {
+            Ok(mut info) => {
+                info.status = ncp::Status::Inaccurate;
+                return Ok(info);
+            }
+            Err(e) => last = e,
+        }
+    }
+    Err(last.into())
 }

@@ -997,6 +997,54 @@ enum Round {
     Nominal(usize),
 }
 
+/// Growth world `w` (see [`Round`]): its time step, its simulator, and for a target task on a world
+/// other than the library's own the sharpened dynamics its branches are optimised on
+/// ([`LibrarySettings::growth_sharpening`]).
+fn growth_world(
+    task: &Build,
+    round: usize,
+) -> Result<(f64, Simulator, Option<SceneDynamics>), LibraryError> {
+    let s = task.settings;
+    // Odd rounds run on hard contact: the policy is meant for the smoothed and the hard world alike.
+    let steps_of = &s.growth_time_steps;
+    let h = if steps_of.is_empty() {
+        s.h
+    } else {
+        steps_of[(round / 2) % steps_of.len()]
+    };
+    let world = Simulator::new(
+        task.scene.clone(),
+        StepSettings {
+            model: if round % 2 == 1 {
+                Complementarity::Hard
+            } else {
+                s.model.complementarity()
+            },
+            h,
+            ..StepSettings::default()
+        },
+    )?;
+    // A target task's branches for a world other than the library's own are optimised nearer contact
+    // (LibrarySettings::growth_sharpening).
+    let other_world = round % 2 == 1 || h != s.h;
+    let sharpened = match s.model {
+        ContactModel::Logistic(sigma) => Some(ContactModel::Logistic(sigma * s.growth_sharpening)),
+        ContactModel::Normal(sigma) => Some(ContactModel::Normal(sigma * s.growth_sharpening)),
+        ContactModel::Hard => None,
+    };
+    let sharper = match sharpened {
+        Some(model)
+            if task.progress.forward.is_none() && other_world && s.growth_sharpening != 1.0 =>
+        {
+            Some(SceneDynamics::new(
+                LibrarySettings { model, ..s.clone() }.simulator(task.scene)?,
+            ))
+        }
+        _ => None,
+    };
+    Ok((h, world, sharper))
+}
+
 /// One growth round (see [`Exploration::Branches`]) or final check: the number of branches added.
 ///
 /// Failure is the task's: for a task that rewards progress, a stall (the progress coordinate advancing
@@ -1034,41 +1082,7 @@ fn grow(
         .with_control_weight(task.cost.control_weight)
     };
     let mut policy = policy_of(built)?;
-    // Odd rounds run on hard contact: the policy is meant for the smoothed and the hard world alike.
-    let steps_of = &s.growth_time_steps;
-    let h = if steps_of.is_empty() {
-        s.h
-    } else {
-        steps_of[(round / 2) % steps_of.len()]
-    };
-    let mut world = Simulator::new(
-        task.scene.clone(),
-        StepSettings {
-            model: if round % 2 == 1 {
-                Complementarity::Hard
-            } else {
-                s.model.complementarity()
-            },
-            h,
-            ..StepSettings::default()
-        },
-    )?;
-    // A target task's branches for a world other than the library's own are optimised nearer contact
-    // (LibrarySettings::growth_sharpening).
-    let other_world = round % 2 == 1 || h != s.h;
-    let sharpened = match s.model {
-        ContactModel::Logistic(sigma) => Some(ContactModel::Logistic(sigma * s.growth_sharpening)),
-        ContactModel::Normal(sigma) => Some(ContactModel::Normal(sigma * s.growth_sharpening)),
-        ContactModel::Hard => None,
-    };
-    let mut sharper = match sharpened {
-        Some(model) if progress.forward.is_none() && other_world && s.growth_sharpening != 1.0 => {
-            Some(SceneDynamics::new(
-                LibrarySettings { model, ..s.clone() }.simulator(task.scene)?,
-            ))
-        }
-        _ => None,
-    };
+    let (h, mut world, mut sharper) = growth_world(task, round)?;
     let mut rng = ChaCha8Rng::seed_from_u64(s.seed);
     rng.set_stream(u64::MAX - round as u64);
     let steps = (seconds / h).round() as usize;
@@ -1087,8 +1101,8 @@ fn grow(
     // A final check judges a target task as `evaluate` does without kicks: its worst distance over the
     // last quarter; a growth round, by the distance when judged.
     let quarter = match kind {
-        Round::Nominal(_) => steps - steps / 4,
-        Round::Kicked(_) => usize::MAX,
+        Round::Nominal(_) if progress.forward.is_none() => steps - steps / 4,
+        _ => usize::MAX,
     };
     let mut worst = 0.0f64;
     for k in 0..steps {

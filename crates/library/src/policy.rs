@@ -470,17 +470,22 @@ impl Policy {
         if self.control_weight == 0.0 {
             return 0.0;
         }
-        let k = &self.gains[i];
-        let excess: f64 = (self.controls[i].iter().zip(&self.envelope))
-            .enumerate()
-            .map(|(a, (u, (lo, hi)))| {
-                let row = &k[a * self.n..(a + 1) * self.n];
-                let law = row.iter().zip(d).fold(*u, |s, (k, d)| s + k * d);
+        let excess: f64 = (self.envelope.iter().enumerate())
+            .map(|(a, (lo, hi))| {
+                let law = self.law(i, a, d);
                 let e = (law - hi).max(lo - law).max(0.0);
                 e * e
             })
             .sum();
         self.control_weight * excess
+    }
+
+    /// Control `a` of controller `i`'s law at offset `d`: `u_i + K_i d`, unsaturated.
+    fn law(&self, i: usize, a: usize, d: &[f64]) -> f64 {
+        let row = &self.gains[i][a * self.n..(a + 1) * self.n];
+        row.iter()
+            .zip(d)
+            .fold(self.controls[i][a], |s, (k, d)| s + k * d)
     }
 
     /// `x - x_i` with the free angle taken `turns` whole periods back, into `d`.
@@ -508,22 +513,22 @@ impl Policy {
         let mut d = vec![0.0; self.n];
         let mut best = (f64::INFINITY, candidates[0]);
         if candidates.len() > 1 {
-            // (prediction, within reach) of each candidate.
-            let ranked: Vec<(f64, bool)> = candidates
-                .iter()
-                .map(|&(i, turns)| {
-                    self.offset(x, i, turns, &mut d);
-                    let v = self.values[i].predict(&d, turns) + self.extrapolation_charge(i, &d);
-                    let within =
-                        self.reach[i].is_infinite() || self.whitened_squared(&d) <= self.reach[i];
-                    (v, within)
-                })
-                .collect();
-            let any_within = ranked.iter().any(|r| r.1);
-            for (&c, &(v, within)) in candidates.iter().zip(&ranked) {
-                if (within || !any_within) && v < best.0 {
-                    best = (v, c);
+            // The best within reach, and the best of all for when none reaches `x`.
+            let mut best_within = (f64::INFINITY, None);
+            for &(i, turns) in &candidates {
+                self.offset(x, i, turns, &mut d);
+                let v = self.values[i].predict(&d, turns) + self.extrapolation_charge(i, &d);
+                if v < best.0 {
+                    best = (v, (i, turns));
                 }
+                let within =
+                    self.reach[i].is_infinite() || self.whitened_squared(&d) <= self.reach[i];
+                if within && v < best_within.0 {
+                    best_within = (v, Some((i, turns)));
+                }
+            }
+            if let (v, Some(c)) = best_within {
+                best = (v, c);
             }
         }
         let (i, turns) = best.1;
@@ -541,13 +546,8 @@ impl Policy {
                 problem: format!("has {} entries, expected {}", u.len(), self.m),
             });
         }
-        let k = &self.gains[i];
         for (a, u) in u.iter_mut().enumerate() {
-            let row = &k[a * self.n..(a + 1) * self.n];
-            *u = row
-                .iter()
-                .zip(&d)
-                .fold(self.controls[i][a], |s, (k, d)| s + k * d);
+            *u = self.law(i, a, &d);
             if let Some(l) = &self.limits {
                 *u = u.clamp(l.lower[a], l.upper[a]);
             }
