@@ -1101,7 +1101,7 @@ fn nearest_compliant(
     problem: &LinearMcp,
     n: usize,
     lemke: &mut LemkeWorkspace,
-    z: &mut Vec<f64>,
+    z: &mut [f64],
 ) -> Result<ncp::Info, DynamicsError> {
     let dim = problem.q().len();
     let scale = problem.scale();
