@@ -147,17 +147,8 @@ pub(crate) fn stamp() -> String {
         "texts": examples().iter().map(|e| e.text.clone()).collect::<Vec<_>>(),
         "default": LibrarySettings::default(),
         // Not the library file's format version: it changes how a library is written, not its numbers.
-        // Growth's closed loops and the policy's choice (issue 28: a first kick at 40 s, a final check
-        // of every world, reach shrunk where a controller outbid a branch, laws charged beyond the
-        // stored controls).
-        "growth": [
-            library::GROWTH_SECONDS,
-            library::GROWTH_FIRST_KICK,
-            library::REACH_SHRINK,
-            library::VERIFY_PASSES as f64,
-            library::VERIFY_BRANCHES as f64,
-        ],
-        "policy": "value, reach, extrapolation charge",
+        "growth": crate::experiments::recipe::growth_stamp(),
+        "policy": crate::experiments::recipe::POLICY_STAMP,
         "seeds": SEEDS,
         "seconds": SECONDS,
         "kicks": [KICK_STD, KICK_EVERY, KICK_SEED_BASE],

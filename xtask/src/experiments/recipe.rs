@@ -34,17 +34,8 @@ pub(crate) fn stamp() -> String {
         },
         // Not the library file's format version: it changes how a library is written, not what it
         // holds or how its policy runs.
-        // Growth's closed loops and the policy's choice (issue 28: a first kick at 40 s, a final check
-        // of every world, reach shrunk where a controller outbid a branch, laws charged beyond the
-        // stored controls).
-        "growth": [
-            library::GROWTH_SECONDS,
-            library::GROWTH_FIRST_KICK,
-            library::REACH_SHRINK,
-            library::VERIFY_PASSES as f64,
-            library::VERIFY_BRANCHES as f64,
-        ],
-        "policy": "value, reach, extrapolation charge",
+        "growth": growth_stamp(),
+        "policy": POLICY_STAMP,
         "seeds": SEEDS,
         "seconds": SECONDS,
         // The step itself (how penetration is recovered, issue 27): new physics, new numbers.
@@ -52,6 +43,21 @@ pub(crate) fn stamp() -> String {
     });
     format!("{:08x}", crc32fast::hash(inputs.to_string().as_bytes()))
 }
+
+/// Growth's closed loops as the stamps see them (issue 28: a first kick at 40 s, a final check of every
+/// world, reach shrunk where a controller outbid a branch).
+pub(crate) fn growth_stamp() -> serde_json::Value {
+    serde_json::json!([
+        library::GROWTH_SECONDS,
+        library::GROWTH_FIRST_KICK,
+        library::REACH_SHRINK,
+        library::VERIFY_PASSES as f64,
+        library::VERIFY_BRANCHES as f64,
+    ])
+}
+
+/// How the policy chooses, as the stamps see it (laws charged beyond the stored controls, issue 28).
+pub(crate) const POLICY_STAMP: &str = "value, reach, extrapolation charge";
 
 /// The line a generated section of docs/results.md starts with.
 pub(crate) fn stamp_line() -> String {
