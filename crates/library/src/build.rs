@@ -906,15 +906,9 @@ fn branched(
     for b in branches {
         built.append(b);
     }
+    let mut run = |kind| grow(task, &mut dynamics, &mut built, length, kind, report);
     for round in 0..s.growth {
-        let grown = grow(
-            task,
-            &mut dynamics,
-            &mut built,
-            length,
-            Round::Kicked(round),
-            report,
-        )?;
+        let grown = run(Round::Kicked(round))?;
         tracing::info!(round, grown, "library growth");
     }
     if s.growth > 0 {
@@ -924,14 +918,7 @@ fn branched(
         for pass in 0..VERIFY_PASSES {
             let mut grown = 0;
             for world in 0..worlds {
-                grown += grow(
-                    task,
-                    &mut dynamics,
-                    &mut built,
-                    length,
-                    Round::Nominal(world),
-                    report,
-                )?;
+                grown += run(Round::Nominal(world))?;
             }
             tracing::info!(pass, grown, "library verification");
             if grown == 0 {
