@@ -601,6 +601,16 @@ impl<'a> Build<'a> {
             && self.advance(built, trunk, trunk - 1 - window) < STALL_ADVANCE
     }
 
+    /// Whether a target task's solve ends within the task's success tolerance of its targets (never for
+    /// a task that rewards progress).
+    fn settles(&self, sol: &ddp::Solution) -> bool {
+        self.progress.forward.is_none()
+            && sol
+                .states
+                .last()
+                .is_some_and(|x| self.success.distance(x) <= self.success.tolerance)
+    }
+
     fn dynamics(&self) -> Result<SceneDynamics, LibraryError> {
         Ok(SceneDynamics::new(self.settings.simulator(self.scene)?))
     }
@@ -638,8 +648,10 @@ impl<'a> Build<'a> {
             };
             let mut sol = self.solve(dynamics, &x1, &controls, passes, k)?;
             // The build's first solve, and the first of every chain of a target task (a branch from a
-            // state the policy left off target, perhaps with the contact out of reach).
-            if k == 0 && (first || self.progress.forward.is_none()) {
+            // state the policy left off target, perhaps with the contact out of reach), unless it ends
+            // within the task's tolerance: then it needs no contact, and teaches the policy to let be
+            // (issue 28: a sixth of pushing's searches came back from such branches empty).
+            if k == 0 && (first || self.progress.forward.is_none()) && !self.settles(&sol) {
                 let settings = *dynamics.model().settings();
                 let found;
                 (sol, found) = self.reach(&settings, &x1, sol, passes)?;
@@ -1032,7 +1044,8 @@ fn growth_world(
     Ok((h, world, sharper))
 }
 
-/// One growth round (see [`Exploration::Branches`]) or final check: the number of branches added.
+/// One growth round (see [`Exploration::Branches`]) or final check: the number of branches added (not
+/// counting those that came back empty).
 ///
 /// Failure is the task's: for a task that rewards progress, a stall (the progress coordinate advancing
 /// less than [`STALL_ADVANCE`] the rewarded way in [`STALL_WINDOW`] seconds), and a branch starts where
@@ -1041,7 +1054,10 @@ fn growth_world(
 /// first interval, from the start), and two branches start, one from the state the kick left and one
 /// from the state the policy is in then (whose first solve reaches for the contact if the policy let go
 /// of it: [`task::ContactProblem::feel_contact`]), optimised at the sharpened noise scale
-/// ([`LibrarySettings::growth_sharpening`]) when the round's world is not the library's own.
+/// ([`LibrarySettings::growth_sharpening`]) when the round's world is not the library's own. A branch
+/// whose first solve ends within the tolerance is kept as it is (it teaches the policy to let be); one
+/// whose search for the contact finds none that pays comes back empty and is not added (it still counts
+/// towards the round's branches at most).
 fn grow(
     task: &Build,
     dynamics: &mut SceneDynamics,
@@ -1081,7 +1097,8 @@ fn grow(
     let mut recent = std::collections::VecDeque::with_capacity(window + 1);
     let mut x = s.x0.clone();
     let mut u = vec![0.0; task.scene.n_controls];
-    let mut grown = 0;
+    // Branches grown, and tried (some come back empty): a round tries at most `most`.
+    let (mut grown, mut tried) = (0, 0);
     // A target task's last perturbed state, the controller used there, and when to judge the way back.
     let mut kicked: Option<(Vec<f64>, usize)> = None;
     let mut judge_at = first_kick - 1;
@@ -1131,11 +1148,12 @@ fn grow(
             }
             None => Vec::new(),
         };
-        let grown_before = grown;
+        let tried_before = tried;
         for (from, i, stuck) in failed_at {
-            if grown == most {
+            if tried == most {
                 break;
             }
+            tried += 1;
             let (trajectory, offset) = (i / s.keep, i % s.keep);
             let plan = ddp::shift_controls(&built.plans[trajectory], offset);
             let branch_dynamics = match sharper.as_mut() {
@@ -1151,6 +1169,11 @@ fn grow(
                 |_, _| {},
                 report,
             )?;
+            // A target task's branch whose search found no contact that helps (a block knocked out of
+            // the finger's reach, say) has nothing to teach: the policy stays as it is.
+            if branch.entries.is_empty() {
+                continue;
+            }
             let first_new = built.entries.len();
             built.append(branch);
             policy = policy_of(built)?;
@@ -1160,8 +1183,8 @@ fn grow(
             recent.clear();
             grown += 1;
         }
-        if grown > grown_before {
-            if grown == most {
+        if tried > tried_before {
+            if tried == most {
                 break;
             }
             policy.control(&x, &mut u)?;
@@ -1236,5 +1259,86 @@ mod tests {
                 _ => assert_eq!(e.reach, None, "{i}"),
             }
         }
+    }
+
+    /// A fork on a slider and a block on the ground (scenes/slider_push.toml's, without its comments):
+    /// the block's target is 0.5 along the ground.
+    const SLIDER: &str = r#"
+gravity = [0.0, -4.0]
+[[body]]
+name = "pusher"
+semi_axes = [0.15, 0.15]
+parent = "world"
+anchor = [-1.0, 0.25]
+centre = [0.0, 0.0]
+joint = { type = "slider", axis = [1.0, 0.0], limits = [-0.5, 2.5], damping = 0.5, actuated = true }
+[[body]]
+name = "prong"
+semi_axes = [0.15, 0.15]
+parent = "pusher"
+anchor = [2.0, 0.0]
+centre = [0.0, 0.0]
+joint = { type = "weld" }
+[[body]]
+name = "block"
+semi_axes = [0.4, 0.25]
+parent = "world"
+anchor = [0.0, 0.0]
+centre = [0.0, 0.0]
+joint = { type = "free", damping = 0.05 }
+[[plane]]
+name = "ground"
+point = [0.0, 0.0]
+normal = [0.0, 1.0]
+[[contact]]
+a = "ground"
+b = "block"
+friction = 0.5
+[[contact]]
+a = "pusher"
+b = "block"
+friction = 0.2
+[[contact]]
+a = "prong"
+b = "block"
+friction = 0.2
+[task.push]
+h = 0.05
+horizon = 60
+model = "logistic"
+sigma = 0.05
+x0 = { "block.y" = 0.25 }
+control_weight = 0.05
+control_limits = [-4.0, 4.0]
+running = [{ coordinate = "block.x", quadratic = 1.0, target = 0.5 }]
+final = [
+    { coordinate = "block.x", quadratic = 20.0, target = 0.5 },
+    { coordinate = "block.x", velocity = true, quadratic = 5.0 },
+]
+"#;
+
+    #[test]
+    fn a_target_tasks_branch_already_at_its_targets_is_kept_without_reaching_for_contact() {
+        let file = task::ProblemFile::from_toml_str(SLIDER).unwrap();
+        let task = file.task(Some("push")).unwrap();
+        let scene = &file.scene;
+        let settings = LibrarySettings::default().for_task(&task).fitted(40);
+        let build = Build::new(scene, &task, &settings).unwrap();
+        // The block at rest on its target, both prongs 0.45 from it: nothing to do, and no contact felt.
+        let names = scene.coordinate_names();
+        let at = |name: &str| names.iter().position(|n| n == name).unwrap();
+        let mut x1 = task.x0.clone();
+        x1[at("block.x")] = 0.5;
+        x1[at("pusher.position")] = 0.5;
+        let zero = vec![vec![0.0; scene.n_controls]; settings.horizon];
+        let mut dynamics = build.dynamics().unwrap();
+        let branch = build
+            .chain(&mut dynamics, x1, zero, 2, false, |_, _| {}, &|_| {})
+            .unwrap();
+        // Both trajectories kept: the policy learns to leave the block be there (a branch that reached
+        // for the contact found none that pays, and came back empty).
+        assert_eq!(branch.entries.len(), 2 * settings.keep);
+        let first = &branch.entries[0];
+        assert!(first.cost < 1e-2, "{}", first.cost);
     }
 }
