@@ -99,8 +99,9 @@ pub enum Exploration {
     /// [`LibrarySettings::growth`] rounds: the policy runs in closed loop from `x0` with a velocity kick
     /// every 10 s, on the library's own model in even rounds and on hard contact in odd ones, at the time
     /// steps of [`LibrarySettings::growth_time_steps`] in turn (a pair of rounds each); wherever the free angle advances less than
-    /// [`STALL_ADVANCE`] in [`STALL_WINDOW`] seconds, a branch of `length` trajectories starts from that
-    /// state, warm-started from the plan of the controller the policy used there.
+    /// [`STALL_ADVANCE`] in [`STALL_WINDOW`] seconds, a branch of `length` trajectories at most (spanning
+    /// the failure's window: `Build::growth_length`) starts from that state, warm-started from the plan of
+    /// the controller the policy used there.
     Branches {
         /// Trajectories of the unperturbed chain.
         trunk: usize,
@@ -611,6 +612,28 @@ impl<'a> Build<'a> {
                 .is_some_and(|x| self.success.distance(x) <= self.success.tolerance)
     }
 
+    /// Trajectories per growth branch: as many as span the window the task's failure is judged over,
+    /// at most `length` (the recipe's branches off the trunk). A progress task's stall is judged over
+    /// [`STALL_WINDOW`] (10 trajectories of 4 steps at 0.05 s): its branch only has to lead the policy
+    /// back onto the cycle the library covers. A target task's miss is judged [`task::Success::settle`]
+    /// seconds after a kick (25 such trajectories at the default 5 s): its branch has to carry the task all
+    /// the way back. (Issue 28: 10 trajectories for every task cut the three-link finger's builds by a
+    /// fifth with 2 more kicked runs recovered, but the slider's kicked runs fell from 14 of 16 to 8.)
+    fn growth_length(&self, length: usize) -> usize {
+        let s = self.settings;
+        let window = match self.progress.forward {
+            Some(_) => STALL_WINDOW,
+            None => self.success.settle,
+        };
+        let trajectories = (window / (s.shift as f64 * s.h)).ceil();
+        // A window that is not a finite positive time (a settle of 0, say) leaves the recipe's length.
+        if trajectories.is_finite() && trajectories >= 1.0 {
+            length.min(trajectories as usize)
+        } else {
+            length
+        }
+    }
+
     fn dynamics(&self) -> Result<SceneDynamics, LibraryError> {
         Ok(SceneDynamics::new(self.settings.simulator(self.scene)?))
     }
@@ -650,7 +673,7 @@ impl<'a> Build<'a> {
             // The build's first solve, and the first of every chain of a target task (a branch from a
             // state the policy left off target, perhaps with the contact out of reach), unless it ends
             // within the task's tolerance: then it needs no contact, and teaches the policy to let be
-            // (issue 28: a sixth of pushing's searches came back from such branches empty).
+            // (issue 28: 6 of pushing's 207 fruitless searches in one build).
             if k == 0 && (first || self.progress.forward.is_none()) && !self.settles(&sol) {
                 let settings = *dynamics.model().settings();
                 let found;
@@ -918,7 +941,8 @@ fn branched(
     for b in branches {
         built.append(b);
     }
-    let mut run = |kind| grow(task, &mut dynamics, &mut built, length, kind, report);
+    let growth_length = task.growth_length(length);
+    let mut run = |kind| grow(task, &mut dynamics, &mut built, growth_length, kind, report);
     for round in 0..s.growth {
         let grown = run(Round::Kicked(round))?;
         tracing::info!(round, grown, "library growth");
@@ -1261,65 +1285,12 @@ mod tests {
         }
     }
 
-    /// A fork on a slider and a block on the ground (scenes/slider_push.toml's, without its comments):
-    /// the block's target is 0.5 along the ground.
-    const SLIDER: &str = r#"
-gravity = [0.0, -4.0]
-[[body]]
-name = "pusher"
-semi_axes = [0.15, 0.15]
-parent = "world"
-anchor = [-1.0, 0.25]
-centre = [0.0, 0.0]
-joint = { type = "slider", axis = [1.0, 0.0], limits = [-0.5, 2.5], damping = 0.5, actuated = true }
-[[body]]
-name = "prong"
-semi_axes = [0.15, 0.15]
-parent = "pusher"
-anchor = [2.0, 0.0]
-centre = [0.0, 0.0]
-joint = { type = "weld" }
-[[body]]
-name = "block"
-semi_axes = [0.4, 0.25]
-parent = "world"
-anchor = [0.0, 0.0]
-centre = [0.0, 0.0]
-joint = { type = "free", damping = 0.05 }
-[[plane]]
-name = "ground"
-point = [0.0, 0.0]
-normal = [0.0, 1.0]
-[[contact]]
-a = "ground"
-b = "block"
-friction = 0.5
-[[contact]]
-a = "pusher"
-b = "block"
-friction = 0.2
-[[contact]]
-a = "prong"
-b = "block"
-friction = 0.2
-[task.push]
-h = 0.05
-horizon = 60
-model = "logistic"
-sigma = 0.05
-x0 = { "block.y" = 0.25 }
-control_weight = 0.05
-control_limits = [-4.0, 4.0]
-running = [{ coordinate = "block.x", quadratic = 1.0, target = 0.5 }]
-final = [
-    { coordinate = "block.x", quadratic = 20.0, target = 0.5 },
-    { coordinate = "block.x", velocity = true, quadratic = 5.0 },
-]
-"#;
-
     #[test]
     fn a_target_tasks_branch_already_at_its_targets_is_kept_without_reaching_for_contact() {
-        let file = task::ProblemFile::from_toml_str(SLIDER).unwrap();
+        // A fork on a slider and a block on the ground, whose target is 0.5 along it.
+        let file =
+            task::ProblemFile::from_toml_str(include_str!("../../../scenes/slider_push.toml"))
+                .unwrap();
         let task = file.task(Some("push")).unwrap();
         let scene = &file.scene;
         let settings = LibrarySettings::default().for_task(&task).fitted(40);
@@ -1340,5 +1311,23 @@ final = [
         assert_eq!(branch.entries.len(), 2 * settings.keep);
         let first = &branch.entries[0];
         assert!(first.cost < 1e-2, "{}", first.cost);
+    }
+
+    #[test]
+    fn a_growth_branch_spans_the_window_its_failure_is_judged_over() {
+        let length = |text: &str, recipe: usize| {
+            let file = task::ProblemFile::from_toml_str(text).unwrap();
+            let task = file.task(None).unwrap();
+            let settings = LibrarySettings::default().for_task(&task);
+            let build = Build::new(&file.scene, &task, &settings).unwrap();
+            build.growth_length(recipe)
+        };
+        // The finger's stall window, 2 s, is 10 trajectories of 4 steps at 0.05 s ...
+        assert_eq!(length(task::BUILTIN_SCENE_FILE, 20), 10);
+        assert_eq!(length(task::BUILTIN_SCENE_FILE, 6), 6);
+        // ... the slider's settle time, 5 s, 25 of them: the recipe's 20 at most.
+        let slider = include_str!("../../../scenes/slider_push.toml");
+        assert_eq!(length(slider, 20), 20);
+        assert_eq!(length(slider, 40), 25);
     }
 }

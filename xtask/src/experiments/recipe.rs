@@ -53,6 +53,8 @@ pub(crate) fn growth_stamp() -> serde_json::Value {
         library::REACH_SHRINK,
         library::VERIFY_PASSES as f64,
         library::VERIFY_BRANCHES as f64,
+        library::STALL_WINDOW,
+        "branches span the failure's window; settled ones kept, empty ones dropped",
     ])
 }
 
