@@ -596,8 +596,8 @@ fn constraint_rows_name_their_owner_and_steps_give_each_pairs_impulse() {
 /// (issue 28's zoo, library seed 2): the second link 0.087 into the ground at -47 rad/s, pressing the
 /// block it slides on. The two-row friction model's LCP has no solution there (Lemke's method ends on a
 /// ray under every covering vector), which used to stop the whole library build. The step now takes the
-/// nearest compliant problem's solution and says so (`Inaccurate`): finite, the link stopped, the
-/// contact rows complementary, and the same answer as the compliant problem's solution by Lemke's method.
+/// nearest compliant problem's solution and says so (`Inaccurate`): finite, non-negative impulses, the
+/// link's speed into the ground stopped and the state's speed lowered.
 #[test]
 fn a_hard_lcp_without_a_solution_takes_the_nearest_compliant_one_and_says_so() {
     let file = task::ProblemFile::from_toml_str(include_str!("../../scenes/pushing.toml")).unwrap();

@@ -1106,13 +1106,15 @@ fn nearest_compliant(
     let dim = problem.q().len();
     let scale = problem.scale();
     let mut last = ncp::NcpError::Infeasible { pivots: 0 };
+    // One copy of the problem, its contact diagonal set in place to the hard one's plus each `eps`.
+    let m = problem.m_row_major();
+    let (mut a, mut q) = (m.to_vec(), problem.q().to_vec());
     for k in -10..=3 {
         let eps = scale * 10f64.powi(k);
-        let mut a = problem.m_row_major().to_vec();
         for i in n..dim {
-            a[i * dim + i] += eps;
+            a[i * dim + i] = m[i * dim + i] + eps;
         }
-        let compliant = LinearMcp::from_row_major(n, a, problem.q().to_vec())?;
+        let compliant = LinearMcp::from_row_major(n, a, q)?;
         z.iter_mut().skip(n).for_each(|v| *v = 0.0);
         match lemke_in_place(&compliant, &LemkeSettings::default(), lemke, z) {
             Ok(mut info) => {
@@ -1121,6 +1123,7 @@ fn nearest_compliant(
             }
             Err(e) => last = e,
         }
+        (a, q) = compliant.into_row_major();
     }
     Err(last.into())
 }

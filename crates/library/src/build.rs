@@ -605,11 +605,7 @@ impl<'a> Build<'a> {
     /// Whether a target task's solve ends within the task's success tolerance of its targets (never for
     /// a task that rewards progress).
     fn settles(&self, sol: &ddp::Solution) -> bool {
-        self.progress.forward.is_none()
-            && sol
-                .states
-                .last()
-                .is_some_and(|x| self.success.distance(x) <= self.success.tolerance)
+        self.progress.forward.is_none() && sol.states.last().is_some_and(|x| self.success.within(x))
     }
 
     /// Trajectories per growth branch: as many as span the window the task's failure is judged over,

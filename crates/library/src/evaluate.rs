@@ -434,7 +434,7 @@ pub fn evaluate_in(
             after_sum += rate * (kick_steps / 2) as f64 * settings.h;
             after_time += (kick_steps / 2) as f64 * settings.h;
             let back = if holds {
-                success.distance(&x) <= success.tolerance
+                success.within(&x)
             } else {
                 forward * rate > 0.0
             };
@@ -456,7 +456,7 @@ pub fn evaluate_in(
         if let Some((at, angle)) = since_kick {
             let after = k + 1 - at;
             let back = if holds {
-                success.distance(&x) <= success.tolerance
+                success.within(&x)
             } else {
                 forward * (x[free] - angle) >= std::f64::consts::FRAC_PI_2
             };

@@ -598,6 +598,11 @@ impl Success {
             .fold(0.0, f64::max)
     }
 
+    /// Whether every judged target is within the tolerance of its target at `x`.
+    pub fn within(&self, x: &[f64]) -> bool {
+        self.distance(x) <= self.tolerance
+    }
+
     /// Whether the task holds targets (and rewards no progress): perturbations are judged by the way
     /// back to them.
     pub fn holds(&self) -> bool {
