@@ -133,7 +133,19 @@ pub(crate) fn on_two_threads<J: Sync, R: Send>(
 }
 
 fn main() -> anyhow::Result<()> {
-    match Cli::parse().command {
+    let command = Cli::parse().command;
+    // The viewer logs its warnings by default; every command logs its stages (a library build's trunk,
+    // growth rounds and final check; RUST_LOG=info) to standard error when asked.
+    if matches!(command, Command::View(_)) || std::env::var_os("RUST_LOG").is_some() {
+        tracing_subscriber::fmt()
+            .with_writer(std::io::stderr)
+            .with_env_filter(
+                tracing_subscriber::EnvFilter::try_from_default_env()
+                    .unwrap_or_else(|_| "warn".into()),
+            )
+            .init();
+    }
+    match command {
         Command::Distance(args) => distance::run(&args),
         Command::Lcp(args) => lcp::run(&args),
         Command::Step(args) => step::run_step(&args),

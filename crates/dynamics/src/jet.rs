@@ -1,7 +1,8 @@
 //! A second-order forward-mode number over `N` directions with plain arrays: value, gradient and the full
 //! Hessian, each product fused into one pass (no temporaries). The Hessians of the forces `r(q, v)` run on
-//! it (`Jet<6>` over `(q, v)` for three joints; larger scenes take several passes): a few times cheaper than the general-purpose dual types
-//! for the one place where second derivatives of many operations are needed.
+//! it (`Jet<6>` over `(q, v)` for three joints, the narrowest width that holds a scene's arguments up to
+//! twelve; larger scenes take several passes): a few times cheaper than the general-purpose dual types for
+//! the one place where second derivatives of many operations are needed.
 
 use crate::kinematics::Ring;
 use std::ops::{Add, AddAssign, Div, Mul, Neg, Sub, SubAssign};

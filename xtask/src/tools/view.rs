@@ -165,11 +165,6 @@ fn config(args: &Args) -> anyhow::Result<ViewerConfig> {
 
 /// Run `cargo xtask view`.
 pub fn run(args: &Args) -> anyhow::Result<()> {
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "warn".into()),
-        )
-        .init();
     let config = config(args)?;
     let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
     runtime.block_on(async {

@@ -273,22 +273,42 @@ impl Model {
 
     /// The second-order ingredients at `(x, u)`, any number of joints: the geometry over the joint angles
     /// and the forces over `(q, v)`, to be lifted to `y`. Three joints (the finger) take one pass of
-    /// three-direction jets for the geometry and one of six for the forces.
+    /// three-direction jets for the geometry and one of six for the forces; up to six joints, one pass
+    /// each.
     pub(super) fn expansion(&self, x: &[f64], u: &[f64]) -> Result<Expansion, DynamicsError> {
         let scene = self.scene();
         let n = scene.n_dof();
         let mut side = None;
         let m = scene.n_constraints();
         let len = n * n + m * n + 2 * m + n;
-        let geometry = if n <= 3 {
-            Taylor::expand::<3>(&x[..n], len, |q, sink| self.geometry(q, &mut side, sink))?
-        } else {
-            Taylor::expand::<6>(&x[..n], len, |q, sink| self.geometry(q, &mut side, sink))?
+        // The narrowest jet that holds all of a group's arguments, so that one pass gives its Hessians
+        // (each entry's arithmetic is the same in any width: the same numbers to the last bit); past
+        // the widest, passes over pairs of blocks.
+        macro_rules! geometry_in {
+            ($k:literal) => {
+                Taylor::expand::<$k>(&x[..n], len, |q, sink| self.geometry(q, &mut side, sink))?
+            };
+        }
+        macro_rules! forces_in {
+            ($k:literal) => {
+                Taylor::expand::<$k>(&x[..2 * n], n, |qv, sink| {
+                    sink.emit(&self.forces(qv, u));
+                    Ok(())
+                })?
+            };
+        }
+        let geometry = match n {
+            0..=3 => geometry_in!(3),
+            4 => geometry_in!(4),
+            5 | 6 => geometry_in!(6),
+            _ => geometry_in!(8),
         };
-        let forces = Taylor::expand::<6>(&x[..2 * n], n, |qv, sink| {
-            sink.emit(&self.forces(qv, u));
-            Ok(())
-        })?;
+        let forces = match 2 * n {
+            0..=6 => forces_in!(6),
+            7..=8 => forces_in!(8),
+            9..=10 => forces_in!(10),
+            _ => forces_in!(12),
+        };
         let (contacts, distance) = side.expect("the geometry ran at least once");
         Ok(Expansion {
             n,
