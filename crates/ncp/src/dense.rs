@@ -159,6 +159,12 @@ impl DenseLu {
                     10 => eliminate_fixed::<10>(lu, perm, tiny),
                     11 => eliminate_fixed::<11>(lu, perm, tiny),
                     12 => eliminate_fixed::<12>(lu, perm, tiny),
+                    13 => eliminate_fixed::<13>(lu, perm, tiny),
+                    14 => eliminate_fixed::<14>(lu, perm, tiny),
+                    15 => eliminate_fixed::<15>(lu, perm, tiny),
+                    16 => eliminate_fixed::<16>(lu, perm, tiny),
+                    17 => eliminate_fixed::<17>(lu, perm, tiny),
+                    18 => eliminate_fixed::<18>(lu, perm, tiny),
                     _ => eliminate(lu, perm, n, tiny),
                 }
             }

@@ -110,9 +110,14 @@ impl Structured {
     /// that share a row of `dp` are summed before they are multiplied out, so the contraction costs about
     /// as much as one equation's Hessian.
     fn contract(&self, mu: &[f64], out: &mut [f64]) {
-        // The finger's sizes compiled in (the same arithmetic, its loops unrolled); any other at run time.
+        // The example scenes' sizes compiled in (the same arithmetic, the loops unrolled): the finger, the
+        // three-link finger, the slider, two fingers and pushing; any other at run time.
         match (self.expansion.n, self.cols) {
             (3, 8) => self.contract_sized::<3, 8>(mu, out),
+            (4, 11) => self.contract_sized::<4, 11>(mu, out),
+            (4, 9) => self.contract_sized::<4, 9>(mu, out),
+            (5, 14) => self.contract_sized::<5, 14>(mu, out),
+            (5, 12) => self.contract_sized::<5, 12>(mu, out),
             _ => self.contract_sized::<0, 0>(mu, out),
         }
     }
