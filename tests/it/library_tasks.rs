@@ -795,6 +795,121 @@ fn a_continuation_that_finds_no_contact_keeps_the_tasks_own_solve() {
     assert_eq!(c.solution.controls, start.controls);
 }
 
+/// A body's workspace (issue 28) holds every point of it in every configuration: sampled joint angles of
+/// the three-link finger and of the pushing finger, and the slider's fork across its limits; a body whose
+/// way from the world has an unlimited slide (a free block) has none.
+#[test]
+fn a_bodys_workspace_holds_it_in_every_configuration() {
+    let files = [
+        include_str!("../../scenes/three_link_finger.toml"),
+        include_str!("../../scenes/pushing.toml"),
+        include_str!("../../scenes/slider_push.toml"),
+    ];
+    let mut rng = 0x2545_f491_4f6c_dd1du64;
+    let mut uniform = move || {
+        rng ^= rng << 13;
+        rng ^= rng >> 7;
+        rng ^= rng << 17;
+        (rng >> 11) as f64 / (1u64 << 53) as f64
+    };
+    for text in files {
+        let scene = ProblemFile::from_toml_str(text).unwrap().scene;
+        let n = scene.n_dof();
+        for (i, body) in scene.bodies.iter().enumerate() {
+            let free = !scene.actuated(i);
+            let Some((centre, radius)) = scene.workspace(i) else {
+                assert!(free, "{}: a driven body has a workspace", body.name);
+                continue;
+            };
+            let (a, b) = (body.shape.a(), body.shape.b());
+            for _ in 0..400 {
+                // Any angle for a hinge (a free body's angle too), within its limits for a slide.
+                let q: Vec<f64> = (0..n)
+                    .map(|j| match scene.coordinates[j].limits {
+                        Some([lo, hi]) => lo + (hi - lo) * uniform(),
+                        None => 2.0 * std::f64::consts::PI * (uniform() - 0.5) * 3.0,
+                    })
+                    .collect();
+                let kin = dynamics::Kinematics::new(&scene, &q);
+                let (c, phi) = (kin.centre[i], kin.phi[i]);
+                for k in 0..16 {
+                    let t = std::f64::consts::TAU * k as f64 / 16.0;
+                    let (px, py) = (a * t.cos(), b * t.sin());
+                    let p = [
+                        c[0] + phi.cos() * px - phi.sin() * py,
+                        c[1] + phi.sin() * px + phi.cos() * py,
+                    ];
+                    let d = (p[0] - centre[0]).hypot(p[1] - centre[1]);
+                    assert!(d <= radius * (1.0 + 1e-12), "{}: {d} > {radius}", body.name);
+                }
+            }
+        }
+    }
+    // The slider's fork reaches only as far as its slide's limits: its workspace is bounded.
+    let slider = ProblemFile::from_toml_str(include_str!("../../scenes/slider_push.toml"))
+        .unwrap()
+        .scene;
+    let fork = (0..slider.bodies.len())
+        .find(|&i| slider.actuated(i))
+        .unwrap();
+    assert!(slider.workspace(fork).is_some());
+}
+
+/// A contact far beyond the driven body's reach is not searched for (issue 28): pushing's block resting
+/// 6 to the right of the finger's base, where the task's solve feels nothing, comes back as the start
+/// with the pair named and no pull or continuation tried; resting where the finger reaches it, the
+/// search runs as before.
+#[test]
+fn a_contact_far_out_of_reach_is_not_searched_for() {
+    let file = ProblemFile::from_toml_str(include_str!("../../scenes/pushing.toml")).unwrap();
+    let task = file.task(Some("push")).unwrap();
+    let ddp = ddp::Ddp::new(ddp::DdpSettings {
+        max_iterations: 100,
+        control_limits: task.control_limits.clone(),
+        ..ddp::DdpSettings::default()
+    })
+    .unwrap();
+    let step = *library::LibrarySettings::default()
+        .for_task(&task)
+        .simulator(&file.scene)
+        .unwrap()
+        .settings();
+    let names = file.scene.coordinate_names();
+    let block_x = names.iter().position(|c| c == "block.x").unwrap();
+    let at = |x: f64| {
+        let mut x0 = task.x0.clone();
+        x0[block_x] = x;
+        x0
+    };
+    let problem = |x0: &[f64]| -> task::ContactSearch {
+        let start = solve_from(&file, &task, step, &ddp, x0);
+        assert!(!felt(&file, &task, step, x0, &start));
+        task::ContactProblem {
+            ddp: &ddp,
+            scene: &file.scene,
+            settings: &step,
+            cost: &task.cost,
+            x0,
+        }
+        .feel_contact(start, |_, _, _| {})
+        .unwrap()
+    };
+    let far = at(6.0);
+    let search = problem(&far);
+    let apart = search.out_of_reach.expect("out of reach");
+    assert_eq!(
+        task::needed_pairs(&file.scene, &task.cost),
+        Some(vec![apart.pair])
+    );
+    assert!(apart.clearance > 0.5, "{apart:?}");
+    assert!(search.reach.is_none() && search.continuation.is_none() && !search.found());
+    // The finger's reach from its base: the block resting at 1.5 is within twice of it.
+    let near = at(1.5);
+    let search = problem(&near);
+    assert!(search.out_of_reach.is_none());
+    assert!(search.reach.is_some());
+}
+
 /// The task's solve from `x0` with zero controls at first, under `step`.
 fn solve_from(
     file: &ProblemFile,

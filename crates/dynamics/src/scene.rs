@@ -855,6 +855,38 @@ impl Scene {
             .any(|c| c.actuator.is_some())
     }
 
+    /// A disc fixed in the world, `(centre, radius)`, that holds every point of body `i` in every
+    /// configuration its joints allow: hinges at any angle (their limits are not needed, and soft limits
+    /// may be passed), slides within their limits. `None` when a slide on the way from the world has no
+    /// limits (a free joint's `x` and `y`): the body can go anywhere. A bound by the triangle inequality,
+    /// loose but never short: a point outside the disc (by more than the limits' slack) is out of the
+    /// body's reach, whatever the controls do.
+    pub fn workspace(&self, i: usize) -> Option<([f64; 2], f64)> {
+        let b = self.bodies.get(i)?;
+        let (centre, mut radius) = self.origin_workspace(i)?;
+        radius += b.centre[0].hypot(b.centre[1]) + b.shape.a().max(b.shape.b());
+        Some((centre, radius))
+    }
+
+    /// [`Scene::workspace`] of body `i`'s joint frame origin.
+    fn origin_workspace(&self, i: usize) -> Option<([f64; 2], f64)> {
+        let b = &self.bodies[i];
+        let (centre, mut radius) = match b.parent {
+            None => (b.anchor, 0.0),
+            Some(p) => {
+                let (c, r) = self.origin_workspace(p)?;
+                (c, r + b.anchor[0].hypot(b.anchor[1]))
+            }
+        };
+        for c in &self.coordinates[b.coordinates.clone()] {
+            if let CoordinateKind::Slide { axis } = c.kind {
+                let [lo, hi] = c.limits?;
+                radius += lo.abs().max(hi.abs()) * axis[0].hypot(axis[1]);
+            }
+        }
+        Some((centre, radius))
+    }
+
     /// Number of generalised coordinates (one per hinge or slider, three per free joint, none for a weld).
     pub fn n_dof(&self) -> usize {
         self.coordinates.len()

@@ -227,6 +227,28 @@ pub struct Reach {
     pub tries: Vec<(usize, f64, f64, bool)>,
 }
 
+/// A contact too far to reach from a start ([`ContactProblem::out_of_reach`]): over the start's rollout,
+/// which touches nothing the controls move, the bodies they do not move keep farther from every driven
+/// body than twice that body's [workspace](dynamics::Scene::workspace) radius ([`OUT_OF_REACH_SLACK`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OutOfReach {
+    /// The contact pair that came nearest.
+    pub pair: usize,
+    /// By how much it stayed beyond the margin at its nearest.
+    pub clearance: f64,
+}
+
+/// The margin of [`ContactProblem::out_of_reach`] beyond the driven body's workspace, as a fraction of
+/// its radius. No placement of the joints reaches past the workspace, but a step's contact rows are
+/// linear in the velocities, so a link turning fast can meet a body beyond it within one step:
+/// `sqrt(1 + (omega h)^2)` times its reach away, twice at `omega h = 1.7` (35 rad/s at h = 0.05). With a
+/// quarter of the radius (1.25 times the reach), one search in 72 the margin skipped in a build of
+/// roll_block.toml would have felt the contact (issue 28); with the whole radius none in that build or
+/// in a build of pushing.toml did. The smoothed contact's action at a distance adds `40 h sigma` (its
+/// force has fallen by `e^-40` there). A heuristic, not a proof: controls that spin a link faster still
+/// could make such a contact.
+pub const OUT_OF_REACH_SLACK: f64 = 1.0;
+
 /// Passes at most of [`ContactProblem::reach_for_contact`]'s pulled solve: it only has to bring the pair together.
 pub const REACH_PULL_PASSES: usize = 40;
 
@@ -247,6 +269,9 @@ pub struct ContactSearch {
     /// The continuation in the noise scale, if no pull found the contact and the model is smoothed
     /// ([`ContactProblem::continue_in_noise`]).
     pub continuation: Option<Continuation>,
+    /// Where no pull or continuation was tried because no control can reach the contact within the
+    /// horizon ([`ContactProblem::out_of_reach`]).
+    pub out_of_reach: Option<OutOfReach>,
 }
 
 impl ContactSearch {
@@ -315,6 +340,16 @@ impl ContactProblem<'_> {
                 felt: true,
                 reach: None,
                 continuation: None,
+                out_of_reach: None,
+            });
+        }
+        if let Some(apart) = self.out_of_reach(&start) {
+            return Ok(ContactSearch {
+                solution: start,
+                felt: false,
+                reach: None,
+                continuation: None,
+                out_of_reach: Some(apart),
             });
         }
         let reach = self.reach_for_contact(start)?;
@@ -324,6 +359,7 @@ impl ContactProblem<'_> {
                 felt: false,
                 reach: Some(reach),
                 continuation: None,
+                out_of_reach: None,
             });
         }
         let c = self.continue_in_noise(reach.solution.clone(), stage)?;
@@ -332,7 +368,60 @@ impl ContactProblem<'_> {
             felt: false,
             reach: Some(reach),
             continuation: Some(c),
+            out_of_reach: None,
         })
+    }
+
+    /// Whether the contact the task needs is too far for a search from `start` (which felt none) to be
+    /// worth its solves, judged on `start`'s rollout: until a driven body touches an undriven one, the
+    /// undriven bodies move as they do there whatever the controls do. Too far when, for every contact
+    /// pair between a driven body and an undriven one, the undriven body stays farther from the driven
+    /// body's [workspace](dynamics::Scene::workspace) centre than its radius, the undriven body's longest
+    /// semi-axis and the margin ([`OUT_OF_REACH_SLACK`]) at every state of the rollout: then the pair that
+    /// came nearest and its clearance. `None` (no claim) when a pair's driven body can go anywhere (a
+    /// free joint, an unlimited slider), or when the scene has no such pair. In one pushing.toml build
+    /// (issue 28) 79 of 206 searches were skipped so, every one of which had found nothing.
+    pub fn out_of_reach(&self, start: &Solution) -> Option<OutOfReach> {
+        let scene = self.scene;
+        let n = scene.n_dof();
+        let driven =
+            |i: usize| (0..n).any(|j| scene.coordinates[j].actuator.is_some() && scene.moves(j, i));
+        let sigma = noise_scale(self.settings.model).unwrap_or(0.0);
+        let kinematics: Vec<Kinematics> = start
+            .states
+            .iter()
+            .map(|x| Kinematics::new(scene, &x[..n]))
+            .collect();
+        let mut nearest: Option<OutOfReach> = None;
+        for (pair, c) in scene.contacts.iter().enumerate() {
+            let (Side::Body(a), Side::Body(b)) = (c.a, c.b) else {
+                continue;
+            };
+            let (mover, other) = match (driven(a), driven(b)) {
+                (true, false) => (a, b),
+                (false, true) => (b, a),
+                _ => continue,
+            };
+            let (centre, radius) = scene.workspace(mover)?;
+            let shape = &scene.bodies[other].shape;
+            let margin = OUT_OF_REACH_SLACK * radius + 40.0 * self.settings.h * sigma;
+            let reach = radius + shape.a().max(shape.b()) + margin;
+            let clearance = kinematics
+                .iter()
+                .map(|k| {
+                    let c = k.centre[other];
+                    (c[0] - centre[0]).hypot(c[1] - centre[1]) - reach
+                })
+                .fold(f64::INFINITY, f64::min);
+            // Not finite, or within reach at some state: no claim.
+            if !(clearance > 0.0 && clearance.is_finite()) {
+                return None;
+            }
+            if nearest.is_none_or(|o| clearance < o.clearance) {
+                nearest = Some(OutOfReach { pair, clearance });
+            }
+        }
+        nearest
     }
 
     /// A solve from `x0` (the start `start`, which felt no contact) that reaches the contact its task needs:

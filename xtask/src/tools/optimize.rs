@@ -259,6 +259,16 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                     }
                     let sigma = task::noise_scale(base.model);
                     note = Some(match (reach.and_then(|r| r.pair), &search.continuation, sigma) {
+                    _ if search.out_of_reach.is_some() => {
+                        let o = search.out_of_reach.expect("checked");
+                        format!(
+                            "no contact felt, and none in reach: {} stays apart over the horizon by \
+                             more than twice the driven body's reach (by {:.3} at its nearest), so no \
+                             pull or continuation was tried; the solve is kept",
+                            pair_name(&file.scene, o.pair),
+                            o.clearance
+                        )
+                    }
                     (Some(p), _, _) => format!(
                         "reached the contact by pulling {} together, then solved the task's own cost",
                         pair_name(&file.scene, p)
