@@ -149,6 +149,9 @@ pub(crate) fn stamp() -> String {
         // Not the library file's format version: it changes how a library is written, not its numbers.
         "growth": crate::experiments::recipe::growth_stamp(),
         "policy": crate::experiments::recipe::POLICY_STAMP,
+        // Target tasks' contact searches skip a contact plainly too far (the finger's never search in
+        // growth, so the finger's own stamps leave it out).
+        "search": task::OUT_OF_REACH_SLACK,
         "seeds": SEEDS,
         "seconds": SECONDS,
         "kicks": [KICK_STD, KICK_EVERY, KICK_SEED_BASE],
