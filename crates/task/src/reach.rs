@@ -244,7 +244,8 @@ pub struct OutOfReach {
 /// `sqrt(1 + (omega h)^2)` times its reach away, twice at `omega h = 1.7` (35 rad/s at h = 0.05). With a
 /// quarter of the radius (1.25 times the reach), one search in 72 the margin skipped in a build of
 /// roll_block.toml would have felt the contact (issue 28); with the whole radius none in that build or
-/// in a build of pushing.toml did. The smoothed contact's action at a distance adds `40 h sigma` (its
+/// in a build of pushing.toml did (one of the zoo's 32 libraries changed, roll_block's seed 4, with the
+/// same verdicts). The smoothed contact's action at a distance adds `40 h sigma` (its
 /// force has fallen by `e^-40` there). A heuristic, not a proof: controls that spin a link faster still
 /// could make such a contact.
 pub const OUT_OF_REACH_SLACK: f64 = 1.0;
