@@ -270,8 +270,8 @@ pub struct ContactSearch {
     /// The continuation in the noise scale, if no pull found the contact and the model is smoothed
     /// ([`ContactProblem::continue_in_noise`]).
     pub continuation: Option<Continuation>,
-    /// Where no pull or continuation was tried because no control can reach the contact within the
-    /// horizon ([`ContactProblem::out_of_reach`]).
+    /// Where no pull or continuation was tried because the contact is plainly too far
+    /// ([`ContactProblem::out_of_reach`]).
     pub out_of_reach: Option<OutOfReach>,
 }
 

@@ -258,9 +258,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                         );
                     }
                     let sigma = task::noise_scale(base.model);
-                    note = Some(match (reach.and_then(|r| r.pair), &search.continuation, sigma) {
-                    _ if search.out_of_reach.is_some() => {
-                        let o = search.out_of_reach.expect("checked");
+                    let too_far = search.out_of_reach.map(|o| {
                         format!(
                             "no contact felt, and none in reach: {} stays apart over the horizon by \
                              more than twice the driven body's reach (by {:.3} at its nearest), so no \
@@ -268,7 +266,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                             pair_name(&file.scene, o.pair),
                             o.clearance
                         )
-                    }
+                    });
+                    note = too_far.or_else(|| Some(match (reach.and_then(|r| r.pair), &search.continuation, sigma) {
                     (Some(p), _, _) => format!(
                         "reached the contact by pulling {} together, then solved the task's own cost",
                         pair_name(&file.scene, p)
@@ -293,7 +292,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                                      and the hard model has no action at a distance to continue from \
                                      (--model logistic can feel it)"
                         .to_string(),
-                });
+                }));
                     never_felt = !search.found();
                     sol = search.solution;
                 }
