@@ -863,17 +863,7 @@ fn a_bodys_workspace_holds_it_in_every_configuration() {
 fn a_contact_far_out_of_reach_is_not_searched_for() {
     let file = ProblemFile::from_toml_str(include_str!("../../scenes/pushing.toml")).unwrap();
     let task = file.task(Some("push")).unwrap();
-    let ddp = ddp::Ddp::new(ddp::DdpSettings {
-        max_iterations: 100,
-        control_limits: task.control_limits.clone(),
-        ..ddp::DdpSettings::default()
-    })
-    .unwrap();
-    let step = *library::LibrarySettings::default()
-        .for_task(&task)
-        .simulator(&file.scene)
-        .unwrap()
-        .settings();
+    let (ddp, step) = search_setup(&file, &task);
     let names = file.scene.coordinate_names();
     let block_x = names.iter().position(|c| c == "block.x").unwrap();
     let at = |x: f64| {
@@ -908,6 +898,23 @@ fn a_contact_far_out_of_reach_is_not_searched_for() {
     let search = problem(&near);
     assert!(search.out_of_reach.is_none());
     assert!(search.reach.is_some());
+}
+
+/// The contact searches' optimiser (100 passes, the task's control limits) and the step settings of the
+/// task's library (its model, noise scale and time step).
+fn search_setup(file: &ProblemFile, task: &task::Task) -> (ddp::Ddp, dynamics::StepSettings) {
+    let ddp = ddp::Ddp::new(ddp::DdpSettings {
+        max_iterations: 100,
+        control_limits: task.control_limits.clone(),
+        ..ddp::DdpSettings::default()
+    })
+    .unwrap();
+    let step = *library::LibrarySettings::default()
+        .for_task(task)
+        .simulator(&file.scene)
+        .unwrap()
+        .settings();
+    (ddp, step)
 }
 
 /// The task's solve from `x0` with zero controls at first, under `step`.
@@ -949,17 +956,7 @@ fn a_contact_out_of_reach_is_reached_by_pulling_the_pair_together() {
         task::needed_pairs(&file.scene, &task.cost),
         Some(vec![1, 2])
     );
-    let ddp = ddp::Ddp::new(ddp::DdpSettings {
-        max_iterations: 100,
-        control_limits: task.control_limits.clone(),
-        ..ddp::DdpSettings::default()
-    })
-    .unwrap();
-    let smoothed = *library::LibrarySettings::default()
-        .for_task(&task)
-        .simulator(&file.scene)
-        .unwrap()
-        .settings();
+    let (ddp, smoothed) = search_setup(&file, &task);
     let hard = dynamics::StepSettings {
         model: dynamics::Complementarity::Hard,
         ..smoothed

@@ -859,9 +859,8 @@ impl Scene {
     /// configuration its joints allow: hinges at any angle (their limits are not needed, and soft limits
     /// may be passed), slides within their limits. `None` when a slide on the way from the world has no
     /// limits (a free joint's `x` and `y`): the body can go anywhere; also for a body index the scene does
-    /// not have. A bound by the triangle inequality,
-    /// loose but never short: a point outside the disc (by more than the limits' slack) is out of the
-    /// body's reach, whatever the controls do.
+    /// not have. A bound by the triangle inequality, loose but never short: a point outside the disc (by
+    /// more than the limits' slack) is out of the body's reach, whatever the controls do.
     pub fn workspace(&self, i: usize) -> Option<([f64; 2], f64)> {
         let b = self.bodies.get(i)?;
         let (centre, mut radius) = self.origin_workspace(i)?;

@@ -29,9 +29,7 @@ pub fn needed_pairs(scene: &Scene, cost: &TaskCost) -> Option<Vec<usize>> {
         .chain(&cost.final_terms)
         .map(|t| t.index % n)
         .collect();
-    let is_driven =
-        |i: usize| (0..n).any(|j| scene.coordinates[j].actuator.is_some() && scene.moves(j, i));
-    let is_weighed = |i: usize| !is_driven(i) && weighed.iter().any(|&j| scene.moves(j, i));
+    let is_weighed = |i: usize| !driven(scene, i) && weighed.iter().any(|&j| scene.moves(j, i));
     if !(0..scene.bodies.len()).any(is_weighed) {
         return None;
     }
@@ -46,13 +44,18 @@ pub fn needed_pairs(scene: &Scene, cost: &TaskCost) -> Option<Vec<usize>> {
             .enumerate()
             .filter(|(_, c)| match (body(c.a), body(c.b)) {
                 (Some(a), Some(b)) => {
-                    (is_driven(a) && is_weighed(b)) || (is_driven(b) && is_weighed(a))
+                    (driven(scene, a) && is_weighed(b)) || (driven(scene, b) && is_weighed(a))
                 }
                 _ => false,
             })
             .map(|(p, _)| p)
             .collect(),
     )
+}
+
+/// Whether the controls move body `i`: an actuated coordinate of its own joint or of an ancestor's.
+fn driven(scene: &Scene, i: usize) -> bool {
+    (0..scene.n_dof()).any(|j| scene.coordinates[j].actuator.is_some() && scene.moves(j, i))
 }
 
 /// Whether the rollout of `controls` from `x0` in `sim` feels the contact `cost` needs: the total normal
@@ -385,8 +388,6 @@ impl ContactProblem<'_> {
     pub fn out_of_reach(&self, start: &Solution) -> Option<OutOfReach> {
         let scene = self.scene;
         let n = scene.n_dof();
-        let driven =
-            |i: usize| (0..n).any(|j| scene.coordinates[j].actuator.is_some() && scene.moves(j, i));
         let sigma = noise_scale(self.settings.model).unwrap_or(0.0);
         let kinematics: Vec<Kinematics> = start
             .states
@@ -398,7 +399,7 @@ impl ContactProblem<'_> {
             let (Side::Body(a), Side::Body(b)) = (c.a, c.b) else {
                 continue;
             };
-            let (mover, other) = match (driven(a), driven(b)) {
+            let (mover, other) = match (driven(scene, a), driven(scene, b)) {
                 (true, false) => (a, b),
                 (false, true) => (b, a),
                 _ => continue,
