@@ -354,6 +354,7 @@ fn entry(x: Vec<f64>) -> library::Entry {
             per_period: -std::f64::consts::PI,
         },
         reach: None,
+        time_step: 0.05,
     }
 }
 
@@ -535,6 +536,45 @@ fn a_controller_is_passed_over_beyond_its_reach_while_another_reaches() {
     assert!(p.set_reach(0, f64::NAN).is_err());
     assert!(p.set_reach(0, -1.0).is_err());
     assert!(p.distance(&[0.0; 5], 0, 0.0).is_err());
+}
+
+#[test]
+fn a_policy_at_a_time_step_prefers_the_controllers_optimised_at_it() {
+    // Two controllers near the query: the one optimised at the library's 0.05 s predicts the lower cost
+    // and wins at 0.05 s and without a time step; at 0.03 s the one optimised there wins where it is a
+    // candidate, and at a step neither was optimised at both compete again.
+    let mut own = entry(vec![0.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
+    own.value.cost_to_go = -10.0;
+    let mut finer = entry(vec![0.5, 0.0, 0.0, 0.0, 0.0, 0.0]);
+    finer.value.cost_to_go = 0.0;
+    finer.time_step = 0.03;
+    let entries = vec![own, finer];
+    let policy = || {
+        library::Policy::new(&entries, 6, 2, 2)
+            .unwrap()
+            .with_neighbours(2)
+            .unwrap()
+    };
+    let x = [0.2, 0.0, 0.0, 0.0, 0.0, 0.0];
+    assert_eq!(policy().select(&x).unwrap().0, 0);
+    let at = |h: f64| policy().with_time_step(h).unwrap().select(&x).unwrap().0;
+    assert_eq!(at(0.05), 0);
+    assert_eq!(at(0.03), 1);
+    assert_eq!(at(0.01), 0);
+    // With one neighbour the nearest alone is used, whatever its step.
+    let nearest = library::Policy::new(&entries, 6, 2, 2)
+        .unwrap()
+        .with_time_step(0.03)
+        .unwrap();
+    assert_eq!(nearest.select(&x).unwrap().0, 0);
+    for bad in [0.0, -0.03, f64::NAN, f64::INFINITY] {
+        assert!(policy().with_time_step(bad).is_err(), "{bad}");
+    }
+    // A stored controller's time step must be positive and finite.
+    let mut broken = entries.clone();
+    broken[1].time_step = f64::NAN;
+    let err = library::Policy::new(&broken, 6, 2, 2).unwrap_err();
+    assert!(err.to_string().contains("controller 1"), "{err}");
 }
 
 #[test]

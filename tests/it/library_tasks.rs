@@ -1230,6 +1230,42 @@ fn a_target_task_is_judged_and_grown_by_its_own_criterion() {
     assert!(strict >= 5, "{strict} trajectories grown");
 }
 
+/// Issue 28: a target task's final check grows its branches for a world of another time step at that
+/// world's step (horizon scaled to the same time), and every controller keeps the step it was optimised
+/// at through the library file; the growth rounds' branches stay at the task's step.
+#[test]
+fn a_final_check_grows_at_the_worlds_time_step() {
+    // A tolerance no closed loop meets: every world of the final check fails and grows.
+    let file = wheel_to_target("[task.hold.success]\ntolerance = 1e-12\n").unwrap();
+    let task = file.task(None).unwrap();
+    let settings = library::LibrarySettings {
+        growth: 1,
+        ..default_recipe(&task, 16)
+    };
+    assert_eq!(
+        settings.growth_time_steps,
+        vec![0.05, library::WORLD_TIME_STEP]
+    );
+    let lib = library::Library::build(&file, None, &settings, |_, _| {}).unwrap();
+    let at = |h: f64| lib.entries.iter().filter(|e| e.time_step == h).count();
+    let finer = at(library::WORLD_TIME_STEP);
+    assert!(finer > 0, "no controller at 0.03 s");
+    assert_eq!(finer + at(0.05), lib.entries.len());
+    // The trunk and the growth round (the first at the task's own world) come first, at 0.05 s.
+    let first_finer = lib
+        .entries
+        .iter()
+        .position(|e| e.time_step != 0.05)
+        .unwrap();
+    assert!(first_finer >= settings.trajectories * settings.keep);
+    // The file keeps each controller's step.
+    let path = std::env::temp_dir().join(format!("slcp-steps-{}.lib", std::process::id()));
+    lib.save(&path).unwrap();
+    let loaded = library::Library::load(&path).unwrap();
+    std::fs::remove_file(&path).ok();
+    assert_eq!(loaded.entries, lib.entries);
+}
+
 /// Issue 28, bad input: a task that cannot have a library is refused before any work, the reason named:
 /// a scene with nothing to control, a cost that rewards nothing.
 #[test]

@@ -515,6 +515,40 @@ fn check_for_library(task: &Task, scene: &Scene) -> Result<(), LibraryError> {
     Ok(())
 }
 
+/// `cost` with its running terms and control weight scaled by `ratio` (the final terms as they are):
+/// the task's per-step cost for a time step `ratio` times the task's, the same integral over time.
+fn scaled_running(cost: &TaskCost, ratio: f64) -> TaskCost {
+    if ratio == 1.0 {
+        return cost.clone();
+    }
+    let mut scaled = cost.clone();
+    for t in &mut scaled.running {
+        t.linear *= ratio;
+        t.quadratic *= ratio;
+    }
+    scaled.control_weight *= ratio;
+    scaled
+}
+
+/// `plan`, a control sequence at time step `from`, held piecewise constant and sampled at time step
+/// `to` over `horizon` steps (its last control repeated past its end): the warm start of a branch
+/// optimised at another time step than the plan it starts from.
+fn resampled(plan: &[Vec<f64>], from: f64, to: f64, horizon: usize) -> Vec<Vec<f64>> {
+    if from == to && plan.len() == horizon {
+        return plan.to_vec();
+    }
+    let Some(last) = plan.len().checked_sub(1) else {
+        return Vec::new();
+    };
+    (0..horizon)
+        .map(|k| {
+            // The plan's step holding time k to (rounding-safe at the shared instants).
+            let j = ((k as f64 * to + 1e-9 * to) / from).floor() as usize;
+            plan[j.min(last)].clone()
+        })
+        .collect()
+}
+
 /// What every chain of a build shares.
 struct Build<'a> {
     scene: &'a Scene,
@@ -565,7 +599,9 @@ impl<'a> Build<'a> {
         })
     }
 
-    /// The same build under other settings (a longer horizon).
+    /// The same build under other settings (a longer horizon; another time step, for which the running
+    /// cost is scaled by the ratio of the steps, so that a solve over the same time weighs the same
+    /// integral and its values compare with the library's own: [`scaled_running`]).
     fn with_settings<'b>(&self, settings: &'b LibrarySettings) -> Build<'b>
     where
         'a: 'b,
@@ -573,7 +609,7 @@ impl<'a> Build<'a> {
         Build {
             scene: self.scene,
             settings,
-            cost: self.cost.clone(),
+            cost: scaled_running(&self.cost, settings.h / self.settings.h),
             progress: self.progress,
             success: self.success.clone(),
             control_limits: self.control_limits.clone(),
@@ -698,6 +734,7 @@ impl<'a> Build<'a> {
                     cost: sol.cost,
                     value,
                     reach: None,
+                    time_step: s.h,
                 };
                 if t == 0 {
                     report(&entry);
@@ -938,8 +975,7 @@ fn branched(
     for b in branches {
         built.append(b);
     }
-    let growth_length = task.growth_length(length);
-    let mut run = |kind| grow(task, &mut dynamics, &mut built, growth_length, kind, report);
+    let mut run = |kind| grow(task, &mut dynamics, &mut built, length, kind, report);
     for round in 0..s.growth {
         let grown = run(Round::Kicked(round))?;
         tracing::info!(round, grown, "library growth");
@@ -1017,13 +1053,18 @@ enum Round {
     Nominal(usize),
 }
 
+/// The settings and dynamics a growth world's branches are optimised on, where not the library's own.
+type BranchWorld = (LibrarySettings, SceneDynamics);
+
 /// Growth world `w` (see [`Round`]): its time step, its simulator, and for a target task on a world
-/// other than the library's own the sharpened dynamics its branches are optimised on
-/// ([`LibrarySettings::growth_sharpening`]).
+/// other than the library's own the settings and dynamics its branches are optimised on: the world's
+/// time step (the horizon scaled to the same time, the running cost to the same integral:
+/// [`Build::with_settings`]) and the sharpened noise scale ([`LibrarySettings::growth_sharpening`]).
 fn growth_world(
     task: &Build,
     round: usize,
-) -> Result<(f64, Simulator, Option<SceneDynamics>), LibraryError> {
+    at_world_step: bool,
+) -> Result<(f64, Simulator, Option<BranchWorld>), LibraryError> {
     let s = task.settings;
     // Odd rounds run on hard contact: the policy is meant for the smoothed and the hard world alike.
     let steps_of = &s.growth_time_steps;
@@ -1044,25 +1085,30 @@ fn growth_world(
             ..StepSettings::default()
         },
     )?;
-    // A target task's branches for a world other than the library's own are optimised nearer contact
-    // (LibrarySettings::growth_sharpening).
+    // A target task's branches for a world other than the library's own are optimised at its time step
+    // and nearer contact (LibrarySettings::growth_sharpening).
     let other_world = round % 2 == 1 || h != s.h;
-    let sharpened = match s.model {
-        ContactModel::Logistic(sigma) => Some(ContactModel::Logistic(sigma * s.growth_sharpening)),
-        ContactModel::Normal(sigma) => Some(ContactModel::Normal(sigma * s.growth_sharpening)),
-        ContactModel::Hard => None,
+    if task.progress.forward.is_some() || !other_world {
+        return Ok((h, world, None));
+    }
+    let model = match s.model {
+        ContactModel::Logistic(sigma) => ContactModel::Logistic(sigma * s.growth_sharpening),
+        ContactModel::Normal(sigma) => ContactModel::Normal(sigma * s.growth_sharpening),
+        ContactModel::Hard => ContactModel::Hard,
     };
-    let sharper = match sharpened {
-        Some(model)
-            if task.progress.forward.is_none() && other_world && s.growth_sharpening != 1.0 =>
-        {
-            Some(SceneDynamics::new(
-                LibrarySettings { model, ..s.clone() }.simulator(task.scene)?,
-            ))
-        }
-        _ => None,
+    if model == s.model && (h == s.h || !at_world_step) {
+        return Ok((h, world, None));
+    }
+    let branch_h = if at_world_step { h } else { s.h };
+    let horizon = ((s.horizon as f64 * s.h / branch_h).round() as usize).clamp(1, LONGEST_HORIZON);
+    let settings = LibrarySettings {
+        model,
+        h: branch_h,
+        horizon,
+        ..s.clone()
     };
-    Ok((h, world, sharper))
+    let dynamics = SceneDynamics::new(settings.simulator(task.scene)?);
+    Ok((h, world, Some((settings, dynamics))))
 }
 
 /// One growth round (see [`Exploration::Branches`]) or final check: the number of branches added (not
@@ -1074,11 +1120,13 @@ fn growth_world(
 /// ([`task::Success::tolerance`]) [`task::Success::settle`] seconds after a kick (or at the end of the
 /// first interval, from the start), and two branches start, one from the state the kick left and one
 /// from the state the policy is in then (whose first solve reaches for the contact if the policy let go
-/// of it: [`task::ContactProblem::feel_contact`]), optimised at the sharpened noise scale
-/// ([`LibrarySettings::growth_sharpening`]) when the round's world is not the library's own. A branch
+/// of it: [`task::ContactProblem::feel_contact`]), optimised at the world's time step and the sharpened
+/// noise scale ([`growth_world`]) when the round's world is not the library's own. A branch spans the
+/// failure's window ([`Build::growth_length`] of the recipe's `length`) at its time step. A branch
 /// whose first solve ends within the tolerance is kept as it is (it teaches the policy to let be); one
 /// whose search for the contact finds none that pays comes back empty and is not added (it still counts
-/// towards the round's branches at most).
+/// towards the round's branches at most). The round's policy runs at the world's time step
+/// ([`Policy::with_time_step`]).
 fn grow(
     task: &Build,
     dynamics: &mut SceneDynamics,
@@ -1094,6 +1142,8 @@ fn grow(
     let s = task.settings;
     let progress = task.progress;
     let free = progress.coordinate;
+    let (h, mut world, branch_world) =
+        growth_world(task, round, matches!(kind, Round::Nominal(_)))?;
     let policy_of = |built: &Built| {
         Policy::for_progress(
             &built.entries,
@@ -1103,10 +1153,15 @@ fn grow(
         )?
         .with_neighbours(s.neighbours)?
         .with_limits(task.control_limits.clone())?
-        .with_control_weight(task.cost.control_weight)
+        .with_control_weight(task.cost.control_weight)?
+        .with_time_step(h)
     };
     let mut policy = policy_of(built)?;
-    let (h, mut world, mut sharper) = growth_world(task, round)?;
+    let (branch_settings, mut branch_dynamics) = branch_world.unzip();
+    let branch_task = branch_settings.as_ref().map(|b| task.with_settings(b));
+    let branch_task = branch_task.as_ref().unwrap_or(task);
+    // Trajectories per branch: as many as span the failure's window at the branches' time step.
+    let length = branch_task.growth_length(length);
     let mut rng = ChaCha8Rng::seed_from_u64(s.seed);
     rng.set_stream(u64::MAX - round as u64);
     let steps = (seconds / h).round() as usize;
@@ -1176,13 +1231,14 @@ fn grow(
             }
             tried += 1;
             let (trajectory, offset) = (i / s.keep, i % s.keep);
-            let plan = ddp::shift_controls(&built.plans[trajectory], offset);
-            let branch_dynamics = match sharper.as_mut() {
-                Some(d) => d,
-                None => &mut *dynamics,
-            };
-            let branch = task.chain(
-                branch_dynamics,
+            let plan = resampled(
+                &ddp::shift_controls(&built.plans[trajectory], offset),
+                built.entries[trajectory * s.keep].time_step,
+                branch_task.settings.h,
+                branch_task.settings.horizon,
+            );
+            let branch = branch_task.chain(
+                branch_dynamics.as_mut().unwrap_or(&mut *dynamics),
                 from.clone(),
                 plan,
                 length,
@@ -1239,6 +1295,7 @@ mod tests {
                 per_period: 0.0,
             },
             reach: None,
+            time_step: 0.05,
         }
     }
 
@@ -1308,6 +1365,38 @@ mod tests {
         assert_eq!(branch.entries.len(), 2 * settings.keep);
         let first = &branch.entries[0];
         assert!(first.cost < 1e-2, "{}", first.cost);
+    }
+
+    #[test]
+    fn a_plan_is_resampled_to_another_time_step_held_piecewise_constant() {
+        let plan: Vec<Vec<f64>> = (0..6).map(|k| vec![k as f64]).collect();
+        let flat = |p: Vec<Vec<f64>>| p.into_iter().flatten().collect::<Vec<f64>>();
+        // 0.05 s to 0.03 s over 8 steps: times 0, 0.03, ..., 0.21 fall in steps 0, 0, 1, 1, 2, 3, 3, 4.
+        assert_eq!(
+            flat(resampled(&plan[..5], 0.05, 0.03, 8)),
+            vec![0.0, 0.0, 1.0, 1.0, 2.0, 3.0, 3.0, 4.0]
+        );
+        // 0.03 s to 0.05 s: times 0, 0.05, 0.1, 0.15 fall in steps 0, 1, 3, 5; past the end, the last.
+        assert_eq!(
+            flat(resampled(&plan, 0.03, 0.05, 5)),
+            vec![0.0, 1.0, 3.0, 5.0, 5.0]
+        );
+        assert_eq!(resampled(&plan, 0.05, 0.05, 6), plan);
+        assert!(resampled(&[], 0.05, 0.03, 4).is_empty());
+    }
+
+    #[test]
+    fn a_cost_at_another_time_step_weighs_the_same_integral() {
+        let file = task::ProblemFile::from_toml_str(SLIDER).unwrap();
+        let cost = file.task(Some("push")).unwrap().cost;
+        let scaled = scaled_running(&cost, 0.6);
+        assert_eq!(scaled.final_terms, cost.final_terms);
+        assert_eq!(scaled.control_weight, 0.6 * cost.control_weight);
+        for (s, c) in scaled.running.iter().zip(&cost.running) {
+            assert_eq!((s.linear, s.quadratic), (0.6 * c.linear, 0.6 * c.quadratic));
+            assert_eq!((s.index, s.target), (c.index, c.target));
+        }
+        assert_eq!(scaled_running(&cost, 1.0), cost);
     }
 
     #[test]

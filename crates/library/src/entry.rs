@@ -27,6 +27,10 @@ pub struct Entry {
     /// model outbid, at a state the policy failed from, the branch grown there: that state is then
     /// outside its reach (the funnel shrinking of simulation-based LQR-trees).
     pub reach: Option<f64>,
+    /// The time step its trajectory was optimised at: the library's own, or for a target task's growth
+    /// branch on a world of another time step, that world's ([`crate::Policy::with_time_step`] prefers
+    /// the controllers of the step it runs at).
+    pub time_step: f64,
 }
 
 /// The second-order model of the cost-to-go around a stored state `x_s`, extended to the library's full

@@ -317,6 +317,8 @@ pub fn evaluate_in(
     settings: &EvaluationSettings,
 ) -> Result<Evaluation, LibraryError> {
     let own = library.scene();
+    // The policy at the world's time step (the controllers growth optimised for it preferred).
+    let policy = &policy.clone().with_time_step(settings.h)?;
     let n = scene.n_dof();
     // The coordinate the library's task measures progress along.
     let progress = library.progress()?;

@@ -23,7 +23,7 @@ use task::{ProblemFile, Task, TaskSpec};
 /// The file's magic bytes.
 pub const MAGIC: &[u8; 8] = b"SLCPLIB\0";
 /// The format version this build writes and reads.
-pub const VERSION: u32 = 8;
+pub const VERSION: u32 = 9;
 const HEADER: usize = 8 + 4 + 8 + 4;
 
 /// A trajectory library: the scene and settings it was built with and its local controllers.
@@ -187,13 +187,15 @@ impl Library {
     }
 
     /// The global policy (eq. 20) over its controllers, saturated to its task's control limits, charging
-    /// laws for controls beyond the stored range at its task's control weight.
+    /// laws for controls beyond the stored range at its task's control weight, at the library's time
+    /// step ([`Policy::with_time_step`]: another world's step is the caller's to set).
     pub fn policy(&self) -> Result<Policy, LibraryError> {
         let s = &self.scene;
         Policy::for_progress(&self.entries, s.n_state(), s.n_controls, &self.progress()?)?
             .with_neighbours(self.settings.neighbours)?
             .with_limits(self.task().control_limits.clone())?
-            .with_control_weight(self.cost().control_weight)
+            .with_control_weight(self.cost().control_weight)?
+            .with_time_step(self.settings.h)
     }
 
     /// What counts as success for its task ([`task::Success`]).

@@ -122,6 +122,10 @@ pub struct Policy {
     /// The task's control weight `w` (running cost `w |u|^2` a step) the ranking charges a law for the
     /// part of its control beyond [`Self::envelope`] ([`Policy::with_control_weight`]; 0: no charge).
     control_weight: f64,
+    /// The time step each stored controller was optimised at ([`Entry::time_step`]).
+    time_steps: Vec<f64>,
+    /// The time step the policy runs at, whose controllers it prefers ([`Policy::with_time_step`]).
+    time_step: Option<f64>,
 }
 
 /// Whole periods `p` in `x` (rounded down; 0 without a period, `p = 0`).
@@ -211,10 +215,12 @@ impl Policy {
                     .chain(&v.gradient)
                     .chain(&v.hessian)
                     .chain([&v.cost_to_go, &v.per_period])
-                    .all(|v| v.is_finite());
+                    .all(|v| v.is_finite())
+                && e.time_step.is_finite()
+                && e.time_step > 0.0;
             if !ok {
                 return Err(LibraryError::Invalid(format!(
-                    "controller {i} has the wrong sizes or a non-finite entry"
+                    "controller {i} has the wrong sizes, a non-finite entry or a time step that is not positive"
                 )));
             }
         }
@@ -306,7 +312,33 @@ impl Policy {
                 })
                 .collect(),
             control_weight: 0.0,
+            time_steps: entries.iter().map(|e| e.time_step).collect(),
+            time_step: None,
         })
+    }
+
+    /// The same policy for a world of time step `h`: among the candidates of [`Policy::select`], the
+    /// controllers optimised at `h` ([`Entry::time_step`]) compete alone where there is one (a target
+    /// task's growth branches for a world of another step than the library's: the same push, optimised
+    /// at 0.05 s, slides pushing's block 0.13 to 0.21 short of or past its target at 0.03 s). A policy
+    /// without a time step, or whose candidates at a state include none optimised at `h`, ranks them
+    /// all. `Err` unless `h` is finite and positive.
+    pub fn with_time_step(mut self, h: f64) -> Result<Self, LibraryError> {
+        if !(h.is_finite() && h > 0.0) {
+            return Err(LibraryError::Setting {
+                name: "time step",
+                value: h,
+                expected: "finite and positive",
+            });
+        }
+        self.time_step = Some(h);
+        Ok(self)
+    }
+
+    /// Whether controller `i` was optimised at the policy's time step.
+    fn at_own_step(&self, i: usize) -> bool {
+        self.time_step
+            .is_some_and(|h| (self.time_steps[i] - h).abs() <= 1e-9 * h)
     }
 
     /// The same policy with its controls saturated to `limits` (a task's control limits: the linear law
@@ -509,7 +541,10 @@ impl Policy {
 
     /// [`Policy::select`] and the offset of `x` from the chosen state.
     fn choose(&self, x: &[f64]) -> Result<((usize, f64), Vec<f64>), LibraryError> {
-        let candidates = self.nearest_n(x, self.neighbours)?;
+        let mut candidates = self.nearest_n(x, self.neighbours)?;
+        if candidates.iter().any(|&(i, _)| self.at_own_step(i)) {
+            candidates.retain(|&(i, _)| self.at_own_step(i));
+        }
         let mut d = vec![0.0; self.n];
         let mut best = (f64::INFINITY, candidates[0]);
         if candidates.len() > 1 {

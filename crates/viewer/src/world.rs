@@ -266,7 +266,7 @@ impl World {
         let library = match library {
             Some(lib) => {
                 lib.check_scene(&scene)?;
-                let policy = lib.policy()?;
+                let policy = lib.policy()?.with_time_step(settings.h)?;
                 Some((lib, policy))
             }
             None => None,

@@ -237,6 +237,7 @@ pub(crate) fn closed_loop(
             ..StepSettings::default()
         },
     )?;
+    let policy = &policy.clone().with_time_step(h)?;
     let mut x = x0.to_vec();
     let mut u = vec![0.0; lib.scene().n_controls];
     let mut states = vec![x.clone()];
