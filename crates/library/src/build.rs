@@ -1057,9 +1057,10 @@ enum Round {
 type BranchWorld = (LibrarySettings, SceneDynamics);
 
 /// Growth world `w` (see [`Round`]): its time step, its simulator, and for a target task on a world
-/// other than the library's own the settings and dynamics its branches are optimised on: the world's
-/// time step (the horizon scaled to the same time, the running cost to the same integral:
-/// [`Build::with_settings`]) and the sharpened noise scale ([`LibrarySettings::growth_sharpening`]).
+/// other than the library's own the settings and dynamics its branches are optimised on: the sharpened
+/// noise scale ([`LibrarySettings::growth_sharpening`]) and, when `at_world_step` (the final check), the
+/// world's time step, the horizon scaled to the same time and the running cost to the same integral
+/// ([`Build::with_settings`]); a growth round's branches stay at the task's step.
 fn growth_world(
     task: &Build,
     round: usize,
@@ -1120,8 +1121,9 @@ fn growth_world(
 /// ([`task::Success::tolerance`]) [`task::Success::settle`] seconds after a kick (or at the end of the
 /// first interval, from the start), and two branches start, one from the state the kick left and one
 /// from the state the policy is in then (whose first solve reaches for the contact if the policy let go
-/// of it: [`task::ContactProblem::feel_contact`]), optimised at the world's time step and the sharpened
-/// noise scale ([`growth_world`]) when the round's world is not the library's own. A branch spans the
+/// of it: [`task::ContactProblem::feel_contact`]), optimised at the sharpened noise scale, and in the
+/// final check at the world's time step ([`growth_world`]), when the round's world is not the library's
+/// own. A branch spans the
 /// failure's window ([`Build::growth_length`] of the recipe's `length`) at its time step. A branch
 /// whose first solve ends within the tolerance is kept as it is (it teaches the policy to let be); one
 /// whose search for the contact finds none that pays comes back empty and is not added (it still counts

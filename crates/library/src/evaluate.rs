@@ -309,7 +309,8 @@ pub fn evaluate(
 }
 
 /// [`evaluate`] in a world whose scene differs from the library's (other friction, masses, drag: a
-/// model the library never saw); it must have the library's state, controls and free joint.
+/// model the library never saw); it must have the library's state, controls and free joint. The policy
+/// runs at the world's time step ([`Policy::with_time_step`]).
 pub fn evaluate_in(
     scene: &dynamics::Scene,
     library: &Library,
