@@ -1097,10 +1097,10 @@ fn growth_world(
         ContactModel::Normal(sigma) => ContactModel::Normal(sigma * s.growth_sharpening),
         ContactModel::Hard => ContactModel::Hard,
     };
-    if model == s.model && (h == s.h || !at_world_step) {
+    let branch_h = if at_world_step { h } else { s.h };
+    if model == s.model && branch_h == s.h {
         return Ok((h, world, None));
     }
-    let branch_h = if at_world_step { h } else { s.h };
     let horizon = ((s.horizon as f64 * s.h / branch_h).round() as usize).clamp(1, LONGEST_HORIZON);
     let settings = LibrarySettings {
         model,
