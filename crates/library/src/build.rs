@@ -98,8 +98,9 @@ pub enum Exploration {
     /// chain of `length` trajectories warm-started from the trunk's plan there. Then
     /// [`LibrarySettings::growth`] rounds: the policy runs in closed loop from `x0` with a velocity kick
     /// every 10 s, on the library's own model in even rounds and on hard contact in odd ones, at the time
-    /// steps of [`LibrarySettings::growth_time_steps`] in turn (a pair of rounds each); wherever the free angle advances less than
-    /// [`STALL_ADVANCE`] in [`STALL_WINDOW`] seconds, a branch of `length` trajectories at most (spanning
+    /// steps of [`LibrarySettings::growth_time_steps`] in turn (a pair of rounds each); wherever the free
+    /// angle advances less than [`STALL_ADVANCE`] over the stall window ([`STALL_WINDOW`] seconds, or
+    /// [`DWELL_MARGIN`] times the trunk's longest pause if longer), a branch of `length` trajectories at most (spanning
     /// the failure's window: `Build::growth_length`) starts from that state, warm-started from the plan of
     /// the controller the policy used there.
     Branches {
@@ -144,6 +145,9 @@ pub const WORLD_TIME_STEP: f64 = 0.03;
 pub const STALL_ADVANCE: f64 = 0.3;
 /// ... over this many seconds.
 pub const STALL_WINDOW: f64 = 2.0;
+/// A progress task's growth judges stalls over the longer of [`STALL_WINDOW`] and this multiple of the
+/// trunk's longest pause (the time its cycle takes to advance [`STALL_ADVANCE`]: `Build::dwell`).
+pub const DWELL_MARGIN: f64 = 1.5;
 /// Simulated seconds per growth round: [`GROWTH_FIRST_KICK`] unkicked, then nine kicks 10 s apart and
 /// 10 s after the last.
 pub const GROWTH_SECONDS: f64 = 130.0;
@@ -638,6 +642,23 @@ impl<'a> Build<'a> {
             && self.advance(built, trunk, trunk - 1 - window) < STALL_ADVANCE
     }
 
+    /// The trunk's longest dwell: over the trunk's trajectories past its first `settle`, the longest time
+    /// (s) from one's start until the progress coordinate has advanced [`STALL_ADVANCE`] the rewarded way,
+    /// over the starts from which it does before the trunk ends; `None` for a target task or a trunk that
+    /// never advances that far.
+    fn dwell(&self, built: &Built, trunk: usize, settle: usize) -> Option<f64> {
+        let forward = self.progress.forward?;
+        let s = self.settings;
+        let at = |j: usize| built.entries[j * s.keep].x[self.progress.coordinate];
+        (settle..trunk)
+            .filter_map(|i| {
+                (i + 1..trunk)
+                    .find(|&j| forward * (at(j) - at(i)) >= STALL_ADVANCE)
+                    .map(|j| (j - i) as f64 * s.shift as f64 * s.h)
+            })
+            .reduce(f64::max)
+    }
+
     /// Whether a target task's solve ends within the task's success tolerance of its targets (never for
     /// a task that rewards progress).
     fn settles(&self, sol: &ddp::Solution) -> bool {
@@ -950,6 +971,11 @@ fn branched(
     let task = task.with_settings(&settings);
     let task = &task;
     let s = &settings;
+    // A stall is a pause longer than any the trunk's own cycle makes (the three-link finger's cycle
+    // pauses 3.2 s between flicks; judged over 2 s, every cycle of it stalled and growth never tapered).
+    let dwell = task.dwell(&built, trunk, settle);
+    let stall_window = dwell.map_or(STALL_WINDOW, |d| STALL_WINDOW.max(DWELL_MARGIN * d));
+    tracing::info!(?dwell, stall_window, "library trunk dwell");
     // Branches off the trunk, the budget's remainder split into chains of `length` (the last shorter).
     let rest = s.trajectories - trunk;
     let count = rest.div_ceil(length);
@@ -975,7 +1001,17 @@ fn branched(
     for b in branches {
         built.append(b);
     }
-    let mut run = |kind| grow(task, &mut dynamics, &mut built, length, kind, report);
+    let mut run = |kind| {
+        grow(
+            task,
+            &mut dynamics,
+            &mut built,
+            length,
+            stall_window,
+            kind,
+            report,
+        )
+    };
     for round in 0..s.growth {
         let grown = run(Round::Kicked(round))?;
         tracing::info!(round, grown, "library growth");
@@ -1116,7 +1152,7 @@ fn growth_world(
 /// counting those that came back empty).
 ///
 /// Failure is the task's: for a task that rewards progress, a stall (the progress coordinate advancing
-/// less than [`STALL_ADVANCE`] the rewarded way in [`STALL_WINDOW`] seconds), and a branch starts where
+/// less than [`STALL_ADVANCE`] the rewarded way in `stall_window` seconds), and a branch starts where
 /// the policy stalled; for a target task, not being back within its success tolerance
 /// ([`task::Success::tolerance`]) [`task::Success::settle`] seconds after a kick (or at the end of the
 /// first interval, from the start), and two branches start, one from the state the kick left and one
@@ -1134,6 +1170,7 @@ fn grow(
     dynamics: &mut SceneDynamics,
     built: &mut Built,
     length: usize,
+    stall_window: f64,
     kind: Round,
     report: &(dyn Fn(&Entry) + Sync),
 ) -> Result<usize, LibraryError> {
@@ -1169,7 +1206,7 @@ fn grow(
     let steps = (seconds / h).round() as usize;
     let kick_steps = ((10.0 / h).round() as usize).max(1);
     let first_kick = ((first_kick_seconds / h).round() as usize).max(1);
-    let window = ((STALL_WINDOW / h).round() as usize).max(1);
+    let window = ((stall_window / h).round() as usize).max(1);
     // A target task's time bound after a kick (from the start: the first interval).
     let settle = ((task.success.settle / h).round() as usize).clamp(1, kick_steps);
     let mut recent = std::collections::VecDeque::with_capacity(window + 1);
@@ -1232,6 +1269,13 @@ fn grow(
                 break;
             }
             tried += 1;
+            tracing::debug!(
+                ?kind,
+                seconds = k as f64 * h,
+                stuck,
+                angle = from[free],
+                "growth branch"
+            );
             let (trajectory, offset) = (i / s.keep, i % s.keep);
             let plan = resampled(
                 &ddp::shift_controls(&built.plans[trajectory], offset),
@@ -1416,5 +1460,41 @@ mod tests {
         // ... the slider's settle time, 5 s, 25 of them: the recipe's 20 at most.
         assert_eq!(length(SLIDER, 20), 20);
         assert_eq!(length(SLIDER, 40), 25);
+    }
+
+    #[test]
+    fn the_stall_window_outlasts_the_trunks_longest_pause() {
+        // A trunk of 30 trajectories (keep 4, shift 4, h 0.05: 0.2 s each) on the finger's ellipse angle,
+        // the state's third entry: 0.12 rad a trajectory, but a pause of 15 trajectories (3 s) from 10 on.
+        let build = |text: &str| {
+            let file = task::ProblemFile::from_toml_str(text).unwrap();
+            let task = file.task(None).unwrap();
+            (file, task)
+        };
+        let (file, finger) = build(task::BUILTIN_SCENE_FILE);
+        let settings = LibrarySettings::default().for_task(&finger);
+        let spin = Build::new(&file.scene, &finger, &settings).unwrap();
+        let angle = |j: usize| match j {
+            ..10 => 0.12 * j as f64,
+            10..25 => 1.2 + 0.001 * (j - 10) as f64,
+            _ => 1.214 + 0.12 * (j - 24) as f64,
+        };
+        let mut built = Built::default();
+        for j in 0..30 {
+            for _ in 0..settings.keep {
+                built.entries.push(entry([0.0, 0.0, angle(j), 0.0], 0.0));
+            }
+        }
+        let dwell = spin.dwell(&built, 30, 5).unwrap();
+        // From trajectory 8, 9 or 10 (0.96 to 1.2 rad): 0.3 rad further 17 trajectories on, over the pause.
+        assert!((dwell - 17.0 * 0.2).abs() < 1e-12, "{dwell}");
+        // Past the pause the trunk never pauses: 3 trajectories for 0.3 rad at 0.12 each.
+        let dwell = spin.dwell(&built, 30, 25).unwrap();
+        assert!((dwell - 0.6).abs() < 1e-12, "{dwell}");
+        // A target task has no pause to measure.
+        let (file, slider) = build(SLIDER);
+        let settings = LibrarySettings::default().for_task(&slider);
+        let push = Build::new(&file.scene, &slider, &settings).unwrap();
+        assert_eq!(push.dwell(&built, 30, 5), None);
     }
 }

@@ -54,6 +54,7 @@ pub(crate) fn growth_stamp() -> serde_json::Value {
         library::VERIFY_PASSES as f64,
         library::VERIFY_BRANCHES as f64,
         library::STALL_WINDOW,
+        library::DWELL_MARGIN,
         "branches span the failure's window; settled ones kept, empty ones dropped",
     ])
 }
