@@ -100,9 +100,9 @@ pub enum Exploration {
     /// every 10 s, on the library's own model in even rounds and on hard contact in odd ones, at the time
     /// steps of [`LibrarySettings::growth_time_steps`] in turn (a pair of rounds each); wherever the free
     /// angle advances less than [`STALL_ADVANCE`] over the stall window ([`STALL_WINDOW`] seconds, or
-    /// [`DWELL_MARGIN`] times the trunk's longest pause if longer), a branch of `length` trajectories at most (spanning
-    /// the failure's window: `Build::growth_length`) starts from that state, warm-started from the plan of
-    /// the controller the policy used there.
+    /// [`DWELL_MARGIN`] times the trunk's longest pause if longer), a branch of `length` trajectories at
+    /// most (spanning the failure's window: `Build::growth_length`) starts from that state, warm-started
+    /// from the plan of the controller the policy used there.
     Branches {
         /// Trajectories of the unperturbed chain.
         trunk: usize,
