@@ -627,8 +627,12 @@ impl<'a> Build<'a> {
         let (Some(forward), Some(last)) = (self.progress.forward, trunk.checked_sub(1)) else {
             return 0.0;
         };
-        let at = |j: usize| built.entries[j * self.settings.keep].x[self.progress.coordinate];
-        forward * (at(last) - at(from.min(last)))
+        forward * (self.coordinate_at(built, last) - self.coordinate_at(built, from.min(last)))
+    }
+
+    /// The progress coordinate at the start of trajectory `j`.
+    fn coordinate_at(&self, built: &Built, j: usize) -> f64 {
+        built.entries[j * self.settings.keep].x[self.progress.coordinate]
     }
 
     /// Whether a progress task's trunk stalls: over its last [`STALL_WINDOW`] seconds (when it runs that
@@ -649,7 +653,7 @@ impl<'a> Build<'a> {
     fn dwell(&self, built: &Built, trunk: usize, settle: usize) -> Option<f64> {
         let forward = self.progress.forward?;
         let s = self.settings;
-        let at = |j: usize| built.entries[j * s.keep].x[self.progress.coordinate];
+        let at = |j: usize| self.coordinate_at(built, j);
         (settle..trunk)
             .filter_map(|i| {
                 (i + 1..trunk)
