@@ -10,7 +10,7 @@
 //! controllers. Loading checks all of it before anything is decoded, then the decoded
 //! library for consistency; a file that fails any check is refused whole.
 
-use crate::build::{LibrarySettings, build_entries};
+use crate::build::{Entries, LibrarySettings, build_entries};
 use crate::entry::Entry;
 use crate::error::LibraryError;
 use crate::policy::Policy;
@@ -148,9 +148,20 @@ impl Library {
         progress: impl FnMut(usize, &Entry) + Send,
     ) -> Result<Self, LibraryError> {
         let task = problem.task(name)?;
-        let spec = problem.tasks[&task.name].clone();
         let built = build_entries(&problem.scene, &task, settings, progress)?;
-        Ok(Library {
+        Ok(Library::assemble(problem, task, settings, built))
+    }
+
+    /// The library of `built`, made for `task` of `problem` with `settings` (its horizon the one the
+    /// build used).
+    pub(crate) fn assemble(
+        problem: &ProblemFile,
+        task: Task,
+        settings: &LibrarySettings,
+        built: Entries,
+    ) -> Self {
+        let spec = problem.tasks[&task.name].clone();
+        Library {
             scene: problem.scene.clone(),
             task: (task, spec),
             settings: LibrarySettings {
@@ -158,7 +169,7 @@ impl Library {
                 ..settings.clone()
             },
             entries: built.entries,
-        })
+        }
     }
 
     /// The scene it was built for.

@@ -52,10 +52,11 @@ pub(crate) fn growth_stamp() -> serde_json::Value {
         library::GROWTH_FIRST_KICK,
         library::REACH_SHRINK,
         library::VERIFY_PASSES as f64,
+        library::VERIFY_PASSES_MOST as f64,
         library::VERIFY_BRANCHES as f64,
         library::STALL_WINDOW,
         library::DWELL_MARGIN,
-        "branches span the failure's window; settled ones kept, empty ones dropped",
+        "branches span the failure's window; settled ones kept, empty ones dropped; the best-checked library kept",
     ])
 }
 
