@@ -1190,7 +1190,7 @@ fn unkicked(task: &Build, built: &Built, w: usize) -> Result<Verdict, LibraryErr
     let (h, mut world) = world_of(task, w)?;
     let policy = policy_at(task, built, h)?;
     let success = &task.success;
-    let criterion = success.describe(&task.scene.coordinate_names());
+    let names = task.scene.coordinate_names();
     let steps = ((GROWTH_FIRST_KICK / h).round() as usize).max(1);
     let quarter = steps - steps / 4;
     let mut x = task.settings.x0.clone();
@@ -1207,8 +1207,9 @@ fn unkicked(task: &Build, built: &Built, w: usize) -> Result<Verdict, LibraryErr
         policy.control(&x, &mut u)?;
         let step = world.step(&x, &u)?;
         if !step.x_next.iter().all(|v| v.is_finite()) {
+            // A closed loop that blows up fails, whatever its numbers so far.
             return Ok(Verdict {
-                criterion,
+                criterion: success.describe(&names),
                 ..Verdict::default()
             });
         }
@@ -1219,14 +1220,7 @@ fn unkicked(task: &Build, built: &Built, w: usize) -> Result<Verdict, LibraryErr
         .map(|&(i, direction)| direction * (x[i] - at_quarter[i]) / late)
         .reduce(f64::min);
     let distance = (!success.targets.is_empty()).then(|| worst.max(success.distance(&x)));
-    Ok(Verdict {
-        passed: rate.is_none_or(|r| r >= success.min_rate)
-            && distance.is_none_or(|d| d <= success.tolerance)
-            && (rate.is_some() || distance.is_some()),
-        rate,
-        distance,
-        criterion,
-    })
+    Ok(Verdict::of(success, rate, distance, &names))
 }
 
 /// Growth world `w` (see [`Round`]): its time step, its simulator, and for a target task on a world

@@ -104,6 +104,28 @@ pub struct Verdict {
     pub criterion: String,
 }
 
+impl Verdict {
+    /// A run's verdict from its least last-quarter rate and its largest target distance (each `None`
+    /// where the task judges none): passed when the rate is at least the least rate and the distance
+    /// within the tolerance, and the task judges at least one of them. `names` are the scene's
+    /// coordinates, for the criterion in words.
+    pub(crate) fn of(
+        success: &task::Success,
+        rate: Option<f64>,
+        distance: Option<f64>,
+        names: &[String],
+    ) -> Self {
+        Verdict {
+            passed: rate.is_none_or(|r| r >= success.min_rate)
+                && distance.is_none_or(|d| d <= success.tolerance)
+                && (rate.is_some() || distance.is_some()),
+            rate,
+            distance,
+            criterion: success.describe(names),
+        }
+    }
+}
+
 /// What a closed-loop run achieved by the measure of the library's own task cost (any scene and task;
 /// the finger's built-in task is `-theta3 + 0.05 |u|^2`).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
@@ -495,14 +517,7 @@ pub fn evaluate_in(
             late_distance.max(last)
         }
     });
-    let verdict = Verdict {
-        passed: rate.is_none_or(|r| r >= success.min_rate)
-            && distance.is_none_or(|d| d <= success.tolerance)
-            && (rate.is_some() || distance.is_some()),
-        rate,
-        distance,
-        criterion: success.describe(&scene.coordinate_names()),
-    };
+    let verdict = Verdict::of(success, rate, distance, &scene.coordinate_names());
     Ok(Evaluation {
         spin_rate: turned / time,
         final_spin_rate: (x[free] - angle_at_quarter) / ((steps - quarter) as f64 * settings.h),
