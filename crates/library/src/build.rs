@@ -4,10 +4,10 @@
 
 use crate::entry::{Entry, LocalValue};
 use crate::error::LibraryError;
-use crate::evaluate::Verdict;
+use crate::evaluate::{EvaluationSettings, Judge, Verdict, closed_loop};
 use crate::policy::Policy;
 use ddp::{Ddp, DdpError, DdpSettings};
-use dynamics::{Complementarity, Scene, Simulator, StepSettings};
+use dynamics::{Scene, Simulator, StepSettings};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
@@ -1140,24 +1140,31 @@ enum Round {
 /// The settings and dynamics a growth world's branches are optimised on, where not the library's own.
 type BranchWorld = (LibrarySettings, SceneDynamics);
 
-/// Growth world `w` (see [`Round`]): its time step and its simulator.
-fn world_of(task: &Build, round: usize) -> Result<(f64, Simulator), LibraryError> {
+/// Growth world `w` (see [`Round`]): its time step and contact model.
+fn world_model(task: &Build, round: usize) -> (f64, ContactModel) {
     let s = task.settings;
-    // Odd rounds run on hard contact: the policy is meant for the smoothed and the hard world alike.
     let steps_of = &s.growth_time_steps;
     let h = if steps_of.is_empty() {
         s.h
     } else {
         steps_of[(round / 2) % steps_of.len()]
     };
+    // Odd rounds run on hard contact: the policy is meant for the smoothed and the hard world alike.
+    let model = if round % 2 == 1 {
+        ContactModel::Hard
+    } else {
+        s.model
+    };
+    (h, model)
+}
+
+/// Growth world `w` (see [`Round`]): its time step and its simulator.
+fn world_of(task: &Build, round: usize) -> Result<(f64, Simulator), LibraryError> {
+    let (h, model) = world_model(task, round);
     let world = Simulator::new(
         task.scene.clone(),
         StepSettings {
-            model: if round % 2 == 1 {
-                Complementarity::Hard
-            } else {
-                s.model.complementarity()
-            },
+            model: model.complementarity(),
             h,
             ..StepSettings::default()
         },
@@ -1181,46 +1188,37 @@ fn policy_at(task: &Build, built: &Built, h: f64) -> Result<Policy, LibraryError
     .with_time_step(h)
 }
 
-/// The policy of the controllers built so far, run on growth world `w` ([`world_of`]) from the task's
-/// start without kicks for [`GROWTH_FIRST_KICK`] seconds, judged by the task's own criterion as
-/// [`crate::evaluate`] judges an unkicked run of that length (the same verdict: every rewarded
-/// coordinate's last-quarter rate at least the least rate, every judged target within tolerance over
-/// the last quarter).
+/// The policy of the controllers built so far, run on growth world `w` ([`world_model`]) from the
+/// task's start without kicks for [`GROWTH_FIRST_KICK`] seconds by [`crate::evaluate`]'s own closed
+/// loop, and its verdict by the task's criterion (every rewarded coordinate's last-quarter rate at
+/// least the least rate, every judged target within tolerance over the last quarter).
 fn unkicked(task: &Build, built: &Built, w: usize) -> Result<Verdict, LibraryError> {
-    let (h, mut world) = world_of(task, w)?;
-    let policy = policy_at(task, built, h)?;
-    let success = &task.success;
-    let names = task.scene.coordinate_names();
-    let steps = ((GROWTH_FIRST_KICK / h).round() as usize).max(1);
-    let quarter = steps - steps / 4;
-    let mut x = task.settings.x0.clone();
-    let mut u = vec![0.0; task.scene.n_controls];
-    let mut at_quarter = x.clone();
-    let mut worst = 0.0f64;
-    for k in 0..steps {
-        if k == quarter {
-            at_quarter.copy_from_slice(&x);
-        }
-        if k >= quarter {
-            worst = worst.max(success.distance(&x));
-        }
-        policy.control(&x, &mut u)?;
-        let step = world.step(&x, &u)?;
-        if !step.x_next.iter().all(|v| v.is_finite()) {
-            // A closed loop that blows up fails, whatever its numbers so far.
-            return Ok(Verdict {
-                criterion: success.describe(&names),
-                ..Verdict::default()
-            });
-        }
-        x = step.x_next;
+    let s = task.settings;
+    let (h, model) = world_model(task, w);
+    let judge = Judge {
+        own: task.scene,
+        progress: task.progress,
+        success: &task.success,
+        cost: &task.cost,
+        x0: &s.x0,
+        h: s.h,
+    };
+    let run = EvaluationSettings {
+        model,
+        h,
+        seconds: GROWTH_FIRST_KICK,
+        kick_every: 0.0,
+        ..EvaluationSettings::default()
+    };
+    match closed_loop(task.scene, &judge, &policy_at(task, built, h)?, &run) {
+        Ok(evaluation) => Ok(evaluation.success),
+        // A closed loop that blows up fails, whatever its numbers so far.
+        Err(LibraryError::Diverged { .. }) => Ok(Verdict {
+            criterion: task.success.describe(&task.scene.coordinate_names()),
+            ..Verdict::default()
+        }),
+        Err(e) => Err(e),
     }
-    let late = (steps - quarter) as f64 * h;
-    let rate = (success.rates.iter())
-        .map(|&(i, direction)| direction * (x[i] - at_quarter[i]) / late)
-        .reduce(f64::min);
-    let distance = (!success.targets.is_empty()).then(|| worst.max(success.distance(&x)));
-    Ok(Verdict::of(success, rate, distance, &names))
 }
 
 /// Growth world `w` (see [`Round`]): its time step, its simulator, and for a target task on a world

@@ -75,6 +75,12 @@ pub enum LibraryError {
     /// The payload does not decode, or decodes to something inconsistent.
     #[error("invalid library: {0}")]
     Invalid(String),
+    /// A closed loop of the library's policy left the finite states.
+    #[error("invalid library: the closed loop produced a non-finite state at step {step}")]
+    Diverged {
+        /// The step that produced it.
+        step: usize,
+    },
     /// The task refused (a malformed task, one that cannot have a library) or its optimisation failed.
     #[error(transparent)]
     Task(#[from] task::TaskError),

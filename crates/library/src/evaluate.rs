@@ -10,6 +10,7 @@ use dynamics::{Simulator, StepSettings};
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
+use task::Progress;
 
 /// How a policy is evaluated.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -339,18 +340,49 @@ pub fn evaluate_in(
     policy: &Policy,
     settings: &EvaluationSettings,
 ) -> Result<Evaluation, LibraryError> {
-    let own = library.scene();
+    let judge = Judge {
+        own: library.scene(),
+        progress: library.progress()?,
+        success: library.success(),
+        cost: library.cost(),
+        x0: &library.task().x0,
+        h: library.settings.h,
+    };
+    closed_loop(scene, &judge, policy, settings)
+}
+
+/// The library's side of a closed loop: its scene, its task's progress coordinate, success criterion,
+/// cost and start, and the time step its controllers were optimised at. A [`Library`] has them, and so
+/// has a library still being built (whose final check judges its worlds as [`evaluate`] does).
+pub(crate) struct Judge<'a> {
+    pub(crate) own: &'a dynamics::Scene,
+    pub(crate) progress: Progress,
+    pub(crate) success: &'a task::Success,
+    pub(crate) cost: &'a task::TaskCost,
+    /// The start when the settings give none.
+    pub(crate) x0: &'a [f64],
+    pub(crate) h: f64,
+}
+
+/// [`evaluate_in`] with the library's side given by `judge`.
+pub(crate) fn closed_loop(
+    scene: &dynamics::Scene,
+    judge: &Judge,
+    policy: &Policy,
+    settings: &EvaluationSettings,
+) -> Result<Evaluation, LibraryError> {
+    let own = judge.own;
     // The policy at the world's time step (the controllers growth optimised for it preferred).
     let policy = &policy.clone().with_time_step(settings.h)?;
     let n = scene.n_dof();
     // The coordinate the library's task measures progress along.
-    let progress = library.progress()?;
+    let progress = judge.progress;
     let free = progress.coordinate;
     // The direction the task rewards (the finger's forward spin is +1; a task with a negative linear
     // weight rewards the other way): the kick measures count progress that way.
     let forward = progress.forward.unwrap_or(1.0);
     // A task that rewards no progress has its kicks judged by the way back to its targets.
-    let success = library.success();
+    let success = judge.success;
     let holds = progress.forward.is_none();
     if scene.n_state() != own.n_state() || scene.n_controls != own.n_controls {
         return Err(LibraryError::SceneMismatch(format!(
@@ -396,7 +428,11 @@ pub fn evaluate_in(
             expected: "finite and non-negative",
         });
     }
-    let x0 = crate::build::start(&settings.x0, library.task());
+    let x0 = if settings.x0.is_empty() {
+        judge.x0
+    } else {
+        &settings.x0
+    };
     crate::check("x0", x0, scene.n_state())?;
     let mut world = Simulator::new(
         scene.clone(),
@@ -427,13 +463,7 @@ pub fn evaluate_in(
     let mut interval_start = x[free];
     let quarter = steps - steps / 4;
     let mut angle_at_quarter = x[free];
-    let mut meter = TaskMeter::new(
-        library.cost().clone(),
-        n,
-        settings.h,
-        library.settings.h,
-        quarter,
-    );
+    let mut meter = TaskMeter::new(judge.cost.clone(), n, settings.h, judge.h, quarter);
     let mut at_quarter = x.clone();
     let settle_steps = ((success.settle / settings.h).round() as usize).max(1);
     let mut late_distance: f64 = 0.0;
@@ -494,9 +524,7 @@ pub fn evaluate_in(
             }
         }
         if !x.iter().all(|v| v.is_finite()) {
-            return Err(LibraryError::Invalid(format!(
-                "the closed loop produced a non-finite state at step {k}"
-            )));
+            return Err(LibraryError::Diverged { step: k });
         }
     }
     let (events, touching_steps) = (contacts.events, contacts.touching_steps);
