@@ -128,3 +128,64 @@ fn an_optimiser_pass_allocates_nothing_of_its_own() {
         );
     }
 }
+
+/// A solve of a scene file's task, by full second-order DDP and by iLQR, allocates in all what a solve of
+/// the same problem with fewer passes allocates (the workspace, the knots' data sized by the first pass,
+/// the solution; the thread's working vectors of the derivatives are sized by an earlier solve): every
+/// later pass (the knots' steps, their first and second derivatives and the
+/// contractions of the backward passes, the line search's trial steps) allocates nothing.
+fn passes_allocate_nothing(file: &str, task: &str) {
+    use ddp::{Ddp, DdpSettings, Method};
+    use task::SceneDynamics;
+    let problem = ProblemFile::from_toml_str(file).expect("a scene file of the repository");
+    let task = problem.task(Some(task)).expect("its task");
+    let model = Model::new(
+        problem.scene.clone(),
+        StepSettings {
+            model: task.model.complementarity(),
+            h: task.h,
+            ..StepSettings::default()
+        },
+    )
+    .expect("the task's model");
+    let dynamics = SceneDynamics::from_model(model);
+    let zero = vec![vec![0.0; problem.scene.n_controls]; task.horizon];
+    let solve = |passes: usize, method: Method| {
+        // A tolerance no pass meets: every solve runs its whole pass budget.
+        let ddp = Ddp::new(DdpSettings {
+            max_iterations: passes,
+            tol_cost: 1e-300,
+            method,
+            ..DdpSettings::default()
+        })
+        .expect("settings");
+        let mut ran = 0;
+        let info = allocation_counter::measure(|| {
+            let s = ddp.solve(&dynamics, &task.cost, &task.x0, &zero);
+            ran = s.expect("the task solves").iterations.len();
+        });
+        (info.count_total, ran)
+    };
+    for method in [Method::Full, Method::GaussNewton] {
+        // The derivative stages' working vectors are the thread's, sized by its first solve.
+        solve(1, method);
+        let ((few, ran_few), (many, ran_many)) = (solve(3, method), solve(20, method));
+        assert_eq!((ran_few, ran_many), (3, 20), "{} {method:?}", task.name);
+        assert!(few > 0, "the first pass sizes the knots' data");
+        assert_eq!(
+            few, many,
+            "{} {method:?}: {few} allocations in 3 passes, {many} in 20",
+            task.name
+        );
+    }
+}
+
+#[test]
+fn a_finger_optimiser_pass_allocates_nothing_in_steady_state() {
+    passes_allocate_nothing(include_str!("../../scenes/finger.toml"), "spin");
+}
+
+#[test]
+fn a_pushing_optimiser_pass_allocates_nothing_in_steady_state() {
+    passes_allocate_nothing(include_str!("../../scenes/pushing.toml"), "push");
+}

@@ -81,7 +81,7 @@ impl ContactImpulse {
 }
 
 /// Constraint values and Jacobian rows at `q`, in the order of [`Scene::rows`].
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct Constraints<T = f64> {
     /// `d(q)`, one per row.
     pub d: Vec<T>,

@@ -193,10 +193,10 @@ pub struct StepData {
     x: Vec<f64>,
     u: Vec<f64>,
     step: Option<Step>,
-    /// The derivatives of `step` once computed ([`Model::calc_diff`], [`Model::calc_diff2_prepare`]).
-    pub(crate) derivatives: Option<crate::derivative::StepDerivatives>,
-    /// What the second derivatives of `step` keep besides its first ([`Model::calc_diff2_prepare`]).
-    pub(crate) second: Option<crate::derivative::SecondOrderParts>,
+    /// The derivatives of `step` once computed ([`Model::calc_diff`], [`Model::calc_diff2_prepare`]:
+    /// the first, and what the second keep besides them) and the buffers they were computed in, which
+    /// the next step's derivatives refill.
+    pub(crate) diff: crate::derivative::DerivativeData,
     /// The ingredients [`Model::step`] assembles its problem from, kept so that the next step refills
     /// them without allocating.
     ingredients: StepIngredients,
@@ -230,7 +230,43 @@ struct SolveScratch {
     correcting: CorrectionScratch<f64>,
 }
 
+/// A step a data holds, as its derivatives read it: the point it was computed from, the step and the
+/// applied forces.
+#[derive(Clone, Copy)]
+pub(crate) struct Stored<'a> {
+    pub(crate) x: &'a [f64],
+    pub(crate) u: &'a [f64],
+    pub(crate) step: &'a Step,
+    pub(crate) forces: &'a [f64],
+}
+
 impl StepData {
+    /// The step it holds as its derivatives read it, if any.
+    pub(crate) fn stored(&self) -> Option<Stored<'_>> {
+        let StepData {
+            x, u, step, forces, ..
+        } = self;
+        step.as_ref().map(|step| Stored { x, u, step, forces })
+    }
+
+    /// [`StepData::stored`], and beside it the derivatives it keeps, to be written.
+    pub(crate) fn stored_and_derivatives(
+        &mut self,
+    ) -> (Option<Stored<'_>>, &mut crate::derivative::DerivativeData) {
+        let StepData {
+            x,
+            u,
+            step,
+            forces,
+            diff,
+            ..
+        } = self;
+        (
+            step.as_ref().map(|step| Stored { x, u, step, forces }),
+            diff,
+        )
+    }
+
     /// The last step computed with this data, if any (and it succeeded).
     pub fn step(&self) -> Option<&Step> {
         self.step.as_ref()
@@ -363,10 +399,15 @@ impl Model {
             x: Vec::new(),
             u: Vec::new(),
             step: None,
-            derivatives: None,
-            second: None,
+            diff: Default::default(),
             ingredients: StepIngredients::default(),
-            solve: SolveScratch::default(),
+            solve: SolveScratch {
+                correcting: CorrectionScratch::for_size(
+                    self.scene.n_dof(),
+                    self.scene.n_constraints(),
+                ),
+                ..SolveScratch::default()
+            },
         }
     }
 
@@ -472,22 +513,26 @@ impl Model {
     }
 
     /// The derivative passes' ingredients as the step sees them, in place: explicit drag checked
-    /// ([`Model::check_drag`]), implicit drag added to `M` ([`Model::with_drag`]), the rows'
-    /// distances limited by the recovery ([`Model::recovered_all`]). Returns the distances as they
-    /// were, which the step reports, and the position-level correction
-    /// ([`Model::position_correction`]) in the same scalar.
-    pub(crate) fn prepare_ingredients<T: Ring>(
+    /// ([`Model::check_drag_in`]), implicit drag added to `M` ([`Model::with_drag`]), the rows'
+    /// distances limited by the recovery ([`Model::recovered_all`]). Writes the distances as they were,
+    /// which the step reports, into `distance` and the position-level correction
+    /// ([`Model::position_correction`]) in the same scalar into `correction`, its working vectors in
+    /// `scratch` (no allocation once they have the scene's sizes).
+    pub(crate) fn prepare_ingredients_into<T: Ring>(
         &self,
         M: &mut [T],
         jacobian: &[T],
         d: &mut [T],
-    ) -> Result<(Vec<f64>, Vec<T>), DynamicsError> {
-        self.check_drag(M)?;
+        (distance, correction): (&mut Vec<f64>, &mut Vec<T>),
+        scratch: &mut PrepareScratch<T>,
+    ) -> Result<(), DynamicsError> {
+        self.check_drag_in(M, &mut scratch.drag)?;
         self.with_drag(M);
-        let distance = d.iter().map(Ring::value).collect();
-        let correction = self.position_correction(|e| M[e], jacobian, d);
+        distance.clear();
+        distance.extend(d.iter().map(Ring::value));
+        self.position_correction_into(|e| M[e], jacobian, d, correction, &mut scratch.correcting);
         self.recovered_all(d);
-        Ok((distance, correction))
+        Ok(())
     }
 
     /// The position-level part of the recovery ([`StepSettings::recovery`]): the smallest `dq` in the
@@ -684,13 +729,9 @@ impl Model {
     /// Explicit drag ([`Drag::Explicit`]) is stable while `h lambda_max(M^-1 D) <= 2`; an error naming the
     /// joint that breaks it otherwise. With `M = L L^T` and `W = L^-1 D^1/2`, `lambda_max(M^-1 D)` is that of
     /// `S = W^T W`, at most its trace `|W|_F^2`: that bound settles the usual case in a few flops, and the
-    /// eigenvalue itself is computed only when the bound is above `2 / h`.
-    pub(crate) fn check_drag<T: Ring>(&self, M: &[T]) -> Result<(), DynamicsError> {
-        self.check_drag_in(M, &mut (Vec::new(), Vec::new()))
-    }
-
-    /// [`Model::check_drag`] with its Cholesky factor and `W` in `scratch` (no allocation once they have
-    /// the scene's size, unless the bound calls for the eigenvalue).
+    /// eigenvalue itself is computed only when the bound is above `2 / h`. Its Cholesky factor and `W`
+    /// are kept in `scratch` (no allocation once they have the scene's size, unless the bound calls for
+    /// the eigenvalue).
     fn check_drag_in<T: Ring>(
         &self,
         M: &[T],
@@ -751,21 +792,9 @@ impl Model {
         })
     }
 
-    /// The mixed LCP from its ingredients at the start of the step (`r` holding `B u`).
-    pub(crate) fn assemble_problem(
-        &self,
-        v: &[f64],
-        M: &[f64],
-        r: &[f64],
-        cons: Constraints,
-    ) -> Result<(LinearMcp, Constraints), DynamicsError> {
-        let problem = self.assemble_into(v, M, r, &cons, (Vec::new(), Vec::new()))?;
-        Ok((problem, cons))
-    }
-
-    /// [`Model::assemble_problem`] in the buffers `(a, b)` of an earlier problem (no allocation once they
-    /// have its size).
-    fn assemble_into(
+    /// The mixed LCP from its ingredients at the start of the step (`r` holding `B u`), in the buffers
+    /// `(a, b)` of an earlier problem (no allocation once they have its size).
+    pub(crate) fn assemble_into(
         &self,
         v: &[f64],
         M: &[f64],
@@ -896,8 +925,7 @@ impl Model {
         let n = self.scene.n_dof();
         let m = cons.d.len();
         let mut holder = data.step.take();
-        data.derivatives = None;
-        data.second = None;
+        data.diff.forget();
         let scratch = &mut data.solve;
         let z = &mut scratch.z;
         z.clear();
@@ -999,6 +1027,33 @@ impl Model {
     }
 }
 
+/// The working vectors of [`Model::prepare_ingredients_into`]: the drag check's and the position
+/// correction's.
+#[derive(Debug)]
+pub(crate) struct PrepareScratch<T> {
+    drag: (Vec<f64>, Vec<f64>),
+    correcting: CorrectionScratch<T>,
+}
+
+impl<T> PrepareScratch<T> {
+    /// [`CorrectionScratch::for_size`].
+    pub(crate) fn for_size(n: usize, m: usize) -> Self {
+        PrepareScratch {
+            drag: (Vec::new(), Vec::new()),
+            correcting: CorrectionScratch::for_size(n, m),
+        }
+    }
+}
+
+impl<T> Default for PrepareScratch<T> {
+    fn default() -> Self {
+        PrepareScratch {
+            drag: (Vec::new(), Vec::new()),
+            correcting: CorrectionScratch::default(),
+        }
+    }
+}
+
 /// The working matrices of [`Model::position_correction_into`]: the penetrated constraints, `J_P`, the
 /// right-hand side, the Cholesky factor of `W`, `W^-1 J_P^T` and `A`.
 #[derive(Debug)]
@@ -1009,6 +1064,21 @@ pub(crate) struct CorrectionScratch<T> {
     l: Vec<T>,
     y: Vec<T>,
     a: Vec<T>,
+}
+
+impl<T> CorrectionScratch<T> {
+    /// Room for every constraint of a scene of `n` coordinates and `m` rows at once, so that no step
+    /// allocates when its deepest penetration so far comes (a knot of an optimiser first touching).
+    pub(crate) fn for_size(n: usize, m: usize) -> Self {
+        CorrectionScratch {
+            active: Vec::with_capacity(m),
+            jp: Vec::with_capacity(m * n),
+            rhs: Vec::with_capacity(m),
+            l: Vec::with_capacity(n * n),
+            y: Vec::with_capacity(m * n),
+            a: Vec::with_capacity(m * m),
+        }
+    }
 }
 
 impl<T> Default for CorrectionScratch<T> {

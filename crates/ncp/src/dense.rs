@@ -71,6 +71,8 @@ enum Backend {
     Hand {
         lu: Vec<f64>,
         perm: Vec<usize>,
+        /// A copy of the right-hand sides of [`DenseLu::solve_many`] (grown to the largest seen).
+        copy: Vec<f64>,
     },
     Faer {
         lu: Mat<f64>,
@@ -97,6 +99,7 @@ impl DenseLu {
             LinearSolver::Hand => Backend::Hand {
                 lu: vec![0.0; n * n],
                 perm: (0..n).collect(),
+                copy: Vec::new(),
             },
             LinearSolver::Faer => {
                 let req =
@@ -142,7 +145,7 @@ impl DenseLu {
         }
         let tiny = (n as f64) * f64::EPSILON * scale;
         match &mut self.backend {
-            Backend::Hand { lu, perm } => {
+            Backend::Hand { lu, perm, .. } => {
                 lu.copy_from_slice(a);
                 for (i, p) in perm.iter_mut().enumerate() {
                     *p = i;
@@ -245,7 +248,7 @@ impl DenseLu {
         let n = self.n;
         debug_assert_eq!(rhs.len(), n);
         match &mut self.backend {
-            Backend::Hand { lu, perm } => {
+            Backend::Hand { lu, perm, .. } => {
                 // P a = L U, so a^T y = U^T L^T (P y): solve U^T w = rhs, L^T t = w, then y = P^T t.
                 let mut t = [0.0f64; 32];
                 let mut heap = Vec::new();
@@ -284,17 +287,12 @@ impl DenseLu {
         let n = self.n;
         debug_assert_eq!(rhs.len(), n * k);
         match &mut self.backend {
-            Backend::Hand { lu, perm } => {
-                // A copy of the right-hand sides (rows are read in pivot order), on the stack when small.
-                let mut stack = [0.0f64; 128];
-                let heap: Vec<f64>;
-                let b: &[f64] = if rhs.len() <= stack.len() {
-                    stack[..rhs.len()].copy_from_slice(rhs);
-                    &stack[..rhs.len()]
-                } else {
-                    heap = rhs.to_vec();
-                    &heap
-                };
+            Backend::Hand { lu, perm, copy } => {
+                // A copy of the right-hand sides (rows are read in pivot order), kept for the next
+                // solve: no allocation once it has the largest size.
+                copy.clear();
+                copy.extend_from_slice(rhs);
+                let b: &[f64] = copy;
                 for i in 0..n {
                     let (done, rest) = rhs.split_at_mut(i * k);
                     let xi = &mut rest[..k];
@@ -341,7 +339,7 @@ impl DenseLu {
         let n = self.n;
         debug_assert_eq!(rhs.len(), n);
         match &mut self.backend {
-            Backend::Hand { lu, perm } => {
+            Backend::Hand { lu, perm, .. } => {
                 // Forward substitution on P b (unit lower), then back substitution.
                 let mut x = [0.0f64; 32];
                 if n <= 32 {
@@ -565,6 +563,7 @@ mod tests {
                     let Backend::Hand {
                         lu: factors,
                         perm: p,
+                        ..
                     } = &lu.backend
                     else {
                         unreachable!()

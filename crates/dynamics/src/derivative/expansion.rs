@@ -38,8 +38,25 @@ pub(super) struct Ingredients<T> {
     pub(super) correction: Vec<T>,
 }
 
+impl<T> Ingredients<T> {
+    /// No ingredients yet (vectors to be filled).
+    pub(super) fn empty() -> Self {
+        Ingredients {
+            contacts: Vec::new(),
+            distance: Vec::new(),
+            M: Vec::new(),
+            r: Vec::new(),
+            jac: Vec::new(),
+            d: Vec::new(),
+            sigma: Vec::new(),
+            correction: Vec::new(),
+        }
+    }
+}
+
 /// Values, gradients and Hessians of a list of functions of `dim` arguments, stored flat: function `i`'s
 /// gradient is `g[i dim..(i + 1) dim]`, its Hessian the row-major `dim x dim` block after `i dim^2` of `h`.
+#[derive(Default)]
 pub(super) struct Taylor {
     dim: usize,
     re: Vec<f64>,
@@ -73,29 +90,34 @@ impl Taylor {
     /// one pass when `dim <= K`; otherwise the arguments are cut into blocks of `K / 2` and each pair of
     /// blocks takes one pass (its jets carry both blocks' directions), which together cover every
     /// gradient entry and every block of the Hessian. `f` hands its values, in order, to the [`Sink`];
-    /// `len` is how many there are (the storage is allocated once).
+    /// `len` is how many there are. The coefficients go into `taylor`'s vectors (refilled: no allocation
+    /// once they have the sizes) and the arguments' jets into `args`.
     pub(super) fn expand<const K: usize>(
+        taylor: &mut Taylor,
         at: &[f64],
         len: usize,
+        args: &mut Vec<Jet<K>>,
         mut f: impl FnMut(&[Jet<K>], &mut Sink<'_>) -> Result<(), DynamicsError>,
-    ) -> Result<Taylor, DynamicsError> {
+    ) -> Result<(), DynamicsError> {
         let dim = at.len();
-        let mut taylor = Taylor {
-            dim,
-            re: Vec::with_capacity(len),
-            g: Vec::with_capacity(len * dim),
-            h: Vec::with_capacity(len * dim * dim),
-        };
+        taylor.dim = dim;
+        for (v, size) in [
+            (&mut taylor.re, len),
+            (&mut taylor.g, len * dim),
+            (&mut taylor.h, len * dim * dim),
+        ] {
+            v.clear();
+            v.reserve(size);
+        }
         let mut pass = |dirs: &[usize], first: bool| -> Result<(), DynamicsError> {
-            let args: Vec<Jet<K>> = at
-                .iter()
-                .enumerate()
-                .map(|(i, &v)| match dirs.iter().position(|&d| d == i) {
+            args.clear();
+            args.extend(at.iter().enumerate().map(
+                |(i, &v)| match dirs.iter().position(|&d| d == i) {
                     Some(l) => Jet::variable(v, l),
                     None => Jet::from(v),
-                })
-                .collect();
-            f(&args, &mut Sink::new(&mut taylor, dirs, first))
+                },
+            ));
+            f(args, &mut Sink::new(taylor, dirs, first))
         };
         const { assert!(K <= ALL_DIRECTIONS.len()) };
         if dim <= K {
@@ -106,7 +128,7 @@ impl Taylor {
                 pass(dirs, i == 0)?;
             }
         }
-        Ok(taylor)
+        Ok(())
     }
 }
 
@@ -155,6 +177,11 @@ impl<'a> Sink<'a> {
         }
     }
 
+    /// Whether this pass is the first (which creates the functions).
+    pub(super) fn first(&self) -> bool {
+        self.first
+    }
+
     /// The next functions' values in jets.
     pub(super) fn emit<const K: usize>(&mut self, values: &[Jet<K>]) {
         let t = &mut *self.taylor;
@@ -191,6 +218,7 @@ impl<'a> Sink<'a> {
 /// The second-order ingredients before lifting: functions of `q` (the geometry: `M`, `J`, `d` and the
 /// noise, one [`Taylor`] over `n` arguments) and the forces, a function of `(q, v)` (over `2n`); the forces
 /// hold `B u` in value only (they are affine in `u`, whose directions are added on lifting).
+#[derive(Default)]
 pub(super) struct Expansion {
     pub(super) n: usize,
     /// Complementarity rows.
@@ -266,18 +294,26 @@ impl Expansion {
         }
     }
 
-    /// The ingredients' values: `M`, `r + B u` and the constraints (true distances) at the step's start.
-    pub(super) fn values(&self) -> (Vec<f64>, Vec<f64>, Constraints) {
+    /// The ingredients' values: `M`, `r + B u` and the constraints (true distances) at the step's start,
+    /// into the vectors given (refilled).
+    pub(super) fn values_into(
+        &self,
+        mass: &mut Vec<f64>,
+        r: &mut Vec<f64>,
+        cons: &mut Constraints,
+    ) {
         let (n, m, geo) = (self.n, self.m, &self.geometry);
-        let cons = Constraints {
-            d: self.distance.clone(),
-            jacobian: (0..m * n).map(|e| geo.re(self.jac(e / n, e % n))).collect(),
-            contacts: self.contacts.clone(),
-        };
-        let mass = (0..n * n)
-            .map(|e| geo.re(self.mass(e / n, e % n)))
-            .collect();
-        (mass, (0..n).map(|i| self.forces.re(i)).collect(), cons)
+        cons.d.clear();
+        cons.d.extend_from_slice(&self.distance);
+        cons.jacobian.clear();
+        cons.jacobian
+            .extend((0..m * n).map(|e| geo.re(self.jac(e / n, e % n))));
+        cons.contacts.clear();
+        cons.contacts.extend_from_slice(&self.contacts);
+        mass.clear();
+        mass.extend((0..n * n).map(|e| geo.re(self.mass(e / n, e % n))));
+        r.clear();
+        r.extend((0..n).map(|i| self.forces.re(i)));
     }
 
     /// `-K_y`, the derivatives in `y = (x, u)` of the logistic and hard models' equations (the linearise

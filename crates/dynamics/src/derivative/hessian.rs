@@ -12,23 +12,18 @@ use super::expansion::{D2, DIRECTIONS, Expansion, block_pairs};
 use super::linearise::{Linearised, RowKind, system};
 use crate::error::DynamicsError;
 use nalgebra::SMatrix;
-use ncp::{DenseLu, NcpFunction};
+use ncp::NcpFunction;
 use num_dual::Derivative;
 
-/// The linearised step of the logistic or hard model with a constant sigma, kept to contract its
-/// equations' Hessians along `T` with any `mu` ([`Structured::contract`]) without assembling them: every
-/// product in the equations ([`system`]) is of a function of `q` alone (gradient and Hessian over the first
-/// `n` directions, from its expansion) and a function affine in `s`, and each complementarity row is a
-/// function of two such quantities (`lambda_k`, `w_k`).
+/// What the logistic or hard model with a constant sigma keeps, besides the step's expansion and
+/// linearisation, to contract its equations' Hessians along `T` with any `mu` ([`Structured::contract`])
+/// without assembling them: every product in the equations ([`system`]) is of a function of `q` alone
+/// (gradient and Hessian over the first `n` directions, from its expansion) and a function affine in `s`,
+/// and each complementarity row is a function of two such quantities (`lambda_k`, `w_k`).
+#[derive(Default)]
 pub(super) struct Structured {
-    expansion: Expansion,
-    h: f64,
     /// The velocities `v` of `x`.
     v: Vec<f64>,
-    p: Vec<f64>,
-    /// `dp/dy`, row-major `len(p) x cols`.
-    dp: Vec<f64>,
-    cols: usize,
     /// Each complementarity row's weight on the curvature of `w_k`: `d phi / d w_k` for a logistic row,
     /// 1 for an active hard row, 0 for a fixed one.
     slope: Vec<f64>,
@@ -41,22 +36,30 @@ pub(super) struct Structured {
 
 impl Structured {
     /// Everything of the contraction that does not depend on `mu`, from the step's expansion and
-    /// linearisation (`p`, `dp` and the rows' kinds).
-    pub(super) fn new(
-        expansion: Expansion,
-        h: f64,
+    /// linearisation (`p`, `dp` and the rows' kinds), refilled in place.
+    pub(super) fn fill(
+        &mut self,
+        expansion: &Expansion,
+        (h, sigma): (f64, f64),
         x: &[f64],
-        p: Vec<f64>,
-        dp: Vec<f64>,
-        kinds: &[RowKind],
-        sigma: f64,
-    ) -> Structured {
+        lin: &Linearised,
+    ) {
         let (n, m) = (expansion.n, expansion.m);
+        let (p, dp, kinds) = (&lin.p, &lin.dp, &lin.kinds);
         let cols = dp.len() / p.len();
         let geo = &expansion.geometry;
-        let mut slope = vec![0.0; m];
-        let mut curvature = vec![0.0; m];
-        let mut bend = vec![0.0; m * cols];
+        let Structured {
+            v,
+            slope,
+            curvature,
+            bend,
+        } = self;
+        for buffer in [&mut *slope, &mut *curvature] {
+            buffer.clear();
+            buffer.resize(m, 0.0);
+        }
+        bend.clear();
+        bend.resize(m * cols, 0.0);
         for k in 0..m {
             match kinds[k] {
                 RowKind::Fixed => {}
@@ -92,44 +95,42 @@ impl Structured {
                 }
             }
         }
-        Structured {
-            v: x[n..2 * n].to_vec(),
-            expansion,
-            h,
-            p,
-            dp,
-            cols,
-            slope,
-            curvature,
-            bend,
-        }
+        v.clear();
+        v.extend_from_slice(&x[n..2 * n]);
     }
 
     /// `sum_k mu_k H_k` into `out` (row-major `cols x cols`), `H_k` the Hessian in `s` of equation `k`
     /// at `(p0 + dp s, y0 + s)`. The equations are weighted as they are accumulated, and the products
     /// that share a row of `dp` are summed before they are multiplied out, so the contraction costs about
     /// as much as one equation's Hessian.
-    fn contract(&self, mu: &[f64], out: &mut [f64]) {
+    fn contract(&self, on: On<'_>, mu: &[f64], out: &mut [f64], scratch: &mut Vec<f64>) {
         // The example scenes' sizes compiled in (the same arithmetic, the loops unrolled): the finger, the
         // three-link finger, the slider, two fingers and pushing; any other at run time.
-        match (self.expansion.n, self.cols) {
-            (3, 8) => self.contract_sized::<3, 8>(mu, out),
-            (4, 11) => self.contract_sized::<4, 11>(mu, out),
-            (4, 9) => self.contract_sized::<4, 9>(mu, out),
-            (5, 14) => self.contract_sized::<5, 14>(mu, out),
-            (5, 12) => self.contract_sized::<5, 12>(mu, out),
-            _ => self.contract_sized::<0, 0>(mu, out),
+        match (on.expansion.n, on.cols) {
+            (3, 8) => self.contract_sized::<3, 8>(on, mu, out, scratch),
+            (4, 11) => self.contract_sized::<4, 11>(on, mu, out, scratch),
+            (4, 9) => self.contract_sized::<4, 9>(on, mu, out, scratch),
+            (5, 14) => self.contract_sized::<5, 14>(on, mu, out, scratch),
+            (5, 12) => self.contract_sized::<5, 12>(on, mu, out, scratch),
+            _ => self.contract_sized::<0, 0>(on, mu, out, scratch),
         }
     }
 
     /// [`Structured::contract`] with `N` joints and `C` columns when they are not 0.
-    fn contract_sized<const N: usize, const C: usize>(&self, mu: &[f64], out: &mut [f64]) {
-        let ex = &self.expansion;
+    fn contract_sized<const N: usize, const C: usize>(
+        &self,
+        on: On<'_>,
+        mu: &[f64],
+        out: &mut [f64],
+        scratch: &mut Vec<f64>,
+    ) {
+        let ex = on.expansion;
         let n = if N > 0 { N } else { ex.n };
-        let cols = if C > 0 { C } else { self.cols };
-        let (m, h, p, v) = (ex.m, self.h, &self.p, &self.v);
+        let cols = if C > 0 { C } else { on.cols };
+        let (m, h, p, v) = (ex.m, on.h, &on.lin.p, &self.v);
         let geo = &ex.geometry;
-        let row = |t: usize| &self.dp[t * cols..(t + 1) * cols];
+        let dp = &on.lin.dp;
+        let row = |t: usize| &dp[t * cols..(t + 1) * cols];
         // The sum has three parts, each accumulated in its own place:
         // - second derivatives in q of functions of q, weighted: `hq`, the leading n x n block;
         // - products of a gradient in q with a row t of dp (or a unit vector): the gradients that meet
@@ -140,7 +141,8 @@ impl Structured {
         // Every slice below is cut to its length first, so that with the sizes compiled in the loops
         // have constant trip counts and no bounds checks.
         let (nn, nc) = (n * n, n * cols);
-        let mut scratch = vec![0.0; nn + nc + (n + m) * n];
+        scratch.clear();
+        scratch.resize(nn + nc + (n + m) * n, 0.0);
         let (hq, rest) = scratch.split_at_mut(nn);
         let (pm, a) = rest.split_at_mut(nc);
         let pm = &mut pm[..nc];
@@ -241,18 +243,19 @@ impl Structured {
     }
 }
 
-/// The Hessians over `q` of the position-level correction's entries (`n` row-major `n x n` blocks), or
-/// `None` where the correction is zero (no constraint deeper than the recovery).
-pub(super) fn correction_hessians(ing: &Expansion) -> Option<Vec<f64>> {
+/// The Hessians over `q` of the position-level correction's entries (`n` row-major `n x n` blocks) into
+/// `out`, or nothing (`out` empty) where the correction is zero (no constraint deeper than the recovery).
+pub(super) fn correction_hessians(ing: &Expansion, out: &mut Vec<f64>) {
     let n = ing.n;
     let geo = &ing.geometry;
     let dim = geo.dim();
+    out.clear();
     let any = (0..n).any(|i| {
         let k = ing.correction(i);
         geo.re(k) != 0.0 || geo.g(k).iter().any(|&g| g != 0.0)
     });
-    any.then(|| {
-        let mut out = vec![0.0; n * n * n];
+    if any {
+        out.resize(n * n * n, 0.0);
         for i in 0..n {
             let h = geo.h(ing.correction(i));
             for a in 0..n.min(dim) {
@@ -261,35 +264,45 @@ pub(super) fn correction_hessians(ing: &Expansion) -> Option<Vec<f64>> {
                 }
             }
         }
-        out
-    })
+    }
 }
 
-/// What the second-order adjoint contracts with `mu`: the Hessians of the step's equations along `T`.
-// One per knot, kept with the knot's data: the variants' sizes do not matter, an allocation would.
-#[allow(clippy::large_enum_variant)]
+/// What a contraction reads of the step besides its own vectors: the expansion, the linearisation, the
+/// time step and `y`'s length.
+#[derive(Clone, Copy)]
+struct On<'a> {
+    expansion: &'a Expansion,
+    lin: &'a Linearised,
+    h: f64,
+    cols: usize,
+}
+
+/// How the second-order adjoint contracts the Hessians of the step's equations along `T` with `mu`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub(super) enum Equations {
-    /// Each equation's Hessian, row-major `cols x cols`, one after the other (the general path).
-    Assembled(Vec<f64>),
-    /// The ingredients they are assembled from, contracted directly ([`Structured::contract`]).
-    Structured(Structured),
+    /// From the ingredients they are made of, directly ([`Structured::contract`]).
+    #[default]
+    Structured,
+    /// Each equation's Hessian, assembled ([`SecondOrderParts::assembled`]).
+    Assembled,
 }
 
 /// The Hessians along `T` of the step's equations ([`system`]) in second-order vector duals: one pass
 /// when `y` has at most eight entries, otherwise one pass per pair of blocks of four directions.
 pub(super) fn general_hessians(
     ing: &Expansion,
-    h: f64,
-    x: &[f64],
+    (h, x): (f64, &[f64]),
     lin: &Linearised,
     cols: usize,
     normal: bool,
-) -> Vec<f64> {
+    e: &mut Vec<f64>,
+) {
     let n = ing.n;
     let np = lin.p.len();
     let passes = block_pairs(cols, DIRECTIONS);
     let cc = cols * cols;
-    let mut e = vec![0.0; np * cc];
+    e.clear();
+    e.resize(np * cc, 0.0);
     for dirs in &passes {
         let ps: Vec<D2> = (0..np)
             .map(|i| {
@@ -322,23 +335,33 @@ pub(super) fn general_hessians(
             }
         }
     }
-    e
 }
 
-/// What a step's second derivatives keep besides the step and its first derivatives: the factors of
-/// `K_p` (for the adjoint `mu`) and the Hessians of the step's equations along `T`, or what they are made
-/// of (module documentation of stage 3). Kept in the step's data ([`Model::calc_diff2_prepare`]) or in a
-/// [`SecondOrderStep`].
+/// What a step's second derivatives keep besides the step and its first derivatives: the ingredients'
+/// expansion, the step's linearisation (with the factors of `K_p`, for the adjoint `mu`) and the
+/// Hessians of the step's equations along `T`, or what they are made of (module documentation of stage
+/// 3). Kept in the step's data ([`Model::calc_diff2_prepare`]), where every vector is refilled in place
+/// by the next step's, or in a [`SecondOrderStep`].
+#[derive(Default)]
 pub(crate) struct SecondOrderParts {
     pub(super) n: usize,
     pub(super) cols: usize,
     pub(super) h: f64,
-    pub(super) adjoint: DenseLu,
-    /// The Hessians of the step's equations along `T`, or what they are made of.
+    /// The second-order expansion of the step's ingredients.
+    pub(super) expansion: Expansion,
+    /// The step's linearisation; its factors of `K_p` are the adjoint's.
+    pub(super) lin: Linearised,
+    /// How the equations' Hessians are contracted, and what each way keeps.
     pub(super) equations: Equations,
+    pub(super) structured: Structured,
+    /// Each equation's Hessian, row-major `cols x cols`, one after the other (the general path).
+    pub(super) assembled: Vec<f64>,
     /// The Hessians over `q` of the position-level correction `dq(q)` (`q' = q + dq + h v'`), `n` blocks of
-    /// `n x n`; `None` when it is zero.
-    pub(super) correction: Option<Vec<f64>>,
+    /// `n x n`; empty when it is zero.
+    pub(super) correction: Vec<f64>,
+    /// The contraction's adjoint `mu` and its scratch (refilled by each).
+    pub(super) mu: Vec<f64>,
+    pub(super) scratch: Vec<f64>,
 }
 
 impl std::fmt::Debug for SecondOrderParts {
@@ -370,21 +393,28 @@ impl SecondOrderParts {
                 problem: format!("needs {} entries, has {}", cols * cols, hess.len()),
             });
         }
-        let np = match &self.equations {
-            Equations::Assembled(e) => e.len() / (cols * cols),
-            Equations::Structured(s) => s.p.len(),
-        };
+        let np = self.lin.p.len();
         // g = (dx'/dp)^T c with x' = [q + h v'; v'], and mu from K_p^T mu = -g.
-        let mut mu = vec![0.0; np];
+        let mu = &mut self.mu;
+        mu.clear();
+        mu.resize(np, 0.0);
         for i in 0..n {
             mu[i] = -(h * c[i] + c[n + i]);
         }
-        self.adjoint.solve_transposed(&mut mu);
-        match &self.equations {
-            Equations::Structured(s) => s.contract(&mu, hess),
-            Equations::Assembled(equations) => {
+        self.lin.lu.solve_transposed(mu);
+        match self.equations {
+            Equations::Structured => {
+                let on = On {
+                    expansion: &self.expansion,
+                    lin: &self.lin,
+                    h,
+                    cols,
+                };
+                self.structured.contract(on, mu, hess, &mut self.scratch)
+            }
+            Equations::Assembled => {
                 hess.fill(0.0);
-                for (e, w) in equations.chunks_exact(cols * cols).zip(&mu) {
+                for (e, w) in self.assembled.chunks_exact(cols * cols).zip(mu.iter()) {
                     for (a, b) in hess.iter_mut().zip(e) {
                         *a += w * b;
                     }
@@ -400,8 +430,8 @@ impl SecondOrderParts {
             }
         }
         // The correction's own curvature: c_q^T dq(q) adds sum_i c_i d^2 dq_i / dq^2 to the (q, q) block.
-        if let Some(blocks) = &self.correction {
-            for (i, block) in blocks.chunks_exact(n * n).enumerate() {
+        if !self.correction.is_empty() {
+            for (i, block) in self.correction.chunks_exact(n * n).enumerate() {
                 if c[i] == 0.0 {
                     continue;
                 }

@@ -42,10 +42,26 @@ pub(super) fn system<T: Scalar>(
     kinds: &[RowKind],
     normal: bool,
 ) -> Vec<T> {
+    let (mut out, mut w) = (Vec::with_capacity(p.len()), Vec::new());
+    system_into(n, h, ing, (v, p), kinds, normal, (&mut out, &mut w));
+    out
+}
+
+/// [`system`] into `out`, the rows' `w` in `w` (both refilled; the logistic and hard models' allocate
+/// nothing once they have the step's sizes).
+pub(super) fn system_into<T: Scalar>(
+    n: usize,
+    h: f64,
+    ing: &Ingredients<T>,
+    (v, p): (&[T], &[T]),
+    kinds: &[RowKind],
+    normal: bool,
+    (out, w): (&mut Vec<T>, &mut Vec<T>),
+) {
     let m = ing.d.len();
     let (vn, rest) = p.split_at(n);
     let lambda = &rest[..m];
-    let mut out = Vec::with_capacity(p.len());
+    out.clear();
     for i in 0..n {
         let mut s = -ing.r[i] * h;
         for j in 0..n {
@@ -56,15 +72,14 @@ pub(super) fn system<T: Scalar>(
         }
         out.push(s);
     }
-    let w: Vec<T> = (0..m)
-        .map(|k| {
-            let mut s = ing.d[k] / h;
-            for j in 0..n {
-                s += ing.jac[k * n + j] * vn[j];
-            }
-            s
-        })
-        .collect();
+    w.clear();
+    w.extend((0..m).map(|k| {
+        let mut s = ing.d[k] / h;
+        for j in 0..n {
+            s += ing.jac[k * n + j] * vn[j];
+        }
+        s
+    }));
     if !normal {
         for k in 0..m {
             out.push(match kinds[k] {
@@ -74,7 +89,7 @@ pub(super) fn system<T: Scalar>(
                 RowKind::Stationary => unreachable!("stationary rows belong to the normal model"),
             });
         }
-        return out;
+        return;
     }
     let nu = &rest[m..m + n];
     let mut ea = Vec::with_capacity(m);
@@ -111,10 +126,9 @@ pub(super) fn system<T: Scalar>(
             _ => unreachable!("normal rows are fixed or stationary"),
         });
     }
-    out
 }
 
-/// What the linearisation of a step keeps.
+/// What the linearisation of a step keeps (refilled in place by the next step's).
 pub(super) struct Linearised {
     /// The unknowns of the step's equations at the solution ([`system`]).
     pub(super) p: Vec<f64>,
@@ -126,6 +140,18 @@ pub(super) struct Linearised {
     pub(super) kinds: Vec<RowKind>,
     /// `d dq / d(x, u)` of the position-level correction, row-major `n x (2n + n_u)`.
     pub(super) dcorrection: Vec<f64>,
+}
+
+impl Default for Linearised {
+    fn default() -> Self {
+        Linearised {
+            p: Vec::new(),
+            lu: DenseLu::new(0, ncp::LinearSolver::Hand),
+            dp: Vec::new(),
+            kinds: Vec::new(),
+            dcorrection: Vec::new(),
+        }
+    }
 }
 
 /// The logistic NCP function of paper eq. (17) in any dual type: `min(a, b) - s softplus(-|a - b| / s)`.

@@ -18,18 +18,19 @@
 //! (the equations at the step's solution, their Jacobian and `dp/dy`), `hessian` (the second-order adjoint);
 //! `residual` evaluates the equations themselves.
 
+mod data;
 mod expansion;
 mod hessian;
 mod linearise;
 mod model;
 mod residual;
 
-pub(crate) use hessian::SecondOrderParts;
+pub(crate) use data::DerivativeData;
 pub use model::SecondOrderStep;
 pub use residual::{step_residual, step_residual_at};
 
 /// `fx` (row-major `2n x 2n`, `fx[i][j] = dx'_i / dx_j`) and `fu` (row-major `2n x n_u`).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct StepDerivatives {
     /// `dx'/dx`, row-major.
     pub fx: Vec<f64>,

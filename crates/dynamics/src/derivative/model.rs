@@ -8,17 +8,40 @@
 #![allow(non_snake_case)]
 
 use super::StepDerivatives;
+use super::data::{DerivativeData, Duals, Values, Work};
 use super::expansion::{D1, DIRECTIONS, Expansion, F1, Ingredients, Sink, Taylor, jet1_dual};
-use super::hessian::{
-    Equations, SecondOrderParts, Structured, correction_hessians, general_hessians,
-};
-use super::linearise::{Linearised, RowKind, System, system};
+use super::hessian::{Equations, SecondOrderParts, correction_hessians, general_hessians};
+use super::linearise::{Linearised, RowKind, System, system_into};
 use crate::constraint::{Constraints, ContactFrame};
 use crate::error::DynamicsError;
 use crate::jet::Jet;
-use crate::kinematics::Kinematics;
-use crate::step::{Complementarity, Model, Step, StepData, check};
+use crate::kinematics::{ForceScratch, Kinematics};
+use crate::step::{Complementarity, Model, PrepareScratch, Step, StepData, Stored, check};
 use ncp::{DenseLu, LinearSolver, Mcp, NcpFunction, normal_expected_squared};
+use std::any::Any;
+
+thread_local! {
+    /// The derivative stages' working vectors, one set per thread: they hold nothing from one call to the
+    /// next, so the knots of a trajectory share them (kept hot in the cache) instead of each keeping its
+    /// own, and after the first calls nothing is allocated.
+    static WORK: std::cell::RefCell<Work> = std::cell::RefCell::new(Work::default());
+}
+
+/// `f` with this thread's working vectors (fresh ones should it be called from inside `f`).
+fn with_work<R>(f: impl FnOnce(&mut Work) -> R) -> R {
+    WORK.with(|work| match work.try_borrow_mut() {
+        Ok(mut work) => f(&mut work),
+        Err(_) => f(&mut Work::default()),
+    })
+}
+
+/// Why a data without a step has no derivatives.
+fn no_step() -> DynamicsError {
+    DynamicsError::Input {
+        what: "step data",
+        problem: "holds no step to linearise (compute one with Model::step first)".into(),
+    }
+}
 
 impl Model {
     /// An estimate, before anything is allocated, of the bytes one step's second-order expansion
@@ -48,22 +71,36 @@ impl Model {
         &self,
         data: &'d mut StepData,
     ) -> Result<&'d StepDerivatives, DynamicsError> {
-        if data.derivatives.is_none() {
-            let d = self.derivatives(data)?;
-            data.derivatives = Some(d);
+        let (stored, diff) = self.stored_and_derivatives(data)?;
+        if !diff.has_first {
+            let DerivativeData {
+                first,
+                has_first,
+                parts,
+                has_second,
+            } = diff;
+            // The linearisation is the second-order parts' own: they no longer belong to this step.
+            *has_second = false;
+            let (x, u) = (stored.x, stored.u);
+            let lin = &mut parts.lin;
+            with_work(|work| self.linearise(x, u, None, &mut Source::Stored(stored), lin, work))?;
+            self.first_derivatives_into(&parts.lin, first);
+            *has_first = true;
         }
-        Ok(data.derivatives.as_ref().expect("kept above"))
+        Ok(&diff.first)
     }
 
     /// Keep in `data` the first derivatives of the step it holds and everything its second derivatives
     /// need except the vector they are contracted with ([`Model::second_order`], without copying the
-    /// step); nothing when they are kept already. Each [`Model::calc_diff2`] is then the contraction.
+    /// step), each refilled in place; nothing when they are kept already. Each [`Model::calc_diff2`] is
+    /// then the contraction.
     pub fn calc_diff2_prepare(&self, data: &mut StepData) -> Result<(), DynamicsError> {
-        if data.second.is_none() {
-            let (x, u) = self.stored_point(data)?;
-            let (derivatives, parts) = self.second_order_parts(x, u, Source::Stored(data))?;
-            data.derivatives = Some(derivatives);
-            data.second = Some(parts);
+        let (stored, diff) = self.stored_and_derivatives(data)?;
+        if !diff.has_second {
+            (diff.has_first, diff.has_second) = (false, false);
+            let (x, u) = (stored.x, stored.u);
+            self.second_order_parts(x, u, Source::Stored(stored), diff)?;
+            (diff.has_first, diff.has_second) = (true, true);
         }
         Ok(())
     }
@@ -78,11 +115,8 @@ impl Model {
         hess: &mut [f64],
     ) -> Result<&'d StepDerivatives, DynamicsError> {
         self.calc_diff2_prepare(data)?;
-        data.second
-            .as_mut()
-            .expect("prepared above")
-            .hessian_into(c, hess)?;
-        Ok(data.derivatives.as_ref().expect("prepared above"))
+        data.diff.parts.hessian_into(c, hess)?;
+        Ok(&data.diff.first)
     }
 
     /// The exact derivatives of the step `data` holds (the last [`Model::step`] computed with it), at the
@@ -92,9 +126,13 @@ impl Model {
     /// `Err` when `data` holds no step.
     #[tracing::instrument(name = "dynamics.derivatives", level = "debug", skip_all)]
     pub fn derivatives(&self, data: &StepData) -> Result<StepDerivatives, DynamicsError> {
-        let (x, u) = self.stored_point(data)?;
-        let lin = self.linearise(x, u, None, &mut Source::Stored(data))?;
-        Ok(self.first_derivatives(&lin))
+        let stored = self.stored(data)?;
+        let mut diff = DerivativeData::default();
+        let (x, u) = (stored.x, stored.u);
+        let lin = &mut diff.parts.lin;
+        with_work(|work| self.linearise(x, u, None, &mut Source::Stored(stored), lin, work))?;
+        self.first_derivatives_into(lin, &mut diff.first);
+        Ok(diff.first)
     }
 
     /// One step from `x` under `u` in `data` (as [`Model::step`]) and its exact derivatives, the geometry
@@ -107,23 +145,29 @@ impl Model {
         u: &[f64],
     ) -> Result<StepDerivatives, DynamicsError> {
         self.check_point(data, x, u)?;
-        let lin = self.linearise(x, u, None, &mut Source::Solve(data))?;
-        Ok(self.first_derivatives(&lin))
+        let mut diff = DerivativeData::default();
+        let lin = &mut diff.parts.lin;
+        with_work(|work| self.linearise(x, u, None, &mut Source::Solve(data), lin, work))?;
+        self.first_derivatives_into(lin, &mut diff.first);
+        Ok(diff.first)
     }
 
-    /// The point of the step `data` holds; `Err` for data of another model or holding no step.
-    fn stored_point<'d>(
-        &self,
-        data: &'d StepData,
-    ) -> Result<(&'d [f64], &'d [f64]), DynamicsError> {
+    /// The step `data` holds; `Err` for data of another model or holding no step.
+    fn stored<'d>(&self, data: &'d StepData) -> Result<Stored<'d>, DynamicsError> {
         self.check_data(data)?;
-        if data.step().is_none() {
-            return Err(DynamicsError::Input {
-                what: "step data",
-                problem: "holds no step to linearise (compute one with Model::step first)".into(),
-            });
+        data.stored().ok_or_else(no_step)
+    }
+
+    /// [`Model::stored`], and beside it the derivatives `data` keeps.
+    fn stored_and_derivatives<'d>(
+        &self,
+        data: &'d mut StepData,
+    ) -> Result<(Stored<'d>, &'d mut DerivativeData), DynamicsError> {
+        self.check_data(data)?;
+        match data.stored_and_derivatives() {
+            (Some(stored), diff) => Ok((stored, diff)),
+            (None, _) => Err(no_step()),
         }
-        Ok(data.point())
     }
 
     /// `Err` for data of another model, or an `x` or `u` of the wrong length or not finite.
@@ -133,14 +177,18 @@ impl Model {
         check("u", u, self.scene().n_controls)
     }
 
-    fn first_derivatives(&self, lin: &Linearised) -> StepDerivatives {
+    /// `fx` and `fu` from the linearisation, into `out` (refilled).
+    fn first_derivatives_into(&self, lin: &Linearised, out: &mut StepDerivatives) {
         let scene = self.scene();
         let (n, nu, h) = (scene.n_dof(), scene.n_controls, self.settings().h);
         let cols = 2 * n + nu;
         let dv = &lin.dp;
         let nx = 2 * n;
-        let mut fx = vec![0.0; nx * nx];
-        let mut fu = vec![0.0; nx * nu];
+        let StepDerivatives { fx, fu } = out;
+        fx.clear();
+        fx.resize(nx * nx, 0.0);
+        fu.clear();
+        fu.resize(nx * nu, 0.0);
         let dc = &lin.dcorrection;
         for i in 0..n {
             for j in 0..nx {
@@ -154,7 +202,6 @@ impl Model {
                 fu[(n + i) * nu + k] = d;
             }
         }
-        StepDerivatives { fx, fu }
     }
 
     /// The first derivatives of the step `data` holds and everything its second derivatives need except
@@ -164,8 +211,8 @@ impl Model {
     /// as [`Model::derivatives`] does; `Err` when `data` holds no step.
     #[tracing::instrument(name = "dynamics.second_order", level = "debug", skip_all)]
     pub fn second_order(&self, data: &StepData) -> Result<SecondOrderStep, DynamicsError> {
-        let (x, u) = self.stored_point(data)?;
-        self.second_order_from(x, u, Source::Stored(data))
+        let stored = self.stored(data)?;
+        self.second_order_from(stored.x, stored.u, Source::Stored(stored))
     }
 
     /// One step from `x` under `u` in `data` (as [`Model::step`]) and its [`Model::second_order`], the
@@ -185,146 +232,276 @@ impl Model {
 impl Model {
     /// Each row's noise in the scalar type of `jac`: the model's constant, or eq. (18) through `J(q)`.
     pub(super) fn noise<T: crate::kinematics::Ring>(&self, jac: &[T], m: usize) -> Vec<T> {
+        let mut out = Vec::new();
+        self.noise_into(jac, m, &mut out);
+        out
+    }
+
+    /// [`Model::noise`] into `out` (refilled; no allocation for a constant noise once sized).
+    fn noise_into<T: crate::kinematics::Ring>(&self, jac: &[T], m: usize, out: &mut Vec<T>) {
         use crate::step::{Complementarity, row_sigmas};
         let sigma = match self.settings().model {
             Complementarity::Hard => 0.0,
             Complementarity::Logistic { sigma } | Complementarity::Normal { sigma } => sigma,
         };
+        out.clear();
         match self.state_covariance() {
-            Some(cov) => row_sigmas(cov, jac, self.scene().n_dof(), self.settings().h, sigma),
-            None => vec![T::from(sigma); m],
+            Some(cov) => out.extend(row_sigmas(
+                cov,
+                jac,
+                self.scene().n_dof(),
+                self.settings().h,
+                sigma,
+            )),
+            None => out.resize(m, T::from(sigma)),
         }
     }
 
-    /// The ingredients in first-order duals over `y[first..first + 8]`.
-    pub(super) fn first_order_ingredients(
+    /// The ingredients in first-order duals over `y[first..first + 8]`, into `out` (refilled), the jets
+    /// they are computed in among `jets`.
+    fn first_order_ingredients(
         &self,
-        x: &[f64],
-        u: &[f64],
+        (x, u): (&[f64], &[f64]),
         first: usize,
-    ) -> Result<Ingredients<D1>, DynamicsError> {
-        let scene = self.scene();
-        let n = scene.n_dof();
-        let ys: Vec<F1> = x
-            .iter()
-            .chain(u)
-            .enumerate()
-            .map(|(j, &e)| {
-                if (first..first + DIRECTIONS).contains(&j) {
-                    F1::variable(e, j - first)
-                } else {
-                    F1::from(e)
-                }
-            })
-            .collect();
-        let (xs, us) = ys.split_at(2 * n);
-        let kin = Kinematics::new(scene, &xs[..n]);
-        let r = kin.applied_forces(scene, &xs[n..], us);
-        let cons = Constraints::new(scene, &kin, &xs[..n])?;
-        let sigma = self.noise(&cons.jacobian, cons.d.len());
-        let dual = |v: &[F1]| v.iter().map(jet1_dual).collect::<Vec<_>>();
-        let mut M = kin.mass_matrix(scene);
-        let mut d = cons.d;
-        let (distance, correction) = self.prepare_ingredients(&mut M, &cons.jacobian, &mut d)?;
-        Ok(Ingredients {
-            contacts: cons.contacts,
-            distance,
-            M: dual(&M),
-            r: dual(&r),
-            jac: dual(&cons.jacobian),
-            d: dual(&d),
-            sigma: dual(&sigma),
-            correction: dual(&correction),
-        })
-    }
-
-    /// The geometry `[M; J; d; noise; correction]` of `q` in any jet, with the contact frames and true distances.
-    fn geometry<const K: usize>(
-        &self,
-        q: &[Jet<K>],
-        side: &mut Option<(Vec<ContactFrame>, Vec<f64>)>,
-        sink: &mut Sink<'_>,
+        jets: &mut Vec<Box<dyn Any + Send>>,
+        out: &mut Ingredients<D1>,
     ) -> Result<(), DynamicsError> {
         let scene = self.scene();
-        let kin = Kinematics::new(scene, q);
-        let cons = Constraints::new(scene, &kin, q)?;
-        let sigma = self.noise(&cons.jacobian, cons.d.len());
-        let mut M = kin.mass_matrix(scene);
-        let mut d = cons.d;
-        let (distance, correction) = self.prepare_ingredients(&mut M, &cons.jacobian, &mut d)?;
-        if side.is_none() {
-            *side = Some((cons.contacts, distance));
-        }
-        sink.emit(&M);
-        sink.emit(&cons.jacobian);
-        sink.emit(&d);
-        sink.emit(&sigma);
-        sink.emit(&correction);
+        let (n, m) = (scene.n_dof(), scene.n_constraints());
+        let JetWork { args: ys, ing: w } = jet_work::<F1>(jets, (n, m));
+        ys.clear();
+        ys.extend(x.iter().chain(u).enumerate().map(|(j, &e)| {
+            if (first..first + DIRECTIONS).contains(&j) {
+                F1::variable(e, j - first)
+            } else {
+                F1::from(e)
+            }
+        }));
+        let (xs, us) = ys.split_at(2 * n);
+        let kin = match &mut w.kin {
+            Some(kin) => {
+                kin.update(scene, &xs[..n]);
+                kin
+            }
+            None => w.kin.insert(Kinematics::new(scene, &xs[..n])),
+        };
+        kin.applied_forces_into(scene, &xs[n..], us, &mut w.r, &mut w.forces);
+        let cons = match &mut w.cons {
+            Some(cons) => {
+                cons.update(scene, kin, &xs[..n])?;
+                cons
+            }
+            None => w.cons.insert(Constraints::new(scene, kin, &xs[..n])?),
+        };
+        self.noise_into(&cons.jacobian, cons.d.len(), &mut w.sigma);
+        kin.mass_matrix_into(scene, &mut w.M);
+        self.prepare_ingredients_into(
+            &mut w.M,
+            &cons.jacobian,
+            &mut cons.d,
+            (&mut w.distance, &mut w.correction),
+            &mut w.prepare,
+        )?;
+        let dual = |out: &mut Vec<D1>, v: &[F1]| {
+            out.clear();
+            out.extend(v.iter().map(jet1_dual));
+        };
+        out.contacts.clear();
+        out.contacts.extend_from_slice(&cons.contacts);
+        out.distance.clear();
+        out.distance.extend_from_slice(&w.distance);
+        dual(&mut out.M, &w.M);
+        dual(&mut out.r, &w.r);
+        dual(&mut out.jac, &cons.jacobian);
+        dual(&mut out.d, &cons.d);
+        dual(&mut out.sigma, &w.sigma);
+        dual(&mut out.correction, &w.correction);
         Ok(())
     }
 
-    /// The forces `r(q, v) + B u` of `(q, v)` in any jet, `u` held constant.
-    fn forces<const K: usize>(&self, qv: &[Jet<K>], u: &[f64]) -> Vec<Jet<K>> {
+    /// The geometry `[M; J; d; noise; correction]` of `q` in any jet into the sink, in `w`'s vectors; on
+    /// the first pass the contact frames and true distances into `side`.
+    fn geometry<const K: usize>(
+        &self,
+        q: &[Jet<K>],
+        w: &mut JetIngredients<Jet<K>>,
+        (contacts, distance): (&mut Vec<ContactFrame>, &mut Vec<f64>),
+        sink: &mut Sink<'_>,
+    ) -> Result<(), DynamicsError> {
+        let scene = self.scene();
+        let kin = match &mut w.kin {
+            Some(kin) => {
+                kin.update(scene, q);
+                kin
+            }
+            None => w.kin.insert(Kinematics::new(scene, q)),
+        };
+        let cons = match &mut w.cons {
+            Some(cons) => {
+                cons.update(scene, kin, q)?;
+                cons
+            }
+            None => w.cons.insert(Constraints::new(scene, kin, q)?),
+        };
+        self.noise_into(&cons.jacobian, cons.d.len(), &mut w.sigma);
+        kin.mass_matrix_into(scene, &mut w.M);
+        self.prepare_ingredients_into(
+            &mut w.M,
+            &cons.jacobian,
+            &mut cons.d,
+            (&mut w.distance, &mut w.correction),
+            &mut w.prepare,
+        )?;
+        if sink.first() {
+            contacts.clear();
+            contacts.extend_from_slice(&cons.contacts);
+            distance.clear();
+            distance.extend_from_slice(&w.distance);
+        }
+        sink.emit(&w.M);
+        sink.emit(&cons.jacobian);
+        sink.emit(&cons.d);
+        sink.emit(&w.sigma);
+        sink.emit(&w.correction);
+        Ok(())
+    }
+
+    /// The forces `r(q, v) + B u` of `(q, v)` in any jet, `u` held constant, into `w.r`.
+    fn forces<const K: usize>(&self, qv: &[Jet<K>], u: &[f64], w: &mut JetIngredients<Jet<K>>) {
         let scene = self.scene();
         let n = scene.n_dof();
-        let u: Vec<Jet<K>> = u.iter().map(|&e| Jet::from(e)).collect();
-        Kinematics::new(scene, &qv[..n]).applied_forces(scene, &qv[n..], &u)
+        w.u.clear();
+        w.u.extend(u.iter().map(|&e| Jet::from(e)));
+        let kin = match &mut w.kin {
+            Some(kin) => {
+                kin.update(scene, &qv[..n]);
+                kin
+            }
+            None => w.kin.insert(Kinematics::new(scene, &qv[..n])),
+        };
+        kin.applied_forces_into(scene, &qv[n..], &w.u, &mut w.r, &mut w.forces);
     }
 
     /// The second-order ingredients at `(x, u)`, any number of joints: the geometry over the joint angles
     /// and the forces over `(q, v)`, to be lifted to `y`. Three joints (the finger) take one pass of
     /// three-direction jets for the geometry and one of six for the forces; up to six joints, one pass
-    /// each.
-    pub(super) fn expansion(&self, x: &[f64], u: &[f64]) -> Result<Expansion, DynamicsError> {
+    /// each. Into `out`, refilled in place, the jets' working vectors among `jets`.
+    pub(super) fn expansion(
+        &self,
+        (x, u): (&[f64], &[f64]),
+        out: &mut Expansion,
+        jets: &mut Vec<Box<dyn Any + Send>>,
+    ) -> Result<(), DynamicsError> {
         let scene = self.scene();
         let n = scene.n_dof();
-        let mut side = None;
         let m = scene.n_constraints();
         let len = n * n + m * n + 2 * m + n;
+        let Expansion {
+            contacts,
+            distance,
+            actuated,
+            geometry,
+            forces,
+            ..
+        } = out;
         // The narrowest jet that holds all of a group's arguments, so that one pass gives its Hessians
         // (each entry's arithmetic is the same in any width: the same numbers to the last bit); past
         // the widest, passes over pairs of blocks.
         macro_rules! geometry_in {
-            ($k:literal) => {
-                Taylor::expand::<$k>(&x[..n], len, |q, sink| self.geometry(q, &mut side, sink))?
-            };
+            ($k:literal) => {{
+                let JetWork { args, ing } = jet_work::<Jet<$k>>(jets, (n, m));
+                Taylor::expand::<$k>(geometry, &x[..n], len, args, |q, sink| {
+                    self.geometry(q, ing, (&mut *contacts, &mut *distance), sink)
+                })?
+            }};
         }
         macro_rules! forces_in {
-            ($k:literal) => {
-                Taylor::expand::<$k>(&x[..2 * n], n, |qv, sink| {
-                    sink.emit(&self.forces(qv, u));
+            ($k:literal) => {{
+                let JetWork { args, ing } = jet_work::<Jet<$k>>(jets, (n, m));
+                Taylor::expand::<$k>(forces, &x[..2 * n], n, args, |qv, sink| {
+                    self.forces(qv, u, ing);
+                    sink.emit(&ing.r);
                     Ok(())
                 })?
-            };
+            }};
         }
-        let geometry = match n {
+        match n {
             0..=3 => geometry_in!(3),
             4 => geometry_in!(4),
             5 | 6 => geometry_in!(6),
             _ => geometry_in!(8),
         };
-        let forces = match 2 * n {
+        match 2 * n {
             0..=6 => forces_in!(6),
             7..=8 => forces_in!(8),
             9..=10 => forces_in!(10),
             _ => forces_in!(12),
         };
-        let (contacts, distance) = side.expect("the geometry ran at least once");
-        Ok(Expansion {
-            n,
-            m: distance.len(),
-            contacts,
-            distance,
-            actuated: scene
+        actuated.clear();
+        actuated.extend(
+            scene
                 .coordinates
                 .iter()
                 .enumerate()
-                .filter_map(|(j, c)| c.actuator.map(|k| (j, 2 * n + k)))
-                .collect(),
-            geometry,
-            forces,
-        })
+                .filter_map(|(j, c)| c.actuator.map(|k| (j, 2 * n + k))),
+        );
+        (out.n, out.m) = (n, out.distance.len());
+        Ok(())
     }
+}
+
+/// The working vectors of the passes in one scalar type `T` (a jet of some width, [`Model::expansion`]; or
+/// the first-order jets of [`Model::first_order_ingredients`]), kept in a step's data: the arguments and
+/// the ingredients computed from them.
+struct JetWork<T> {
+    args: Vec<T>,
+    ing: JetIngredients<T>,
+}
+
+/// The geometry's and the forces' vectors in the scalar `T`.
+struct JetIngredients<T> {
+    kin: Option<Kinematics<T>>,
+    cons: Option<Constraints<T>>,
+    M: Vec<T>,
+    sigma: Vec<T>,
+    correction: Vec<T>,
+    distance: Vec<f64>,
+    prepare: PrepareScratch<T>,
+    u: Vec<T>,
+    r: Vec<T>,
+    forces: ForceScratch<T>,
+}
+
+/// The working vectors of scalar `T` among `jets`, made the first time that scalar is used (for a scene
+/// of `n` coordinates and `m` rows).
+fn jet_work<T: Send + 'static>(
+    jets: &mut Vec<Box<dyn Any + Send>>,
+    (n, m): (usize, usize),
+) -> &mut JetWork<T> {
+    let at = match jets.iter().position(|w| w.is::<JetWork<T>>()) {
+        Some(at) => at,
+        None => {
+            jets.push(Box::new(JetWork::<T> {
+                args: Vec::new(),
+                ing: JetIngredients {
+                    kin: None,
+                    cons: None,
+                    M: Vec::new(),
+                    sigma: Vec::new(),
+                    correction: Vec::new(),
+                    distance: Vec::new(),
+                    prepare: PrepareScratch::for_size(n, m),
+                    u: Vec::new(),
+                    r: Vec::new(),
+                    forces: ForceScratch::default(),
+                },
+            }));
+            jets.len() - 1
+        }
+    };
+    jets[at]
+        .downcast_mut()
+        .expect("of this width (found above)")
 }
 
 /// Where the step to linearise comes from. The public entry points check the data (and, to solve, `x` and
@@ -332,30 +509,41 @@ impl Model {
 pub(super) enum Source<'a> {
     /// Solve it now in this data (the ingredients' values make its problem: the geometry runs once).
     Solve(&'a mut StepData),
-    /// The step this data holds, linearised as it is (no second solve).
-    Stored(&'a StepData),
+    /// The step a data holds, linearised as it is (no second solve).
+    Stored(Stored<'a>),
 }
 
 impl Source<'_> {
-    /// The data, with the step once it is solved.
-    pub(super) fn data(&self) -> &StepData {
+    /// The applied forces of the step's data.
+    fn forces(&self) -> &[f64] {
         match self {
-            Source::Solve(data) => data,
-            Source::Stored(data) => data,
+            Source::Solve(data) => data.forces(),
+            Source::Stored(stored) => stored.forces,
+        }
+    }
+
+    /// The step, once it is solved.
+    fn step(&self) -> Option<&Step> {
+        match self {
+            Source::Solve(data) => data.step(),
+            Source::Stored(stored) => Some(stored.step),
         }
     }
 }
 
 impl Model {
-    /// The step, the Jacobian of its equations in their unknowns and `dp/d(x, u)`.
-    /// With `second` (the Hessian pass computes them anyway) the first-order ingredients are read off it.
+    /// The step, the Jacobian of its equations in their unknowns and `dp/d(x, u)`, into `lin` (refilled
+    /// in place), the working vectors in `work`. With `second` (the Hessian pass computes them anyway)
+    /// the first-order ingredients are read off it.
     pub(super) fn linearise(
         &self,
         x: &[f64],
         u: &[f64],
         second: Option<&Expansion>,
         source: &mut Source<'_>,
-    ) -> Result<Linearised, DynamicsError> {
+        lin: &mut Linearised,
+        work: &mut Work,
+    ) -> Result<(), DynamicsError> {
         let model = self.settings().model;
         if self.has_state_covariance() && matches!(model, Complementarity::Normal { .. }) {
             return Err(DynamicsError::Unsupported(
@@ -370,39 +558,52 @@ impl Model {
         let direct = second.filter(|_| {
             !self.has_state_covariance() && !matches!(model, Complementarity::Normal { .. })
         });
-        let mut passes = Vec::new();
+        let Work {
+            values,
+            jets,
+            first_order: passes,
+            duals,
+        } = work;
         if direct.is_none() {
-            for first in (0..cols).step_by(DIRECTIONS) {
-                passes.push(match second {
-                    Some(so) => so.first_order(first, cols),
-                    _ => self.first_order_ingredients(x, u, first)?,
-                });
+            let count = cols.div_ceil(DIRECTIONS);
+            passes.truncate(count);
+            passes.resize_with(count, Ingredients::empty);
+            for (pass, first) in passes.iter_mut().zip((0..cols).step_by(DIRECTIONS)) {
+                match second {
+                    Some(so) => *pass = so.first_order(first, cols),
+                    _ => self.first_order_ingredients((x, u), first, jets, pass)?,
+                }
             }
         }
         // The ingredients' values make the step's problem (the geometry runs once).
-        let (M, mut r, cons) = match direct {
-            Some(ex) => ex.values(),
+        match direct {
+            Some(ex) => ex.values_into(&mut values.M, &mut values.r, &mut values.cons),
             None => {
-                let values = |v: &[D1]| v.iter().map(|e| e.re).collect::<Vec<f64>>();
                 let ing = &passes[0];
-                let cons = Constraints {
-                    d: ing.distance.clone(),
-                    jacobian: values(&ing.jac),
-                    contacts: ing.contacts.clone(),
+                let re = |out: &mut Vec<f64>, v: &[D1]| {
+                    out.clear();
+                    out.extend(v.iter().map(|e| e.re));
                 };
-                (values(&ing.M), values(&ing.r), cons)
+                re(&mut values.M, &ing.M);
+                re(&mut values.r, &ing.r);
+                re(&mut values.cons.jacobian, &ing.jac);
+                values.cons.d.clear();
+                values.cons.d.extend_from_slice(&ing.distance);
+                values.cons.contacts.clear();
+                values.cons.contacts.extend_from_slice(&ing.contacts);
             }
-        };
-        for (r, f) in r.iter_mut().zip(source.data().forces()) {
+        }
+        for (r, f) in values.r.iter_mut().zip(source.forces()) {
             *r += f;
         }
-        let (problem, cons) = self.assemble_problem(&x[n..], &M, &r, cons)?;
+        let cons = &values.cons;
+        let lcp = std::mem::take(&mut values.lcp);
+        let problem = self.assemble_into(&x[n..], &values.M, &values.r, cons, lcp)?;
         let problem = match source {
             Source::Stored(_) => problem,
-            Source::Solve(data) => self.solve_into(data, x, u, problem, &cons)?,
+            Source::Solve(data) => self.solve_into(data, x, u, problem, cons)?,
         };
         let step = source
-            .data()
             .step()
             .expect("a stored step (checked by the entry point) or one just solved");
         if step.info.status != ncp::Status::Converged {
@@ -412,25 +613,40 @@ impl Model {
         }
         let m = step.lambda.len();
         let h = self.settings().h;
-        let mut z = step.x_next[n..].to_vec();
+        let Values { z, f, jac, .. } = values;
+        z.clear();
+        z.extend_from_slice(&step.x_next[n..]);
         z.extend_from_slice(&step.lambda);
         let dim = n + m;
-        let mut f = vec![0.0; dim];
-        let mut jac = vec![0.0; dim * dim];
-        problem.evaluate(&z, &mut f, Some(&mut jac));
+        for (buffer, len) in [(&mut *f, dim), (&mut *jac, dim * dim)] {
+            buffer.clear();
+            buffer.resize(len, 0.0);
+        }
+        problem.evaluate(z, f, Some(jac));
+        values.lcp = problem.into_row_major();
         let normal = matches!(model, Complementarity::Normal { .. });
-        let (p, _, mut lu, kinds, slope) = if normal {
-            self.normal_system(&z, &f, &jac, n)?
+        let Linearised {
+            p,
+            lu,
+            dp,
+            kinds,
+            dcorrection,
+        } = lin;
+        if normal {
+            (*p, _, *lu, *kinds, values.slope) = self.normal_system(z, f, jac, n)?;
         } else {
-            self.complementarity_system(&z, &f, &jac, n)?
-        };
+            self.complementarity_system(n, (p, kinds), values, lu)?;
+        }
+        let slope = &values.slope;
         let np = p.len();
-        let mut dp = vec![0.0; np * cols];
+        dp.clear();
+        dp.resize(np * cols, 0.0);
         // The position-level correction's derivatives: a function of q alone.
-        let mut dcorrection = vec![0.0; n * cols];
+        dcorrection.clear();
+        dcorrection.resize(n * cols, 0.0);
         match direct {
             Some(ex) => {
-                ex.equations_y(h, &x[n..], &p, &slope, &mut dp);
+                ex.equations_y(h, &x[n..], p, slope, dp);
                 let geo = &ex.geometry;
                 for i in 0..n {
                     dcorrection[i * cols..i * cols + n].copy_from_slice(geo.g(ex.correction(i)));
@@ -439,19 +655,20 @@ impl Model {
             None => {
                 // The equations' derivatives in y = (x, u) in duals, eight directions per pass (one
                 // pass for the finger), and the correction's read off its duals.
-                let pc: Vec<D1> = p.iter().map(|&e| D1::from_re(e)).collect();
+                let Duals { pc, v, res, w } = duals;
+                pc.clear();
+                pc.extend(p.iter().map(|&e| D1::from_re(e)));
                 for (ing, first) in passes.iter().zip((0..cols).step_by(DIRECTIONS)) {
-                    let v: Vec<D1> = (0..n)
-                        .map(|j| {
-                            let d = D1::from_re(x[n + j]);
-                            if (first..first + DIRECTIONS).contains(&(n + j)) {
-                                d.derivative(n + j - first)
-                            } else {
-                                d
-                            }
-                        })
-                        .collect();
-                    let res = system(n, h, ing, &v, &pc, &kinds, normal);
+                    v.clear();
+                    v.extend((0..n).map(|j| {
+                        let d = D1::from_re(x[n + j]);
+                        if (first..first + DIRECTIONS).contains(&(n + j)) {
+                            d.derivative(n + j - first)
+                        } else {
+                            d
+                        }
+                    }));
+                    system_into(n, h, ing, (v, pc), kinds, normal, (res, w));
                     for k in 0..DIRECTIONS.min(cols - first) {
                         for (i, e) in res.iter().enumerate() {
                             dp[i * cols + first + k] = -e.eps.0.as_ref().map_or(0.0, |g| g[k]);
@@ -467,45 +684,48 @@ impl Model {
                 }
             }
         }
-        lu.solve_many(&mut dp, cols);
-        Ok(Linearised {
-            p,
-            lu,
-            dp,
-            kinds,
-            dcorrection,
-        })
+        lu.solve_many(dp, cols);
+        Ok(())
     }
 
-    /// Logistic and hard models: `p = z`, the Newton matrix with each row's `(d phi/d lambda, d phi/d w)`;
-    /// redundant active rows held fixed.
+    /// Logistic and hard models: `p = z`, the Newton matrix with each row's `(d phi/d lambda, d phi/d w)`
+    /// (in `values.H`; `values.z`, `f` and `jac` are the solution, the residual and its Jacobian);
+    /// redundant active rows held fixed. `p` and the rows' kinds into `p` and `kinds`, each row's slope in
+    /// `w` into `values.slope`, the factors into `lu` (a new workspace when it has another size).
     fn complementarity_system(
         &self,
-        z: &[f64],
-        f: &[f64],
-        jac: &[f64],
         n: usize,
-    ) -> Result<System, DynamicsError> {
+        (p, kinds): (&mut Vec<f64>, &mut Vec<RowKind>),
+        values: &mut Values,
+        lu: &mut DenseLu,
+    ) -> Result<(), DynamicsError> {
+        let Values {
+            z,
+            f,
+            jac,
+            H,
+            dphi,
+            slope,
+            ..
+        } = values;
         let dim = z.len();
         let m = dim - n;
         let model = self.settings().model;
-        let sigmas: Vec<f64> = match self.state_covariance() {
-            Some(_) => {
-                let rows: Vec<f64> = (0..m)
-                    .flat_map(|k| jac[(n + k) * dim..(n + k) * dim + n].iter().copied())
-                    .collect();
-                self.noise(&rows, m)
-            }
-            // A constant noise reads no Jacobian.
-            None => self.noise(&[], m),
-        };
-        let mut kinds = Vec::with_capacity(m);
-        let mut dphi = vec![(0.0, 0.0); m];
+        let sigmas: Option<Vec<f64>> = self.state_covariance().map(|_| {
+            let rows: Vec<f64> = (0..m)
+                .flat_map(|k| jac[(n + k) * dim..(n + k) * dim + n].iter().copied())
+                .collect();
+            self.noise(&rows, m)
+        });
+        kinds.clear();
+        dphi.clear();
+        dphi.resize(m, (0.0, 0.0));
         for k in 0..m {
             let (lambda, w) = (z[n + k], f[n + k]);
             let (kind, d) = match model {
-                Complementarity::Logistic { .. } => {
-                    let sigma = sigmas[k];
+                Complementarity::Logistic { sigma } => {
+                    // A constant noise reads no Jacobian.
+                    let sigma = sigmas.as_ref().map_or(sigma, |s| s[k]);
                     let (_, da, db) = NcpFunction::Logistic { sigma }.first_order(lambda, w);
                     (RowKind::Logistic, (da, db))
                 }
@@ -515,8 +735,9 @@ impl Model {
             kinds.push(kind);
             dphi[k] = d;
         }
-        let build = |dphi: &[(f64, f64)]| {
-            let mut H = jac.to_vec();
+        let build = |H: &mut Vec<f64>, dphi: &[(f64, f64)]| {
+            H.clear();
+            H.extend_from_slice(jac);
             for k in 0..m {
                 let row = &mut H[(n + k) * dim..(n + k + 1) * dim];
                 for e in row.iter_mut() {
@@ -524,16 +745,17 @@ impl Model {
                 }
                 row[n + k] += dphi[k].0;
             }
-            H
         };
-        let mut H = build(&dphi);
-        let mut lu = DenseLu::new(dim, LinearSolver::Hand);
+        build(H, dphi);
+        if lu.dim() != dim {
+            *lu = DenseLu::new(dim, LinearSolver::Hand);
+        }
         // Redundant active rows (more than the velocities can satisfy independently) make the matrix
         // singular: exactly for the hard model's active set, to working precision for a smoothed row whose
         // d phi / d lambda has underflowed (lambda >> sigma). The velocities are still unique. Hold the
         // smallest impulses of such rows fixed, one at a time, until the remaining active rows are
         // independent: the derivative of that branch of impulses, and the derivative of v'.
-        while let Err(cause) = lu.factor(&H) {
+        while let Err(cause) = lu.factor(H) {
             let weakest = (0..m)
                 .filter(|&k| dphi[k].1 > 0.5 && dphi[k].0 < 1e-12)
                 .min_by(|&a, &b| z[n + a].total_cmp(&z[n + b]));
@@ -541,7 +763,7 @@ impl Model {
                 Some(k) => {
                     dphi[k] = (1.0, 0.0);
                     kinds[k] = RowKind::Fixed;
-                    H = build(&dphi);
+                    build(H, dphi);
                 }
                 None => {
                     return Err(DynamicsError::Singular {
@@ -551,8 +773,11 @@ impl Model {
                 }
             }
         }
-        let slope = dphi.iter().map(|d| d.1).collect();
-        Ok((z.to_vec(), H, lu, kinds, slope))
+        slope.clear();
+        slope.extend(dphi.iter().map(|d| d.1));
+        p.clear();
+        p.extend_from_slice(z);
+        Ok(())
     }
 
     /// Normal model: `p = [v'; lambda; nu]` with `nu = -M^-1 J^T e_b` and the first-order conditions'
@@ -631,14 +856,15 @@ impl Model {
 }
 
 impl Model {
-    /// The step's first derivatives and what its second derivatives keep besides them, for the step in
-    /// `source` (solved now or stored).
+    /// The step's first derivatives (into `diff.first`) and what its second derivatives keep besides
+    /// them (into `diff.parts`), for the step in `source` (solved now or stored), refilled in place.
     pub(super) fn second_order_parts(
         &self,
         x: &[f64],
         u: &[f64],
         mut source: Source<'_>,
-    ) -> Result<(StepDerivatives, SecondOrderParts), DynamicsError> {
+        diff: &mut DerivativeData,
+    ) -> Result<(), DynamicsError> {
         let (n, nu, h) = (
             self.scene().n_dof(),
             self.scene().n_controls,
@@ -654,41 +880,33 @@ impl Model {
                 alternative: "first derivatives only: iLQR / Gauss-Newton (--method ilqr)",
             });
         }
-        let ing = self.expansion(x, u)?;
-        let lin = self.linearise(x, u, Some(&ing), &mut source)?;
-        let derivatives = self.first_derivatives(&lin);
+        let DerivativeData { first, parts, .. } = diff;
+        with_work(|work| {
+            self.expansion((x, u), &mut parts.expansion, &mut work.jets)?;
+            let ing = &parts.expansion;
+            self.linearise(x, u, Some(ing), &mut source, &mut parts.lin, work)
+        })?;
+        let ing = &parts.expansion;
+        self.first_derivatives_into(&parts.lin, first);
         let model = self.settings().model;
-        let structured = match model {
-            Complementarity::Hard => Some(0.0),
-            Complementarity::Logistic { sigma } if !self.has_state_covariance() => Some(sigma),
-            _ => None,
-        };
-        let assembled = match structured {
-            Some(_) => None,
-            None => {
+        (parts.n, parts.cols, parts.h) = (n, cols, h);
+        match model {
+            Complementarity::Hard => {
+                parts.equations = Equations::Structured;
+                parts.structured.fill(ing, (h, 0.0), x, &parts.lin);
+            }
+            Complementarity::Logistic { sigma } if !self.has_state_covariance() => {
+                parts.equations = Equations::Structured;
+                parts.structured.fill(ing, (h, sigma), x, &parts.lin);
+            }
+            _ => {
                 let normal = matches!(model, Complementarity::Normal { .. });
-                Some(general_hessians(&ing, h, x, &lin, cols, normal))
+                parts.equations = Equations::Assembled;
+                general_hessians(ing, (h, x), &parts.lin, cols, normal, &mut parts.assembled);
             }
-        };
-        let correction = correction_hessians(&ing);
-        let Linearised {
-            p, lu, dp, kinds, ..
-        } = lin;
-        let equations = match (structured, assembled) {
-            (Some(sigma), _) => {
-                Equations::Structured(Structured::new(ing, h, x, p, dp, &kinds, sigma))
-            }
-            (None, assembled) => Equations::Assembled(assembled.expect("assembled above")),
-        };
-        let parts = SecondOrderParts {
-            n,
-            cols,
-            h,
-            adjoint: lu,
-            equations,
-            correction,
-        };
-        Ok((derivatives, parts))
+        }
+        correction_hessians(ing, &mut parts.correction);
+        Ok(())
     }
 
     /// [`Model::second_order_parts`] with a copy of the step, as one owned value.
@@ -698,17 +916,21 @@ impl Model {
         u: &[f64],
         source: Source<'_>,
     ) -> Result<SecondOrderStep, DynamicsError> {
-        let (data, (derivatives, parts)) = match source {
+        let mut diff = DerivativeData::default();
+        let step = match source {
             Source::Solve(data) => {
-                let out = self.second_order_parts(x, u, Source::Solve(&mut *data))?;
-                (&*data, out)
+                self.second_order_parts(x, u, Source::Solve(&mut *data), &mut diff)?;
+                data.step().expect("linearised above").clone()
             }
-            Source::Stored(data) => (data, self.second_order_parts(x, u, Source::Stored(data))?),
+            Source::Stored(stored) => {
+                self.second_order_parts(x, u, Source::Stored(stored), &mut diff)?;
+                stored.step.clone()
+            }
         };
         Ok(SecondOrderStep {
-            step: data.step().expect("linearised above").clone(),
-            derivatives,
-            parts: std::cell::RefCell::new(parts),
+            step,
+            derivatives: diff.first,
+            parts: std::cell::RefCell::new(diff.parts),
         })
     }
 }
@@ -765,29 +987,30 @@ mod tests {
     /// directions) for the same step and `c`.
     fn both(sim: &mut Simulator, x: &[f64], u: &[f64], c: &[f64]) -> (Vec<f64>, Vec<f64>, f64) {
         let structured = sim.second_order_step(x, u).unwrap();
-        let ing = sim.model().expansion(x, u).unwrap();
-        let lin = sim
-            .model()
-            .linearise(x, u, Some(&ing), &mut Source::Stored(sim.data()))
+        // The same step's parts again, its equations' Hessians assembled in duals.
+        let model = sim.model();
+        let mut diff = DerivativeData::default();
+        let stored = sim.data().stored().unwrap();
+        model
+            .second_order_parts(x, u, Source::Stored(stored), &mut diff)
             .unwrap();
-        let (n, cols, h) = {
-            let parts = structured.parts.borrow();
-            (parts.n, parts.cols, parts.h)
-        };
-        let equations = general_hessians(&ing, h, x, &lin, cols, false);
-        let step = sim.data().step().unwrap().clone();
+        let mut parts = diff.parts;
+        let cols = parts.cols;
+        general_hessians(
+            &parts.expansion,
+            (parts.h, x),
+            &parts.lin,
+            cols,
+            false,
+            &mut parts.assembled,
+        );
+        parts.equations = Equations::Assembled;
+        let step = stored.step.clone();
         let lambda = step.lambda.iter().fold(0.0f64, |a, &b| a.max(b));
         let general = SecondOrderStep {
             step,
             derivatives: structured.derivatives.clone(),
-            parts: std::cell::RefCell::new(SecondOrderParts {
-                n,
-                cols,
-                h,
-                adjoint: lin.lu,
-                equations: Equations::Assembled(equations),
-                correction: correction_hessians(&ing),
-            }),
+            parts: std::cell::RefCell::new(parts),
         };
         (
             structured.hessian(c).unwrap(),
