@@ -1,29 +1,36 @@
-//! A second-order forward-mode number over `N` directions with plain arrays: value, gradient and the full
-//! Hessian, each product fused into one pass (no temporaries). The Hessians of the forces `r(q, v)` run on
-//! it (`Jet<6>` over `(q, v)` for three joints, the narrowest width that holds a scene's arguments up to
-//! twelve; larger scenes take several passes): a few times cheaper than the general-purpose dual types for
-//! the one place where second derivatives of many operations are needed.
+//! A second-order forward-mode number over `N` directions with plain arrays: value, gradient and the
+//! Hessian's upper triangle, packed, each product fused into one pass (no temporaries). The Hessians of the
+//! forces `r(q, v)` run on it (`Jet<6, 21>` over `(q, v)` for three joints, the narrowest width that holds
+//! a scene's arguments up to twelve; larger scenes take several passes): a few times cheaper than the
+//! general-purpose dual types for the one place where second derivatives of many operations are needed.
 
 use crate::kinematics::Ring;
 use std::ops::{Add, AddAssign, Div, Mul, Neg, Sub, SubAssign};
 
-/// `re + g . s + 1/2 s^T h s`, to second order in `s`. The Hessian is symmetric: only its upper
-/// triangle (`h[i][j]`, `j >= i`) is computed and stored (read it with [`Jet::hessian`]), which saves
-/// close to half the arithmetic of every operation.
+/// `re + g . s + 1/2 s^T h s`, to second order in `s`. The Hessian is symmetric: only its upper triangle
+/// is computed and stored, packed row by row in `H = N (N + 1) / 2` entries (read it with
+/// [`Jet::hessian`]), which saves close to half the arithmetic of every operation and of every copy.
+/// `H` is spelled out because stable Rust cannot compute an array's length from `N`; a jet whose `H` is
+/// not `N (N + 1) / 2` does not compile.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Jet<const N: usize> {
+pub struct Jet<const N: usize, const H: usize> {
     /// Value.
     pub re: f64,
     /// Gradient.
     pub g: [f64; N],
-    /// Hessian, upper triangle (the strict lower triangle stays zero).
-    h: [[f64; N]; N],
+    /// Hessian, upper triangle packed row by row: `(0, 0), (0, 1), .., (0, N - 1), (1, 1), ..`.
+    h: [f64; H],
 }
 
-impl<const N: usize> Jet<N> {
+impl<const N: usize, const H: usize> Jet<N, H> {
+    /// Compile-time check of the packed triangle's length.
+    const PACKED: () = assert!(H == N * (N + 1) / 2, "a jet's H must be N (N + 1) / 2");
+
     /// The Hessian's entry `(i, j)`.
     pub fn hessian(&self, i: usize, j: usize) -> f64 {
-        if i <= j { self.h[i][j] } else { self.h[j][i] }
+        let (i, j) = if i <= j { (i, j) } else { (j, i) };
+        // Rows 0..i hold N + (N - 1) + .. + (N - i + 1) = i N - i (i - 1) / 2 entries.
+        self.h[i * N - i * i.saturating_sub(1) / 2 + (j - i)]
     }
 
     /// The variable `s_i` at value `re`.
@@ -36,27 +43,30 @@ impl<const N: usize> Jet<N> {
     /// `f(self)` from `f`, `f'` and `f''` at `self.re` (chain rule).
     fn chain(&self, f0: f64, f1: f64, f2: f64) -> Self {
         let mut out = Jet::from(f0);
+        let mut k = 0;
         for i in 0..N {
             out.g[i] = f1 * self.g[i];
             for j in i..N {
-                out.h[i][j] = f1 * self.h[i][j] + f2 * self.g[i] * self.g[j];
+                out.h[k] = f1 * self.h[k] + f2 * self.g[i] * self.g[j];
+                k += 1;
             }
         }
         out
     }
 }
 
-impl<const N: usize> From<f64> for Jet<N> {
+impl<const N: usize, const H: usize> From<f64> for Jet<N, H> {
     fn from(re: f64) -> Self {
+        let () = Self::PACKED;
         Jet {
             re,
             g: [0.0; N],
-            h: [[0.0; N]; N],
+            h: [0.0; H],
         }
     }
 }
 
-impl<const N: usize> Add for Jet<N> {
+impl<const N: usize, const H: usize> Add for Jet<N, H> {
     type Output = Self;
     #[inline]
     fn add(mut self, o: Self) -> Self {
@@ -65,20 +75,20 @@ impl<const N: usize> Add for Jet<N> {
     }
 }
 
-impl<const N: usize> AddAssign for Jet<N> {
+impl<const N: usize, const H: usize> AddAssign for Jet<N, H> {
     #[inline]
     fn add_assign(&mut self, o: Self) {
         self.re += o.re;
         for i in 0..N {
             self.g[i] += o.g[i];
-            for j in i..N {
-                self.h[i][j] += o.h[i][j];
-            }
+        }
+        for k in 0..H {
+            self.h[k] += o.h[k];
         }
     }
 }
 
-impl<const N: usize> Sub for Jet<N> {
+impl<const N: usize, const H: usize> Sub for Jet<N, H> {
     type Output = Self;
     #[inline]
     fn sub(mut self, o: Self) -> Self {
@@ -87,40 +97,40 @@ impl<const N: usize> Sub for Jet<N> {
     }
 }
 
-impl<const N: usize> Neg for Jet<N> {
+impl<const N: usize, const H: usize> Neg for Jet<N, H> {
     type Output = Self;
     #[inline]
     fn neg(mut self) -> Self {
         self.re = -self.re;
         for i in 0..N {
             self.g[i] = -self.g[i];
-            for j in i..N {
-                self.h[i][j] = -self.h[i][j];
-            }
+        }
+        for k in 0..H {
+            self.h[k] = -self.h[k];
         }
         self
     }
 }
 
-impl<const N: usize> Mul for Jet<N> {
+impl<const N: usize, const H: usize> Mul for Jet<N, H> {
     type Output = Self;
     #[inline]
     fn mul(self, o: Self) -> Self {
         let mut out = Jet::from(self.re * o.re);
+        let mut k = 0;
         for i in 0..N {
             out.g[i] = self.re * o.g[i] + o.re * self.g[i];
             for j in i..N {
-                out.h[i][j] = self.re * o.h[i][j]
-                    + o.re * self.h[i][j]
-                    + self.g[i] * o.g[j]
-                    + o.g[i] * self.g[j];
+                out.h[k] =
+                    self.re * o.h[k] + o.re * self.h[k] + self.g[i] * o.g[j] + o.g[i] * self.g[j];
+                k += 1;
             }
         }
         out
     }
 }
 
-impl<const N: usize> Add<f64> for Jet<N> {
+impl<const N: usize, const H: usize> Add<f64> for Jet<N, H> {
     type Output = Self;
     #[inline]
     fn add(mut self, o: f64) -> Self {
@@ -129,35 +139,35 @@ impl<const N: usize> Add<f64> for Jet<N> {
     }
 }
 
-impl<const N: usize> Mul<f64> for Jet<N> {
+impl<const N: usize, const H: usize> Mul<f64> for Jet<N, H> {
     type Output = Self;
     #[inline]
     fn mul(mut self, o: f64) -> Self {
         self.re *= o;
         for i in 0..N {
             self.g[i] *= o;
-            for j in i..N {
-                self.h[i][j] *= o;
-            }
+        }
+        for k in 0..H {
+            self.h[k] *= o;
         }
         self
     }
 }
 
-impl<const N: usize> SubAssign for Jet<N> {
+impl<const N: usize, const H: usize> SubAssign for Jet<N, H> {
     #[inline]
     fn sub_assign(&mut self, o: Self) {
         self.re -= o.re;
         for i in 0..N {
             self.g[i] -= o.g[i];
-            for j in i..N {
-                self.h[i][j] -= o.h[i][j];
-            }
+        }
+        for k in 0..H {
+            self.h[k] -= o.h[k];
         }
     }
 }
 
-impl<const N: usize> Div for Jet<N> {
+impl<const N: usize, const H: usize> Div for Jet<N, H> {
     type Output = Self;
     #[inline]
     fn div(self, o: Self) -> Self {
@@ -166,7 +176,7 @@ impl<const N: usize> Div for Jet<N> {
     }
 }
 
-impl<const N: usize> Div<f64> for Jet<N> {
+impl<const N: usize, const H: usize> Div<f64> for Jet<N, H> {
     type Output = Self;
     #[inline]
     fn div(self, o: f64) -> Self {
@@ -174,7 +184,7 @@ impl<const N: usize> Div<f64> for Jet<N> {
     }
 }
 
-impl<const N: usize> Ring for Jet<N> {
+impl<const N: usize, const H: usize> Ring for Jet<N, H> {
     const ORDER: usize = 2;
 
     fn value(&self) -> f64 {
@@ -208,7 +218,7 @@ mod tests {
     #[test]
     fn jet_arithmetic_matches_num_duals_second_order_numbers() {
         for &(a, b) in &[(0.3, -1.2), (2.0, 0.7), (-0.4, 0.0)] {
-            let j = expr(Jet::<2>::variable(a, 0), Jet::<2>::variable(b, 1));
+            let j = expr(Jet::<2, 3>::variable(a, 0), Jet::<2, 3>::variable(b, 1));
             let d = expr(
                 Dual2SVec64::<2>::from_re(a).derivative(0),
                 Dual2SVec64::<2>::from_re(b).derivative(1),
@@ -375,7 +385,7 @@ mod first_order_tests {
     fn a_first_order_jet_is_the_gradient_part_of_a_second_order_one() {
         let f = |x: f64, y: f64| {
             let (a, b) = (Jet1::<2>::variable(x, 0), Jet1::<2>::variable(y, 1));
-            let (c, d) = (Jet::<2>::variable(x, 0), Jet::<2>::variable(y, 1));
+            let (c, d) = (Jet::<2, 3>::variable(x, 0), Jet::<2, 3>::variable(y, 1));
             let e1 = (a * b + 0.3).sin_and_cos().0 / (a * a + 1.0).square_root() - b * 2.0;
             let e2 = (c * d + 0.3).sin_and_cos().0 / (c * c + 1.0).square_root() - d * 2.0;
             (e1, e2)

@@ -92,12 +92,12 @@ impl Taylor {
     /// gradient entry and every block of the Hessian. `f` hands its values, in order, to the [`Sink`];
     /// `len` is how many there are. The coefficients go into `taylor`'s vectors (refilled: no allocation
     /// once they have the sizes) and the arguments' jets into `args`.
-    pub(super) fn expand<const K: usize>(
+    pub(super) fn expand<const K: usize, const H: usize>(
         taylor: &mut Taylor,
         at: &[f64],
         len: usize,
-        args: &mut Vec<Jet<K>>,
-        mut f: impl FnMut(&[Jet<K>], &mut Sink<'_>) -> Result<(), DynamicsError>,
+        args: &mut Vec<Jet<K, H>>,
+        mut f: impl FnMut(&[Jet<K, H>], &mut Sink<'_>) -> Result<(), DynamicsError>,
     ) -> Result<(), DynamicsError> {
         let dim = at.len();
         taylor.dim = dim;
@@ -183,7 +183,7 @@ impl<'a> Sink<'a> {
     }
 
     /// The next functions' values in jets.
-    pub(super) fn emit<const K: usize>(&mut self, values: &[Jet<K>]) {
+    pub(super) fn emit<const K: usize, const H: usize>(&mut self, values: &[Jet<K, H>]) {
         let t = &mut *self.taylor;
         let dim = t.dim;
         let whole = self.dirs.len() == dim;

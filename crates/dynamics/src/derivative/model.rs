@@ -321,10 +321,10 @@ impl Model {
 
     /// The geometry `[M; J; d; noise; correction]` of `q` in any jet into the sink, in `w`'s vectors; on
     /// the first pass the contact frames and true distances into `side`.
-    fn geometry<const K: usize>(
+    fn geometry<const K: usize, const H: usize>(
         &self,
-        q: &[Jet<K>],
-        w: &mut JetIngredients<Jet<K>>,
+        q: &[Jet<K, H>],
+        w: &mut JetIngredients<Jet<K, H>>,
         (contacts, distance): (&mut Vec<ContactFrame>, &mut Vec<f64>),
         sink: &mut Sink<'_>,
     ) -> Result<(), DynamicsError> {
@@ -367,7 +367,12 @@ impl Model {
     }
 
     /// The forces `r(q, v) + B u` of `(q, v)` in any jet, `u` held constant, into `w.r`.
-    fn forces<const K: usize>(&self, qv: &[Jet<K>], u: &[f64], w: &mut JetIngredients<Jet<K>>) {
+    fn forces<const K: usize, const H: usize>(
+        &self,
+        qv: &[Jet<K, H>],
+        u: &[f64],
+        w: &mut JetIngredients<Jet<K, H>>,
+    ) {
         let scene = self.scene();
         let n = scene.n_dof();
         w.u.clear();
@@ -408,17 +413,17 @@ impl Model {
         // (each entry's arithmetic is the same in any width: the same numbers to the last bit); past
         // the widest, passes over pairs of blocks.
         macro_rules! geometry_in {
-            ($k:literal) => {{
-                let JetWork { args, ing } = jet_work::<Jet<$k>>(jets, (n, m));
-                Taylor::expand::<$k>(geometry, &x[..n], len, args, |q, sink| {
+            ($k:literal, $h:literal) => {{
+                let JetWork { args, ing } = jet_work::<Jet<$k, $h>>(jets, (n, m));
+                Taylor::expand::<$k, $h>(geometry, &x[..n], len, args, |q, sink| {
                     self.geometry(q, ing, (&mut *contacts, &mut *distance), sink)
                 })?
             }};
         }
         macro_rules! forces_in {
-            ($k:literal) => {{
-                let JetWork { args, ing } = jet_work::<Jet<$k>>(jets, (n, m));
-                Taylor::expand::<$k>(forces, &x[..2 * n], n, args, |qv, sink| {
+            ($k:literal, $h:literal) => {{
+                let JetWork { args, ing } = jet_work::<Jet<$k, $h>>(jets, (n, m));
+                Taylor::expand::<$k, $h>(forces, &x[..2 * n], n, args, |qv, sink| {
                     self.forces(qv, u, ing);
                     sink.emit(&ing.r);
                     Ok(())
@@ -426,16 +431,16 @@ impl Model {
             }};
         }
         match n {
-            0..=3 => geometry_in!(3),
-            4 => geometry_in!(4),
-            5 | 6 => geometry_in!(6),
-            _ => geometry_in!(8),
+            0..=3 => geometry_in!(3, 6),
+            4 => geometry_in!(4, 10),
+            5 | 6 => geometry_in!(6, 21),
+            _ => geometry_in!(8, 36),
         };
         match 2 * n {
-            0..=6 => forces_in!(6),
-            7..=8 => forces_in!(8),
-            9..=10 => forces_in!(10),
-            _ => forces_in!(12),
+            0..=6 => forces_in!(6, 21),
+            7..=8 => forces_in!(8, 36),
+            9..=10 => forces_in!(10, 55),
+            _ => forces_in!(12, 78),
         };
         actuated.clear();
         actuated.extend(
