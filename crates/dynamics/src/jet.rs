@@ -33,6 +33,11 @@ impl<const N: usize, const H: usize> Jet<N, H> {
         self.h[i * N - i * i.saturating_sub(1) / 2 + (j - i)]
     }
 
+    /// The Hessian's upper triangle, packed row by row.
+    pub fn packed(&self) -> &[f64; H] {
+        &self.h
+    }
+
     /// The variable `s_i` at value `re`.
     pub fn variable(re: f64, i: usize) -> Self {
         let mut j = Jet::from(re);

@@ -194,10 +194,18 @@ impl<'a> Sink<'a> {
                 t.re.push(v.re);
                 if whole {
                     // The one pass over all arguments, in order: its leading blocks, the Hessian
-                    // filled in from the jet's upper triangle.
+                    // filled in from the jet's packed upper triangle, row by row (row i's entries
+                    // left of the diagonal are column i's above it, written already).
                     t.g.extend_from_slice(&v.g[..dim]);
+                    let start = t.h.len();
+                    let packed = v.packed();
+                    let mut row = 0;
                     for i in 0..dim {
-                        t.h.extend((0..dim).map(|j| v.hessian(i, j)));
+                        for j in 0..i {
+                            t.h.push(t.h[start + j * dim + i]);
+                        }
+                        t.h.extend_from_slice(&packed[row..row + dim - i]);
+                        row += K - i;
                     }
                     continue;
                 }
