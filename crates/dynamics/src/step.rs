@@ -185,7 +185,6 @@ pub struct Model {
 pub struct StepData {
     n_dof: usize,
     n_rows: usize,
-    newton: NewtonSolver,
     /// Where the next solve starts: `[v'; lambda]` of the last step, or set by the caller.
     warm: Option<Vec<f64>>,
     /// Generalised forces added to `r + B u` (one per joint), or empty for none.
@@ -197,11 +196,33 @@ pub struct StepData {
     /// the first, and what the second keep besides them) and the buffers they were computed in, which
     /// the next step's derivatives refill.
     pub(crate) diff: crate::derivative::DerivativeData,
-    /// The ingredients [`Model::step`] assembles its problem from, kept so that the next step refills
-    /// them without allocating.
+}
+
+/// What a step works in and keeps nothing of from one step to the next: the ingredients it assembles
+/// its problem from, the solvers' and the position correction's scratch. One set per thread, refilled by
+/// every step (no allocation once it has the scene's sizes), rather than one per data: an optimiser
+/// keeps a data per knot, and a trajectory's knots sharing one set keep it in the cache.
+#[derive(Default)]
+struct StepWork {
     ingredients: StepIngredients,
-    /// The solve's and the correction's scratch space, likewise.
     solve: SolveScratch,
+}
+
+thread_local! {
+    static STEP_WORK: std::cell::RefCell<StepWork> = std::cell::RefCell::new(StepWork::default());
+}
+
+/// `f` with this thread's solve scratch ([`StepWork`]), for a derivative pass that solves its step.
+pub(crate) fn with_solve_scratch<R>(f: impl FnOnce(&mut SolveScratch) -> R) -> R {
+    with_step_work(|work| f(&mut work.solve))
+}
+
+/// `f` with this thread's [`StepWork`] (a fresh one should `f` step again from inside).
+fn with_step_work<R>(f: impl FnOnce(&mut StepWork) -> R) -> R {
+    STEP_WORK.with(|work| match work.try_borrow_mut() {
+        Ok(mut work) => f(&mut work),
+        Err(_) => f(&mut StepWork::default()),
+    })
 }
 
 /// The ingredients of a step ([`Model::step`]), sized by the first step and refilled by every later one:
@@ -219,10 +240,11 @@ struct StepIngredients {
     drag: (Vec<f64>, Vec<f64>),
 }
 
-/// The scratch space of a step's solve: Lemke's workspace, the rows' NCP functions, the iterate, the
-/// position correction and its matrices.
+/// The scratch space of a step's solve: the Newton solver (its workspace), Lemke's workspace, the rows'
+/// NCP functions, the iterate, the position correction and its matrices.
 #[derive(Debug, Default)]
-struct SolveScratch {
+pub(crate) struct SolveScratch {
+    newton: Option<NewtonSolver>,
     lemke: LemkeWorkspace,
     functions: Vec<NcpFunction>,
     z: Vec<f64>,
@@ -392,22 +414,12 @@ impl Model {
         StepData {
             n_dof: self.scene.n_dof(),
             n_rows: self.scene.n_constraints(),
-            newton: NewtonSolver::new(self.settings.newton)
-                .expect("the settings were validated by Model::new"),
             warm: None,
             forces: Vec::new(),
             x: Vec::new(),
             u: Vec::new(),
             step: None,
             diff: Default::default(),
-            ingredients: StepIngredients::default(),
-            solve: SolveScratch {
-                correcting: CorrectionScratch::for_size(
-                    self.scene.n_dof(),
-                    self.scene.n_constraints(),
-                ),
-                ..SolveScratch::default()
-            },
         }
     }
 
@@ -861,17 +873,18 @@ impl Model {
         let scene = &self.scene;
         check("x", x, scene.n_state())?;
         check("u", u, scene.n_controls)?;
-        // Taken out while the solve writes the rest of the data, put back whatever happens.
-        let mut ing = std::mem::take(&mut data.ingredients);
-        let solved = self
-            .ingredients_into(&mut ing, &data.forces, x, u)
-            .and_then(|problem| {
-                let cons = ing.cons.as_ref().expect("filled by ingredients_into");
-                self.solve_into(data, x, u, problem, cons)
-            })
-            .map(|problem| ing.lcp = problem.into_row_major());
-        data.ingredients = ing;
-        solved?;
+        with_step_work(|work| {
+            let StepWork { ingredients, solve } = work;
+            self.ingredients_into(ingredients, &data.forces, x, u)
+                .and_then(|problem| {
+                    let cons = ingredients
+                        .cons
+                        .as_ref()
+                        .expect("filled by ingredients_into");
+                    self.solve_into(data, solve, (x, u), problem, cons)
+                })
+                .map(|problem| ingredients.lcp = problem.into_row_major())
+        })?;
         Ok(data.step.as_ref().expect("stored by solve_into"))
     }
 
@@ -917,8 +930,8 @@ impl Model {
     pub(crate) fn solve_into(
         &self,
         data: &mut StepData,
-        x: &[f64],
-        u: &[f64],
+        scratch: &mut SolveScratch,
+        (x, u): (&[f64], &[f64]),
         problem: LinearMcp,
         cons: &Constraints,
     ) -> Result<LinearMcp, DynamicsError> {
@@ -926,7 +939,9 @@ impl Model {
         let m = cons.d.len();
         let mut holder = data.step.take();
         data.diff.forget();
-        let scratch = &mut data.solve;
+        if scratch.correcting.is_unsized() {
+            scratch.correcting = CorrectionScratch::for_size(n, self.scene.n_constraints());
+        }
         let z = &mut scratch.z;
         z.clear();
         match &data.warm {
@@ -962,11 +977,12 @@ impl Model {
                             .map(|sigma| NcpFunction::Logistic { sigma }),
                     ),
                 }
-                // The model's settings rule, whichever model of these sizes created the data.
-                if data.newton.settings() != &self.settings.newton {
-                    data.newton = NewtonSolver::new(self.settings.newton)?;
-                }
-                data.newton.solve_in_place(&problem, functions, z)?
+                // The model's settings rule, whichever model stepped on this thread before.
+                let newton = match &mut scratch.newton {
+                    Some(newton) if newton.settings() == &self.settings.newton => newton,
+                    slot => slot.insert(NewtonSolver::new(self.settings.newton)?),
+                };
+                newton.solve_in_place(&problem, functions, z)?
             }
             Complementarity::Normal { sigma } => {
                 let s = self.erm.solve(&problem, &sigmas(sigma), z)?;
@@ -1067,6 +1083,11 @@ pub(crate) struct CorrectionScratch<T> {
 }
 
 impl<T> CorrectionScratch<T> {
+    /// Whether it has never been sized.
+    fn is_unsized(&self) -> bool {
+        self.active.capacity() == 0
+    }
+
     /// Room for every constraint of a scene of `n` coordinates and `m` rows at once, so that no step
     /// allocates when its deepest penetration so far comes (a knot of an optimiser first touching).
     pub(crate) fn for_size(n: usize, m: usize) -> Self {

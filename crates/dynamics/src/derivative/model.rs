@@ -606,7 +606,9 @@ impl Model {
         let problem = self.assemble_into(&x[n..], &values.M, &values.r, cons, lcp)?;
         let problem = match source {
             Source::Stored(_) => problem,
-            Source::Solve(data) => self.solve_into(data, x, u, problem, cons)?,
+            Source::Solve(data) => crate::step::with_solve_scratch(|scratch| {
+                self.solve_into(data, scratch, (x, u), problem, cons)
+            })?,
         };
         let step = source
             .step()
