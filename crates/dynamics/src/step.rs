@@ -193,8 +193,7 @@ pub struct StepData {
     u: Vec<f64>,
     step: Option<Step>,
     /// The derivatives of `step` once computed ([`Model::calc_diff`], [`Model::calc_diff2_prepare`]:
-    /// the first, and what the second keep besides them) and the buffers they were computed in, which
-    /// the next step's derivatives refill.
+    /// the first, and what the second keep besides them), refilled in place by the next step's.
     pub(crate) diff: crate::derivative::DerivativeData,
 }
 

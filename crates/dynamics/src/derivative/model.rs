@@ -319,8 +319,8 @@ impl Model {
         Ok(())
     }
 
-    /// The geometry `[M; J; d; noise; correction]` of `q` in any jet into the sink, in `w`'s vectors; on
-    /// the first pass the contact frames and true distances into `side`.
+    /// The geometry `[M; J; d; noise; correction]` of `q` in any jet into the sink, computed in `w`'s
+    /// vectors; on the first pass the contact frames and true distances into `contacts` and `distance`.
     fn geometry<const K: usize, const H: usize>(
         &self,
         q: &[Jet<K, H>],
@@ -456,8 +456,8 @@ impl Model {
 }
 
 /// The working vectors of the passes in one scalar type `T` (a jet of some width, [`Model::expansion`]; or
-/// the first-order jets of [`Model::first_order_ingredients`]), kept in a step's data: the arguments and
-/// the ingredients computed from them.
+/// the first-order jets of [`Model::first_order_ingredients`]), among the thread's working vectors: the
+/// arguments and the ingredients computed from them.
 struct JetWork<T> {
     args: Vec<T>,
     ing: JetIngredients<T>,
