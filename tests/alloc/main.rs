@@ -94,23 +94,28 @@ fn a_pushing_step_allocates_nothing_in_steady_state() {
     }
 }
 
+/// An optimiser of `passes` passes by `method` with a cost tolerance no pass meets: every solve runs
+/// its whole pass budget.
+fn exhausting(passes: usize, method: ddp::Method) -> ddp::Ddp {
+    ddp::Ddp::new(ddp::DdpSettings {
+        max_iterations: passes,
+        tol_cost: 1e-300,
+        method,
+        ..ddp::DdpSettings::default()
+    })
+    .expect("settings")
+}
+
 /// The optimiser's own passes allocate nothing: on the unicycle, whose dynamics and cost allocate
 /// nothing, a solve of nine passes allocates exactly what one of three does (the workspace, the
 /// solution), for full DDP and for iLQR alike.
 #[test]
 fn an_optimiser_pass_allocates_nothing_of_its_own() {
+    use ddp::Method;
     use ddp::problems::Unicycle;
-    use ddp::{Ddp, DdpSettings, Method};
     for method in [Method::Full, Method::GaussNewton] {
         let solve = |passes: usize| {
-            // A tolerance no pass meets: every solve runs its whole pass budget.
-            let ddp = Ddp::new(DdpSettings {
-                max_iterations: passes,
-                tol_cost: 1e-300,
-                method,
-                ..DdpSettings::default()
-            })
-            .expect("settings");
+            let ddp = exhausting(passes, method);
             let (x0, zero) = (Unicycle::X0.to_vec(), vec![vec![0.0; 2]; 75]);
             let mut ran = 0;
             let info = allocation_counter::measure(|| {
@@ -135,7 +140,7 @@ fn an_optimiser_pass_allocates_nothing_of_its_own() {
 /// later pass (the knots' steps, their first and second derivatives and the
 /// contractions of the backward passes, the line search's trial steps) allocates nothing.
 fn passes_allocate_nothing(file: &str, task: &str) {
-    use ddp::{Ddp, DdpSettings, Method};
+    use ddp::Method;
     use task::SceneDynamics;
     let problem = ProblemFile::from_toml_str(file).expect("a scene file of the repository");
     let task = problem.task(Some(task)).expect("its task");
@@ -151,14 +156,7 @@ fn passes_allocate_nothing(file: &str, task: &str) {
     let dynamics = SceneDynamics::from_model(model);
     let zero = vec![vec![0.0; problem.scene.n_controls]; task.horizon];
     let solve = |passes: usize, method: Method| {
-        // A tolerance no pass meets: every solve runs its whole pass budget.
-        let ddp = Ddp::new(DdpSettings {
-            max_iterations: passes,
-            tol_cost: 1e-300,
-            method,
-            ..DdpSettings::default()
-        })
-        .expect("settings");
+        let ddp = exhausting(passes, method);
         let mut ran = 0;
         let info = allocation_counter::measure(|| {
             let s = ddp.solve(&dynamics, &task.cost, &task.x0, &zero);

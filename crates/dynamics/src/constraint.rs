@@ -103,6 +103,23 @@ impl<T: Ring> Constraints<T> {
         Ok(cons)
     }
 
+    /// The rows in `slot` updated to `kin` ([`Constraints::update`]), or new ones made there (see
+    /// [`Kinematics::refresh`]).
+    pub fn refresh<'a>(
+        slot: &'a mut Option<Self>,
+        scene: &Scene,
+        kin: &Kinematics<T>,
+        q: &[T],
+    ) -> Result<&'a mut Self, DynamicsError> {
+        match slot {
+            Some(cons) => {
+                cons.update(scene, kin, q)?;
+                Ok(cons)
+            }
+            None => Ok(slot.insert(Constraints::new(scene, kin, q)?)),
+        }
+    }
+
     /// [`Constraints::new`] in place: the same vectors refilled, without allocating once they have the
     /// scene's sizes (a step's data keeps one).
     pub fn update(

@@ -73,6 +73,18 @@ impl<T: Ring> Kinematics<T> {
         kin
     }
 
+    /// The kinematics in `slot` updated to `q` ([`Kinematics::update`]), or new ones made there: the
+    /// kinematics a step's or a derivative pass's working vectors keep from one call to the next.
+    pub fn refresh<'a>(slot: &'a mut Option<Self>, scene: &Scene, q: &[T]) -> &'a mut Self {
+        match slot {
+            Some(kin) => {
+                kin.update(scene, q);
+                kin
+            }
+            None => slot.insert(Kinematics::new(scene, q)),
+        }
+    }
+
     /// [`Kinematics::new`] in place: the same vectors refilled, without allocating once they have the
     /// scene's sizes (a step's data keeps one).
     pub fn update(&mut self, scene: &Scene, q: &[T]) {

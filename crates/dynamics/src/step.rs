@@ -899,13 +899,7 @@ impl Model {
     ) -> Result<LinearMcp, DynamicsError> {
         let scene = &self.scene;
         let (q, v) = x.split_at(scene.n_dof());
-        let kin = match &mut ing.kin {
-            Some(kin) => {
-                kin.update(scene, q);
-                kin
-            }
-            None => ing.kin.insert(Kinematics::new(scene, q)),
-        };
+        let kin = Kinematics::refresh(&mut ing.kin, scene, q);
         kin.mass_matrix_into(scene, &mut ing.M);
         self.check_drag_in(&ing.M, &mut ing.drag)?;
         self.with_drag(&mut ing.M);
@@ -913,13 +907,7 @@ impl Model {
         for (r, f) in ing.r.iter_mut().zip(forces) {
             *r += f;
         }
-        let cons = match &mut ing.cons {
-            Some(cons) => {
-                cons.update(scene, kin, q)?;
-                cons
-            }
-            None => ing.cons.insert(Constraints::new(scene, kin, q)?),
-        };
+        let cons = Constraints::refresh(&mut ing.cons, scene, kin, q)?;
         self.assemble_into(v, &ing.M, &ing.r, cons, std::mem::take(&mut ing.lcp))
     }
 

@@ -482,12 +482,6 @@ pub const HORIZON_DOUBLINGS: usize = 2;
 /// The longest horizon a stalled trunk is lengthened to.
 pub const LONGEST_HORIZON: usize = 1000;
 
-/// The start a setting's `x0` names: itself, or the task's when it is empty (the default of
-/// [`LibrarySettings`] and [`crate::EvaluationSettings`]).
-pub(crate) fn start<'a>(x0: &'a [f64], task: &'a Task) -> &'a [f64] {
-    if x0.is_empty() { &task.x0 } else { x0 }
-}
-
 /// `Err` naming the reason when the task cannot have a library of controllers on `scene`: the scene
 /// has no control to feed back, or the cost rewards nothing (no state term, so every trajectory's
 /// best is to do nothing).

@@ -428,11 +428,7 @@ pub(crate) fn closed_loop(
             expected: "finite and non-negative",
         });
     }
-    let x0 = if settings.x0.is_empty() {
-        judge.x0
-    } else {
-        &settings.x0
-    };
+    let x0 = crate::start(&settings.x0, judge.x0);
     crate::check("x0", x0, scene.n_state())?;
     let mut world = Simulator::new(
         scene.clone(),

@@ -184,7 +184,7 @@ impl Library {
 
     /// The start of its first trajectory: the settings' `x0`, or its task's when that is empty.
     pub fn x0(&self) -> &[f64] {
-        crate::build::start(&self.settings.x0, &self.task.0)
+        crate::start(&self.settings.x0, &self.task.0.x0)
     }
 
     /// The cost its trajectories minimise (its task's).

@@ -28,6 +28,12 @@ pub use policy::Policy;
 /// `task` crate, re-exported so that a library user reaches it through this one.
 pub use task;
 
+/// The start a setting's `x0` names: itself, or `task_x0` (the task's) when it is empty (the default of
+/// [`LibrarySettings`] and [`EvaluationSettings`]).
+pub(crate) fn start<'a>(x0: &'a [f64], task_x0: &'a [f64]) -> &'a [f64] {
+    if x0.is_empty() { task_x0 } else { x0 }
+}
+
 /// `Err` unless `v` has `len` finite entries ([`task::check`], as the library's own input error).
 pub(crate) fn check(what: &'static str, v: &[f64], len: usize) -> Result<(), LibraryError> {
     task::check(what, v, len).map_err(|e| match e {

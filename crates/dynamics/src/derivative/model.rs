@@ -15,7 +15,7 @@ use super::linearise::{Linearised, RowKind, System, system_into};
 use crate::constraint::{Constraints, ContactFrame};
 use crate::error::DynamicsError;
 use crate::jet::Jet;
-use crate::kinematics::{ForceScratch, Kinematics};
+use crate::kinematics::{ForceScratch, Kinematics, Ring};
 use crate::step::{Complementarity, Model, PrepareScratch, Step, StepData, Stored, check};
 use ncp::{DenseLu, LinearSolver, Mcp, NcpFunction, normal_expected_squared};
 use std::any::Any;
@@ -278,30 +278,10 @@ impl Model {
             }
         }));
         let (xs, us) = ys.split_at(2 * n);
-        let kin = match &mut w.kin {
-            Some(kin) => {
-                kin.update(scene, &xs[..n]);
-                kin
-            }
-            None => w.kin.insert(Kinematics::new(scene, &xs[..n])),
-        };
+        self.geometry_into(&xs[..n], w)?;
+        let (kin, cons) = (w.kin.as_ref(), w.cons.as_ref());
+        let (kin, cons) = (kin.expect("made above"), cons.expect("made above"));
         kin.applied_forces_into(scene, &xs[n..], us, &mut w.r, &mut w.forces);
-        let cons = match &mut w.cons {
-            Some(cons) => {
-                cons.update(scene, kin, &xs[..n])?;
-                cons
-            }
-            None => w.cons.insert(Constraints::new(scene, kin, &xs[..n])?),
-        };
-        self.noise_into(&cons.jacobian, cons.d.len(), &mut w.sigma);
-        kin.mass_matrix_into(scene, &mut w.M);
-        self.prepare_ingredients_into(
-            &mut w.M,
-            &cons.jacobian,
-            &mut cons.d,
-            (&mut w.distance, &mut w.correction),
-            &mut w.prepare,
-        )?;
         let dual = |out: &mut Vec<D1>, v: &[F1]| {
             out.clear();
             out.extend(v.iter().map(jet1_dual));
@@ -319,6 +299,27 @@ impl Model {
         Ok(())
     }
 
+    /// The kinematics, rows, noise, mass matrix and position correction at `q` in `w`'s vectors, as the
+    /// step sees them ([`Model::prepare_ingredients_into`]).
+    fn geometry_into<T: Ring>(
+        &self,
+        q: &[T],
+        w: &mut JetIngredients<T>,
+    ) -> Result<(), DynamicsError> {
+        let scene = self.scene();
+        let kin = Kinematics::refresh(&mut w.kin, scene, q);
+        let cons = Constraints::refresh(&mut w.cons, scene, kin, q)?;
+        self.noise_into(&cons.jacobian, cons.d.len(), &mut w.sigma);
+        kin.mass_matrix_into(scene, &mut w.M);
+        self.prepare_ingredients_into(
+            &mut w.M,
+            &cons.jacobian,
+            &mut cons.d,
+            (&mut w.distance, &mut w.correction),
+            &mut w.prepare,
+        )
+    }
+
     /// The geometry `[M; J; d; noise; correction]` of `q` in any jet into the sink, computed in `w`'s
     /// vectors; on the first pass the contact frames and true distances into `contacts` and `distance`.
     fn geometry<const K: usize, const H: usize>(
@@ -328,30 +329,8 @@ impl Model {
         (contacts, distance): (&mut Vec<ContactFrame>, &mut Vec<f64>),
         sink: &mut Sink<'_>,
     ) -> Result<(), DynamicsError> {
-        let scene = self.scene();
-        let kin = match &mut w.kin {
-            Some(kin) => {
-                kin.update(scene, q);
-                kin
-            }
-            None => w.kin.insert(Kinematics::new(scene, q)),
-        };
-        let cons = match &mut w.cons {
-            Some(cons) => {
-                cons.update(scene, kin, q)?;
-                cons
-            }
-            None => w.cons.insert(Constraints::new(scene, kin, q)?),
-        };
-        self.noise_into(&cons.jacobian, cons.d.len(), &mut w.sigma);
-        kin.mass_matrix_into(scene, &mut w.M);
-        self.prepare_ingredients_into(
-            &mut w.M,
-            &cons.jacobian,
-            &mut cons.d,
-            (&mut w.distance, &mut w.correction),
-            &mut w.prepare,
-        )?;
+        self.geometry_into(q, w)?;
+        let cons = w.cons.as_ref().expect("made above");
         if sink.first() {
             contacts.clear();
             contacts.extend_from_slice(&cons.contacts);
@@ -377,13 +356,7 @@ impl Model {
         let n = scene.n_dof();
         w.u.clear();
         w.u.extend(u.iter().map(|&e| Jet::from(e)));
-        let kin = match &mut w.kin {
-            Some(kin) => {
-                kin.update(scene, &qv[..n]);
-                kin
-            }
-            None => w.kin.insert(Kinematics::new(scene, &qv[..n])),
-        };
+        let kin = Kinematics::refresh(&mut w.kin, scene, &qv[..n]);
         kin.applied_forces_into(scene, &qv[n..], &w.u, &mut w.r, &mut w.forces);
     }
 
