@@ -136,13 +136,21 @@ fn main() -> anyhow::Result<()> {
     let command = Cli::parse().command;
     // The viewer logs its warnings by default; every command logs its stages (a library build's trunk,
     // growth rounds and final check; RUST_LOG=info) to standard error when asked.
+    // RUST_LOG holds `LEVEL` and `target=LEVEL` directives (`info`, `warn,library=debug`); a filter by
+    // target alone, so that no regex engine is built for it (issue 30: the first build's time).
     if matches!(command, Command::View(_)) || std::env::var_os("RUST_LOG").is_some() {
-        tracing_subscriber::fmt()
-            .with_writer(std::io::stderr)
-            .with_env_filter(
-                tracing_subscriber::EnvFilter::try_from_default_env()
-                    .unwrap_or_else(|_| "warn".into()),
-            )
+        use tracing_subscriber::filter::{LevelFilter, Targets};
+        use tracing_subscriber::prelude::*;
+        let targets = match std::env::var("RUST_LOG") {
+            Ok(text) => text.parse::<Targets>().unwrap_or_else(|e| {
+                eprintln!("RUST_LOG={text:?} is not a list of LEVEL or target=LEVEL ({e}): logging warnings");
+                Targets::new().with_default(LevelFilter::WARN)
+            }),
+            Err(_) => Targets::new().with_default(LevelFilter::WARN),
+        };
+        tracing_subscriber::registry()
+            .with(tracing_subscriber::fmt::layer().with_writer(std::io::stderr))
+            .with(targets)
             .init();
     }
     match command {

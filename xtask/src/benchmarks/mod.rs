@@ -5,6 +5,7 @@
 
 mod bench_ddp;
 mod bench_dynamics;
+mod bench_first_build;
 mod bench_library;
 mod bench_ncp;
 mod bench_viewer;
@@ -55,6 +56,9 @@ pub enum Section {
     /// The Python package's call overhead (python/benchmarks/overhead.py, in the Python of SLCP_PYTHON,
     /// default python3, with `pip install ./python` done).
     Python,
+    /// The first build of a fresh clone: the README's two commands and `pip install ./python`, cold
+    /// (about ten minutes; only when asked for by name).
+    FirstBuild,
 }
 
 pub fn run(args: &Args) -> anyhow::Result<()> {
@@ -83,6 +87,10 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     }
     if wanted(Section::Python) {
         sections.push(("python", python_section()?));
+    }
+    // Ten minutes of compiling, and a measure of the machine as much as of the code: by name only.
+    if args.only.contains(&Section::FirstBuild) {
+        sections.push(("first-build", bench_first_build::section()?));
     }
     if wanted(Section::LibraryTolerance) {
         sections.push(("library-tolerance", bench_library::tolerance_section()?));

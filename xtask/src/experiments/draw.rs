@@ -28,21 +28,25 @@ pub(crate) fn both(
     f: impl Fn(&DrawingArea<BitMapBackend, Shift>) -> anyhow::Result<()>,
     g: impl Fn(&DrawingArea<SVGBackend, Shift>) -> anyhow::Result<()>,
 ) -> anyhow::Result<()> {
-    // Each picture whole or not at all: the PNG drawn into a temporary file beside it and renamed, the SVG
-    // drawn into memory and written atomically (a failed draw never leaves half a figure).
-    let png = dir.join(format!("{name}.png"));
-    let partial = dir.join(format!(".{name}.{}.partial.png", std::process::id()));
-    let drawn = (|| {
-        let root = BitMapBackend::new(&partial, size).into_drawing_area();
+    // Each picture whole or not at all: the PNG drawn into memory (RGB) and encoded, the SVG drawn into
+    // memory, each written atomically (a failed draw never leaves half a figure).
+    let mut pixels = vec![0u8; 3 * size.0 as usize * size.1 as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut pixels, size).into_drawing_area();
         root.fill(&WHITE).map_err(err)?;
         f(&root)?;
-        root.present().map_err(err)
-    })()
-    .and_then(|()| std::fs::rename(&partial, &png).map_err(anyhow::Error::from));
-    if drawn.is_err() {
-        let _ = std::fs::remove_file(&partial);
+        root.present().map_err(err)?;
     }
-    drawn?;
+    let mut encoded = Vec::new();
+    {
+        let mut encoder = png::Encoder::new(&mut encoded, size.0, size.1);
+        encoder.set_color(png::ColorType::Rgb);
+        encoder.set_depth(png::BitDepth::Eight);
+        let mut writer = encoder.write_header().map_err(err)?;
+        writer.write_image_data(&pixels).map_err(err)?;
+        writer.finish().map_err(err)?;
+    }
+    crate::write_file(dir.join(format!("{name}.png")), encoded)?;
     let mut text = String::new();
     {
         let root = SVGBackend::with_string(&mut text, size).into_drawing_area();
