@@ -25,7 +25,11 @@ class SlcpError(ValueError):
 
 class Simulator:
     """One time step of a scene under a contact model, its exact first derivatives and the Hessian of
-    ``c . f``. Warm starts carry from one step to the next."""
+    ``c . f``. Warm starts carry from one step to the next.
+
+    Arguments: ``scene``, a scene file (TOML, docs/scenes.md) or None for the built-in flicking finger;
+    ``model``, ``"logistic"`` (eq. 17), ``"normal"`` (eq. 14 with 15) or ``"hard"`` (the exact LCP);
+    ``sigma``, the noise scale of the smoothed models; ``h``, the time step in seconds."""
 
     def __init__(
         self,
@@ -36,6 +40,8 @@ class Simulator:
     ) -> None:
         """The scene file at ``scene`` (TOML, docs/scenes.md), or the flicking finger of SCENE.md;
         ``model`` is ``"logistic"``, ``"normal"`` (noise scale ``sigma``) or ``"hard"``."""
+    def __repr__(self) -> str:
+        """``Simulator(scene=None, model='logistic', sigma=0.1, h=0.05) (6 states, 2 controls)``."""
     @property
     def n_state(self) -> int:
         """Length of the state ``x = [q; v]``."""
@@ -73,18 +79,23 @@ def optimize(
     horizon: Optional[int] = None,
     x0: Optional[ArrayLike] = None,
     us: Optional[ArrayLike] = None,
-    max_iterations: int = 300,
+    iterations: int = 300,
     method: str = "full",
     model: Optional[str] = None,
     sigma: Optional[float] = None,
     h: Optional[float] = None,
+    threads: int = 1,
+    max_iterations: Optional[int] = None,
 ) -> dict[str, Any]:
     """iLQG / DDP on a task of a scene file (its only task when ``task`` is None; the finger's
     ``spin`` without a scene), full second-order DDP (``method="full"``) or Gauss-Newton iLQR
-    (``"ilqr"``), from zero controls or ``us``. Returns ``states`` (N+1, n), ``controls`` (N, m),
-    ``gains`` (N, m, n) with ``u = controls[i] + gains[i] @ (x - states[i])``, the local value model
-    ``cost_to_go`` (N+1,), ``value_gradient`` (N+1, n) and ``value_hessian`` (N+1, n, n), ``cost``,
-    ``passes``, ``status``, ``converged`` and ``task``. Releases the GIL."""
+    (``"ilqr"``), from zero controls or ``us``, at most ``iterations`` passes (``max_iterations`` is its
+    alias), each pass's knots differentiated on ``threads`` threads. Returns ``states`` (N+1, n),
+    ``controls`` (N, m), ``gains`` (N, m, n) with ``u = controls[i] + gains[i] @ (x - states[i])``, the
+    local value model ``cost_to_go`` (N+1,), ``value_gradient`` (N+1, n) and ``value_hessian`` (N+1, n,
+    n), ``cost``, ``passes``, ``status`` (``"cost converged"``, ``"step converged"``, ``"pass limit
+    reached"``, ``"no descent"``, ``"regularisation exceeded"``), ``converged`` and ``task``. Releases
+    the GIL."""
 
 class Library:
     """A controller library (paper section IV-C) and its global nearest-neighbour policy."""
@@ -104,6 +115,7 @@ class Library:
         chains: int = 1,
         model: Optional[str] = None,
         sigma: Optional[float] = None,
+        threads: int = 1,
     ) -> "Library":
         """Build a library as ``cargo xtask train`` does: for a task of a scene file (its only one when
         ``task`` is None; without a scene the built-in ``scenes/finger.toml``, whose only task is the
@@ -116,6 +128,8 @@ class Library:
         """Write the library file."""
     def __len__(self) -> int:
         """Number of local controllers."""
+    def __repr__(self) -> str:
+        """``<slcp.Library: 32 controllers for task 'spin', logistic contact, sigma 0.1, h = 0.05>``."""
     @property
     def states(self) -> Matrix:
         """The controllers' states, shape ``(len, n_state)``."""

@@ -154,6 +154,15 @@ type Linearised<'py> = (
 
 /// The simulator: one time step of a scene under a contact model, its exact first derivatives and the
 /// Hessian of `c^T f`. Warm starts carry from one step to the next, as in the crates.
+///
+/// Arguments:
+///     scene: path of a scene file (TOML, docs/scenes.md), or None for the built-in flicking finger
+///         of SCENE.md (scenes/finger.toml).
+///     model: the contact model: "logistic" (the paper's eq. 17, solved by Newton), "normal" (eq. 14
+///         with 15) or "hard" (the exact LCP, Lemke's method).
+///     sigma: the noise scale of "logistic" and "normal", positive (the paper's 0.1); not used by
+///         "hard".
+///     h: the time step, s.
 #[pyclass(module = "slcp", frozen)]
 struct Simulator {
     /// The simulator, one caller at a time: a second thread using the same object gets a clear error
@@ -161,6 +170,9 @@ struct Simulator {
     sim: std::sync::Mutex<RsSimulator>,
     scene: Scene,
     h: f64,
+    /// What `__repr__` shows: the scene file as given (None: the built-in finger) and the model.
+    source: Option<PathBuf>,
+    model: ContactModel,
 }
 
 #[pymethods]
@@ -170,6 +182,7 @@ impl Simulator {
     #[new]
     #[pyo3(signature = (scene=None, model="logistic", sigma=0.1, h=0.05))]
     fn new(scene: Option<PathBuf>, model: &str, sigma: f64, h: f64) -> PyResult<Self> {
+        let source = scene.clone();
         let scene = match scene {
             None => ProblemFile::builtin().scene,
             Some(p) => {
@@ -198,7 +211,29 @@ impl Simulator {
             scene: sim.scene().clone(),
             h: sim.settings().h,
             sim: std::sync::Mutex::new(sim),
+            source,
+            model,
         })
+    }
+
+    /// `Simulator(scene='scenes/pushing.toml', model='hard', h=0.05)`: how to make it again, with its
+    /// sizes.
+    fn __repr__(&self) -> String {
+        let scene = match &self.source {
+            Some(p) => format!("'{}'", p.display().to_string().replace('\'', "\\'")),
+            None => "None".into(),
+        };
+        let model = match self.model {
+            ContactModel::Hard => "model='hard'".to_string(),
+            ContactModel::Logistic(s) => format!("model='logistic', sigma={s}"),
+            ContactModel::Normal(s) => format!("model='normal', sigma={s}"),
+        };
+        format!(
+            "Simulator(scene={scene}, {model}, h={}) ({} states, {} controls)",
+            self.h,
+            self.scene.n_state(),
+            self.scene.n_controls
+        )
     }
 
     /// Length of the state `x = [q; v]`.
@@ -367,22 +402,40 @@ impl Simulator {
     }
 }
 
+/// The complementarity solve's status by its serialised name (`converged`, `max_iterations`, ...), as
+/// `cargo xtask simulate` prints it.
 fn status(s: ncp::Status) -> String {
-    match s {
-        ncp::Status::Converged => "converged".into(),
-        other => format!("{other:?}").to_lowercase(),
-    }
+    serde_json::to_value(s)
+        .ok()
+        .and_then(|v| v.as_str().map(str::to_string))
+        .unwrap_or_else(|| "unknown".into())
 }
 
-/// `optimize(scene=None, task=None, horizon=None, x0=None, us=None, max_iterations=300, method="full",
-/// model=None, sigma=None, h=None, threads=1) -> dict`: iLQG / DDP on a task of a scene file (the only
-/// one when `task` is None; the finger's `spin` without a scene), the knots of each pass differentiated
-/// on `threads` threads (1 to 256; the same result on any number, `cargo xtask optimize --threads`). Returns the trajectory (`states` (N+1, n),
-/// `controls` (N, m)), the feedback gains `gains` (N, m, n) of `u = controls[i] + gains[i] (x -
-/// states[i])`, the local value model (`cost_to_go` (N+1,), `value_gradient` (N+1, n), `value_hessian`
-/// (N+1, n, n)), `cost`, `passes`, `status` and `converged`. The GIL is released while it runs.
+/// `optimize(scene=None, task=None, horizon=None, x0=None, us=None, iterations=300, method="full",
+/// model=None, sigma=None, h=None, threads=1) -> dict`: iLQG / DDP on a task of a scene file, as
+/// `cargo xtask optimize` (the same names as its flags).
+///
+/// Arguments:
+///     scene: path of a scene file, or None for the built-in finger (scenes/finger.toml).
+///     task: the name of one of its `[task.NAME]` tables; None: its only one.
+///     horizon: steps N (1 to 100000); None: the task's.
+///     x0: the initial state; None: the task's.
+///     us: the controls to start from, shape (N, m); None: zeros.
+///     iterations: passes at most (1 to 100000; `max_iterations` is accepted as its alias).
+///     method: "full" (second-order DDP: the dynamics' Hessians contracted with the value gradient)
+///         or "ilqr" (Gauss-Newton: first derivatives only).
+///     model, sigma, h: the contact model ("logistic", "normal", "hard"), its noise scale and the time
+///         step; None: the task's.
+///     threads: threads each pass's knots are differentiated on (1 to 256; the same result on any
+///         number).
+///
+/// Returns a dict: `states` (N+1, n) and `controls` (N, m); `gains` (N, m, n), the feedback of
+/// `u = controls[i] + gains[i] @ (x - states[i])`; the local value model `cost_to_go` (N+1,),
+/// `value_gradient` (N+1, n), `value_hessian` (N+1, n, n); `cost`; `passes`; `status` (why it stopped:
+/// "cost converged", "step converged", "pass limit reached", "no descent", "regularisation
+/// exceeded"); `converged` (the first two); `task` (its name). The GIL is released while it runs.
 #[pyfunction]
-#[pyo3(signature = (scene=None, task=None, horizon=None, x0=None, us=None, max_iterations=300, method="full", model=None, sigma=None, h=None, threads=1))]
+#[pyo3(signature = (scene=None, task=None, horizon=None, x0=None, us=None, iterations=300, method="full", model=None, sigma=None, h=None, threads=1, max_iterations=None))]
 #[allow(clippy::too_many_arguments)]
 fn optimize<'py>(
     py: Python<'py>,
@@ -391,13 +444,24 @@ fn optimize<'py>(
     horizon: Option<usize>,
     x0: Option<PyArrayLike1<'py, f64, AllowTypeChange>>,
     us: Option<PyArrayLike2<'py, f64, AllowTypeChange>>,
-    max_iterations: usize,
+    iterations: usize,
     method: &str,
     model: Option<&str>,
     sigma: Option<f64>,
     h: Option<f64>,
     threads: usize,
+    max_iterations: Option<usize>,
 ) -> PyResult<Bound<'py, PyDict>> {
+    // `max_iterations` (the crates' name) is an alias of `iterations` (the command line's).
+    let max_iterations = match max_iterations {
+        Some(m) if iterations != 300 && m != iterations => {
+            return Err(error(format!(
+                "iterations {iterations} and its alias max_iterations {m} disagree: give one"
+            )));
+        }
+        Some(m) => m,
+        None => iterations,
+    };
     let file = problem_file(scene)?;
     let task = file.task(task).map_err(error)?;
     let (n, m) = (file.scene.n_state(), file.scene.n_controls);
@@ -409,7 +473,7 @@ fn optimize<'py>(
     }
     if !(1..=100_000).contains(&max_iterations) {
         return Err(error(format!(
-            "max_iterations {max_iterations} must be 1 to 100000"
+            "iterations {max_iterations} must be 1 to 100000"
         )));
     }
     let x0 = match &x0 {
@@ -497,14 +561,15 @@ fn optimize<'py>(
     )?;
     out.set_item("cost", sol.cost)?;
     out.set_item("passes", sol.iterations.len())?;
-    out.set_item("status", format!("{:?}", sol.status))?;
+    out.set_item("status", sol.status.to_string())?;
     out.set_item("converged", sol.status.converged())?;
     out.set_item("task", task.name)?;
     Ok(out)
 }
 
 /// A controller library (paper section IV-C): local feedback controllers along receding-horizon
-/// trajectories, and the global nearest-neighbour policy over them.
+/// trajectories, and the global nearest-neighbour policy over them. Made by `Library.train(...)` (as
+/// `cargo xtask train`) or `Library.load(path)`; `len(lib)` is its number of controllers.
 #[pyclass(module = "slcp")]
 struct Library {
     lib: RsLibrary,
@@ -612,6 +677,17 @@ impl Library {
         self.lib
             .save(&path)
             .map_err(|e| error(format!("{}: {e}", path.display())))
+    }
+
+    /// `<slcp.Library: 3600 controllers for task 'push', logistic contact, sigma 0.05, h = 0.05>`.
+    fn __repr__(&self) -> String {
+        format!(
+            "<slcp.Library: {} controllers for task '{}', {}, h = {}>",
+            self.lib.entries.len(),
+            self.lib.task().name,
+            self.lib.settings.model,
+            self.lib.settings.h
+        )
     }
 
     /// Number of local controllers.

@@ -119,9 +119,11 @@ def test_bad_input_raises_with_the_crates_message_and_never_crashes(root, tmp_pa
 
 
 def test_optimize_returns_the_trajectory_its_gains_and_value_model(root):
-    sol = slcp.optimize(root / "scenes" / "pushing.toml", task="push", max_iterations=300)
+    sol = slcp.optimize(root / "scenes" / "pushing.toml", task="push", iterations=300)
     n, m, N = 10, 2, 60
     assert sol["converged"] and sol["task"] == "push"
+    # Why it stopped, in the command line's words.
+    assert sol["status"] in ("cost converged", "step converged"), sol["status"]
     assert sol["states"].shape == (N + 1, n) and sol["controls"].shape == (N, m)
     assert sol["gains"].shape == (N, m, n)
     assert sol["cost_to_go"].shape == (N + 1,)
@@ -273,3 +275,26 @@ def test_the_package_ships_its_typed_stubs_and_docstrings():
         assert name in stubs, name
     assert "exact first derivatives" in slcp.Simulator.derivatives.__doc__
     assert "GIL" in slcp.optimize.__doc__
+    # help(slcp.Simulator) documents the constructor's arguments; optimize documents its result's keys.
+    for argument in ["scene:", "model:", "sigma:", "h:"]:
+        assert argument in slcp.Simulator.__doc__, argument
+    for key in ["iterations:", "method:", "value_gradient", "pass limit reached"]:
+        assert key in slcp.optimize.__doc__, key
+
+
+def test_objects_print_what_they_are_and_iterations_has_its_alias(root):
+    sim = slcp.Simulator(root / "scenes" / "pushing.toml", model="hard")
+    text = repr(sim)
+    assert text.startswith("Simulator(scene=") and "pushing.toml" in text and "model='hard'" in text, text
+    assert "(10 states, 2 controls)" in text, text
+    assert repr(slcp.Simulator()) == "Simulator(scene=None, model='logistic', sigma=0.1, h=0.05) (6 states, 2 controls)"
+    lib = small_library()
+    assert repr(lib) == "<slcp.Library: 32 controllers for task 'spin', logistic contact, sigma 0.1, h = 0.05>", repr(lib)
+    # `iterations` is the command line's name; `max_iterations` its alias, refused when they disagree.
+    a = slcp.optimize(iterations=3)
+    b = slcp.optimize(max_iterations=3)
+    assert a["passes"] == b["passes"] == 3 and a["status"] == "pass limit reached"
+    with pytest.raises(slcp.SlcpError, match="alias"):
+        slcp.optimize(iterations=3, max_iterations=4)
+    with pytest.raises(slcp.SlcpError, match="iterations 0 must be 1 to 100000"):
+        slcp.optimize(iterations=0)

@@ -279,6 +279,18 @@ fn the_pushing_scene_is_shown_whole_its_free_block_can_be_dragged_and_online_mpc
     assert_eq!(hello["bodies"].as_array().unwrap().len(), 3);
     assert_eq!(hello["watched"]["name"], "block.x");
     assert_eq!(hello["watched"]["target"], 0.6);
+    assert_eq!(hello["watched"]["unit"], "units", "block.x slides");
+    // The block drawn where the task wants it: at x = 0.6, on the ground as it starts (y 0.2, level);
+    // the finger's links have no target and are not sent.
+    let targets = hello["targets"].as_array().unwrap();
+    assert_eq!(targets.len(), 1, "{hello}");
+    assert_eq!(targets[0]["body"], 2);
+    let centre: [f64; 2] = serde_json::from_value(targets[0]["centre"].clone()).unwrap();
+    assert!(
+        (centre[0] - 0.6).abs() < 1e-12 && (centre[1] - 0.2).abs() < 1e-12,
+        "{centre:?}"
+    );
+    assert_eq!(targets[0]["angle"], 0.0);
     let w: Vec<f64> = serde_json::from_value(hello["window"].clone()).unwrap();
     assert!(
         w[2] < 0.0 && w[3] > 1.3 && w[0] < -1.4 - 0.5 && w[1] > 1.2,
@@ -338,7 +350,12 @@ fn the_two_finger_scene_turns_to_its_target_under_online_mpc_and_never_counts_a_
     );
     let hello = serde_json::to_value(world.hello()).unwrap();
     assert_eq!(hello["watched"]["name"], "ellipse.angle");
+    assert_eq!(hello["watched"]["unit"], "rad");
     assert!(hello["planes"].as_array().unwrap().is_empty());
+    // The ellipse outlined at its target angle, in place on its hinge.
+    let targets = hello["targets"].as_array().unwrap();
+    assert_eq!(targets.len(), 1, "{hello}");
+    assert_eq!(targets[0]["angle"], 0.5);
     for _ in 0..160 {
         world.advance().unwrap();
         assert!(world.warning().is_none(), "{:?}", world.warning());
@@ -413,4 +430,23 @@ fn a_scene_with_a_fixed_peg_and_a_ground_sends_both_and_keeps_them_in_the_window
     }
     assert!(world.state().iter().all(|v| v.is_finite()));
     assert_eq!(world.frame().contacts.len(), 3);
+}
+
+#[test]
+fn the_finger_page_follows_the_spin_in_radians_and_draws_no_target() {
+    // The spin task rewards progress and pulls no position to a target: nothing to outline.
+    let world = World::new(
+        task::ProblemFile::builtin().scene,
+        None,
+        WorldSettings {
+            policy: PolicyKind::Off,
+            ..WorldSettings::default()
+        },
+    )
+    .unwrap();
+    let hello = serde_json::to_value(world.hello()).unwrap();
+    assert_eq!(hello["watched"]["name"], "ellipse.angle");
+    assert_eq!(hello["watched"]["target"], serde_json::Value::Null);
+    assert_eq!(hello["watched"]["unit"], "rad");
+    assert_eq!(hello["targets"], serde_json::json!([]));
 }

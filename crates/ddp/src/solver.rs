@@ -37,6 +37,20 @@ pub enum Status {
     RegularisationExceeded,
 }
 
+/// In user words: `cost converged`, `step converged`, `pass limit reached`, `no descent`,
+/// `regularisation exceeded` (the serialised form keeps the variant's name).
+impl std::fmt::Display for Status {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Status::CostConverged => "cost converged",
+            Status::StepConverged => "step converged",
+            Status::MaxIterations => "pass limit reached",
+            Status::NoDescent => "no descent",
+            Status::RegularisationExceeded => "regularisation exceeded",
+        })
+    }
+}
+
 impl Status {
     /// Whether the optimiser converged.
     pub fn converged(self) -> bool {

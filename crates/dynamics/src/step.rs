@@ -43,6 +43,18 @@ pub enum Complementarity {
     },
 }
 
+/// In user words: `hard contact`, `logistic contact, sigma 0.1`, `normal contact, sigma 0.1` (the noise
+/// scale as given, without trailing digits).
+impl std::fmt::Display for Complementarity {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Complementarity::Hard => write!(f, "hard contact"),
+            Complementarity::Logistic { sigma } => write!(f, "logistic contact, sigma {sigma}"),
+            Complementarity::Normal { sigma } => write!(f, "normal contact, sigma {sigma}"),
+        }
+    }
+}
+
 /// How a step integrates the joints' viscous drag `-c_j v_j`.
 ///
 /// Explicit drag (SCENE.md: "drag, like the rest of r, uses the velocity at the start of the step") is

@@ -25,3 +25,10 @@ impl ContactModel {
         }
     }
 }
+
+/// In user words, as the simulator's model reads (`logistic contact, sigma 0.1`, `hard contact`).
+impl std::fmt::Display for ContactModel {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        self.complementarity().fmt(f)
+    }
+}

@@ -16,7 +16,8 @@ let socket = null;
 let shapes = [];
 let planes = [];
 let fixed = [];
-let watched = { name: "", index: 0, target: null };
+let watched = { name: "", index: 0, target: null, unit: "rad" };
+let targets = []; // the bodies where the task wants them: [{ body, centre, angle }]
 let frame = null;
 let history = []; // [t, rate of the watched entry, its value]
 let dragging = false;
@@ -46,12 +47,13 @@ function connect() {
       planes = message.planes || [];
       fixed = message.fixed || [];
       watched = message.watched || watched;
+      targets = message.targets || [];
       fit(message.window || [-3.5, 3.5, -4, 2]);
       document.getElementById("title").textContent = message.title || "";
       document.getElementById("watched-name").textContent =
         watched.target === null || watched.target === undefined
           ? `${watched.name} rate (2 s)`
-          : `${watched.name} (target ${watched.target})`;
+          : `${watched.name} (target ${watched.target} ${unit()})`;
       document.getElementById("status").textContent =
         `connected; h = ${message.h} s; ` +
         (message.library ? `library of ${message.controllers} controllers` : "no library loaded");
@@ -104,13 +106,17 @@ function syncControls(f) {
   document.getElementById("pause").textContent = f.paused ? "resume" : "pause";
 }
 
+// The watched entry's unit, and its rate's.
+const unit = () => watched.unit || "rad";
+const rateUnit = () => `${unit()}/s`;
+
 function readout(f) {
   const fixed = (v, d) => (Number.isFinite(v) ? v.toFixed(d) : "-");
   document.getElementById("time").textContent = `${fixed(f.t, 2)} s`;
   document.getElementById("spin").textContent =
     watched.target === null || watched.target === undefined
-      ? `${fixed(f.spin_rate, 3)} /s`
-      : `${fixed(f.watched, 3)}`;
+      ? `${fixed(f.spin_rate, 3)} ${rateUnit()}`
+      : `${fixed(f.watched, 3)} ${unit()}`;
   document.getElementById("control-ms").textContent =
     `${fixed(f.control_ms, 3)} ms (max ${fixed(f.control_ms_max, 3)} ms over 2 s)` +
     (f.policy === "mpc" ? `; plan re-seeded ${f.mpc_reseeds}x` : "");
@@ -170,6 +176,25 @@ function draw() {
   for (const f of fixed) {
     ellipse({ centre: f.centre, angle: f.angle }, f, "#a0a0a0", "#444");
   }
+  // Where the task wants its bodies: faint dashed outlines under the bodies themselves.
+  for (const t of targets) {
+    const shape = shapes[t.body];
+    if (!shape) {
+      continue;
+    }
+    const [cx, cy] = toScreen(t.centre);
+    ctx.beginPath();
+    ctx.ellipse(cx, cy, SCALE * shape.semi_axes[0], SCALE * shape.semi_axes[1], -t.angle, 0, 2 * Math.PI);
+    ctx.setLineDash([5, 4]);
+    ctx.strokeStyle = "rgba(46, 125, 50, 0.8)";
+    ctx.lineWidth = 1.5;
+    ctx.stroke();
+    ctx.setLineDash([]);
+    ctx.beginPath();
+    ctx.moveTo(cx, cy);
+    ctx.lineTo(cx + SCALE * shape.semi_axes[0] * Math.cos(t.angle), cy - SCALE * shape.semi_axes[0] * Math.sin(t.angle));
+    ctx.stroke();
+  }
   if (frame && shapes.length === frame.bodies.length) {
     frame.bodies.forEach((pose, i) => {
       const shape = shapes[i];
@@ -222,30 +247,64 @@ function draw() {
   requestAnimationFrame(draw);
 }
 
+// The watched entry over the last PLOT_SECONDS: its rate, or for a task with a target its distance to
+// the target (the target is the dashed line at 0). Axes: time before now along the bottom, the value on
+// the left, both labelled with their units.
 function drawPlot() {
   const w = plot.width;
   const h = plot.height;
+  const left = 38; // room for the value axis's labels
+  const bottom = h - 16; // room for the time axis's labels
+  const top = 16; // room for the caption
   plotCtx.clearRect(0, 0, w, h);
-  // A task with a target: the watched entry's distance to it; otherwise its rate.
   const target = watched.target;
   const hasTarget = target !== null && target !== undefined;
   const value = (p) => (hasTarget ? p[2] - target : p[1]);
   const limit = Math.max(hasTarget ? 0.1 : 0.5, ...history.map((p) => Math.abs(value(p))));
-  const y = (v) => h / 2 - (h / 2 - 10) * (v / limit);
-  plotCtx.strokeStyle = "#bbb";
-  plotCtx.beginPath();
-  plotCtx.moveTo(0, y(0));
-  plotCtx.lineTo(w, y(0));
-  plotCtx.stroke();
+  const mid = (top + bottom) / 2;
+  const y = (v) => mid - (mid - top - 2) * (v / limit);
+  const x = (ago) => w - ((w - left) * ago) / PLOT_SECONDS;
   plotCtx.fillStyle = "#555";
   plotCtx.font = "11px sans-serif";
+  plotCtx.textAlign = "left";
   plotCtx.fillText(
     hasTarget
-      ? `${watched.name} - ${target}, last ${PLOT_SECONDS} s (+-${limit.toFixed(2)})`
-      : `${watched.name} rate, last ${PLOT_SECONDS} s (+-${limit.toFixed(2)} /s)`,
-    4,
-    12,
+      ? `${watched.name} - target (${target} ${unit()}), ${unit()}`
+      : `${watched.name} rate, ${rateUnit()}`,
+    left,
+    11,
   );
+  // Axes and their ticks.
+  plotCtx.strokeStyle = "#888";
+  plotCtx.lineWidth = 1;
+  plotCtx.beginPath();
+  plotCtx.moveTo(left, top);
+  plotCtx.lineTo(left, bottom);
+  plotCtx.lineTo(w, bottom);
+  plotCtx.stroke();
+  plotCtx.textAlign = "right";
+  for (const v of [limit, 0, -limit]) {
+    plotCtx.fillText(v === 0 ? "0" : v.toFixed(2), left - 3, y(v) + 4);
+  }
+  plotCtx.textAlign = "center";
+  for (const ago of [PLOT_SECONDS, PLOT_SECONDS / 2, 0]) {
+    plotCtx.fillText(ago === 0 ? "now" : `-${ago} s`, Math.min(x(ago), w - 12), h - 3);
+  }
+  plotCtx.textAlign = "left";
+  // The zero line: the target for a task with one (dashed), no spin otherwise.
+  plotCtx.strokeStyle = hasTarget ? "rgba(46, 125, 50, 0.9)" : "#bbb";
+  if (hasTarget) {
+    plotCtx.setLineDash([5, 4]);
+  }
+  plotCtx.beginPath();
+  plotCtx.moveTo(left, y(0));
+  plotCtx.lineTo(w, y(0));
+  plotCtx.stroke();
+  plotCtx.setLineDash([]);
+  if (hasTarget) {
+    plotCtx.fillStyle = "rgba(46, 125, 50, 0.9)";
+    plotCtx.fillText("target", left + 3, y(0) - 3);
+  }
   if (history.length < 2) {
     return;
   }
@@ -254,13 +313,12 @@ function drawPlot() {
   plotCtx.lineWidth = 1.5;
   plotCtx.beginPath();
   history.forEach((p, i) => {
-    const t = p[0];
-    const v = value(p);
-    const x = w - (w * (t1 - t)) / PLOT_SECONDS;
+    const px = x(t1 - p[0]);
+    const py = y(value(p));
     if (i === 0) {
-      plotCtx.moveTo(x, y(v));
+      plotCtx.moveTo(px, py);
     } else {
-      plotCtx.lineTo(x, y(v));
+      plotCtx.lineTo(px, py);
     }
   });
   plotCtx.stroke();

@@ -231,6 +231,19 @@ pub struct FixedShape {
     pub angle: f64,
 }
 
+/// A body where the task wants it, sent once and drawn as a faint outline: the task's initial pose with
+/// every position its cost pulls to a target (a quadratic term on a joint coordinate, the final term's
+/// target where both name one) set to that target. Only the bodies those coordinates move are sent.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TargetPose {
+    /// The body's index (as in `bodies`).
+    pub body: usize,
+    /// Centre.
+    pub centre: [f64; 2],
+    /// Angle of its first semi-axis.
+    pub angle: f64,
+}
+
 /// The state entry the page follows: the task's progress coordinate, whose rate the frames carry, or
 /// the first position a task without progress pulls to a target.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -241,9 +254,13 @@ pub struct WatchedView {
     pub index: usize,
     /// Its target, if the task has one.
     pub target: Option<f64>,
+    /// Its unit: `rad` for an angle, `units` (the scene's length unit) for a slide.
+    pub unit: String,
 }
 
 /// A message from the server.
+// The hello is sent once per connection, the frames (boxed) at every step: its size costs nothing.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "type", rename_all = "snake_case")]
 pub enum ServerMessage {
@@ -267,6 +284,8 @@ pub enum ServerMessage {
         window: [f64; 4],
         /// The state entry the frames follow.
         watched: WatchedView,
+        /// The bodies where the task wants them (empty for a task with no position target).
+        targets: Vec<TargetPose>,
     },
     /// The state after a step.
     Frame(Box<Frame>),

@@ -6,9 +6,9 @@ use crate::error::ViewerError;
 use crate::mpc::{MpcSettings, OnlineMpc};
 use crate::protocol::{
     BodyPose, BodyShape, ClientMessage, ContactView, FixedShape, Frame, PlaneShape, PolicyKind,
-    ServerMessage, SpringView, WatchedView, WorldKind,
+    ServerMessage, SpringView, TargetPose, WatchedView, WorldKind,
 };
-use dynamics::{Complementarity, Kinematics, Scene, Simulator, StepSettings};
+use dynamics::{Complementarity, CoordinateKind, Kinematics, Scene, Simulator, StepSettings};
 use library::{Library, Policy};
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
@@ -110,6 +110,30 @@ impl Watched {
             target: None,
         })
     }
+}
+
+/// The bodies where `task` wants them ([`TargetPose`]): its initial pose with each position its cost
+/// pulls to a target set to that target (a final term's over a running term's), and only the bodies
+/// those coordinates move; none for a task without position targets.
+pub fn target_poses(scene: &Scene, task: &Task) -> Vec<TargetPose> {
+    let n = scene.n_dof();
+    let mut q = task.x0[..n].to_vec();
+    let mut targeted = vec![false; n];
+    for term in task.cost.running.iter().chain(&task.cost.final_terms) {
+        if term.index < n && term.quadratic != 0.0 && term.target.is_finite() {
+            q[term.index] = term.target;
+            targeted[term.index] = true;
+        }
+    }
+    let kin = Kinematics::new(scene, &q);
+    (0..scene.bodies.len())
+        .filter(|&b| (0..n).any(|c| targeted[c] && scene.moves(c, b)))
+        .map(|b| TargetPose {
+            body: b,
+            centre: kin.centre[b],
+            angle: kin.phi[b],
+        })
+        .collect()
 }
 
 /// A world window `[x_min, x_max, y_min, y_max]` for the page: every body at `x0` and within the reach
@@ -403,7 +427,13 @@ impl World {
                 name: self.watched.name.clone(),
                 index: self.watched.index,
                 target: self.watched.target,
+                unit: match self.scene.coordinates[self.watched.index % self.scene.n_dof()].kind {
+                    CoordinateKind::Angle => "rad",
+                    CoordinateKind::Slide { .. } => "units",
+                }
+                .into(),
             },
+            targets: target_poses(&self.scene, &self.settings.task),
         }
     }
 

@@ -236,7 +236,7 @@ fn from_rest(problem: &ProblemFile, task: &Task) -> anyhow::Result<FromRest> {
         status: if sol.status.converged() {
             "converged".into()
         } else {
-            format!("not converged: {:?}", sol.status)
+            format!("not converged: {}", sol.status)
         },
         cost: sol.cost,
         seconds,

@@ -112,55 +112,102 @@ fn draw_surface<DB: DrawingBackend>(
     let (zmin, zmax) = pts
         .iter()
         .fold((0.0f64, -2.2f64), |(a, b), p| (a.min(p.1), b.max(p.1)));
+    // Colour by height (theta2), blue low to red high, with its scale on the right.
+    let colour = |y: f64| -> RGBColor {
+        let c = HSLColor(0.6 - 0.6 * (y - zmin) / (zmax - zmin + 1e-12), 0.8, 0.45);
+        let (r, g, b) = c.rgb();
+        RGBColor(r, g, b)
+    };
+    let (root, right) = root.split_horizontally(root.dim_in_pixel().0 as i32 - 130);
+    colour_bar(&right, (zmin, zmax), "theta2 (rad)", &colour)?;
+    let root = &root;
+    let floor = zmin.min(-2.2);
     let mut chart = ChartBuilder::on(root)
         .caption(
             "Fig. 2: contact surface d(q) = 0 (angle 2 theta3, radius theta1 + pi + 0.5, height theta2)",
             ("sans-serif", 16),
         )
         .margin(10)
-        .build_cartesian_3d(-r..r, zmin.min(-2.2)..zmax.max(0.0), -r..r)
+        .build_cartesian_3d(-r..r, floor..zmax.max(0.0), -r..r)
         .map_err(err)?;
     chart.with_projection(|mut p| {
         p.pitch = 0.5;
         p.yaw = 0.6;
-        p.scale = 0.8;
+        p.scale = 0.75;
         p.into_matrix()
     });
     chart.configure_axes().draw().map_err(err)?;
+    // Each name below the floor beside the edge plotters puts its ticks on (x along z = r, z along
+    // x = r), theta2's above the vertical edge with its ticks (x = -r, z = r).
     axis_names(
         &mut chart,
         [
             (
                 "(theta1 + pi + 0.5) cos 2 theta3",
-                (0.0, zmin.min(-2.2), -r),
+                (-0.9 * r, floor - 0.75, r),
             ),
-            ("theta2 (rad)", (-r, 0.1, -r)),
+            ("theta2 (rad)", (-r, zmax.max(0.0) + 0.35, r)),
             (
                 "(theta1 + pi + 0.5) sin 2 theta3",
-                (-r, zmin.min(-2.2), 0.0),
+                (r, floor - 0.75, -0.5 * r),
             ),
         ],
     )?;
     chart
-        .draw_series(pts.iter().map(|&(x, y, z)| {
-            let c = HSLColor(0.6 - 0.6 * (y - zmin) / (zmax - zmin + 1e-12), 0.8, 0.45);
-            Circle::new((x, y, z), 2, c.filled())
-        }))
+        .draw_series(
+            pts.iter()
+                .map(|&(x, y, z)| Circle::new((x, y, z), 2, colour(y).filled())),
+        )
         .map_err(err)?;
     Ok(())
 }
 
-/// The finger's joint space `(theta1, theta2, theta3 mod pi)` as a 3-D chart under `caption`, seen at
-/// `(pitch, yaw)`, with its axes drawn and named (Figs. 3 and 4).
+/// `theta3` modulo pi in `[cut, cut + pi)`: the axis of Figs. 3 and 4 cut where the cycle does not
+/// touch ([`contact_cut`]), so that its contact is drawn in one piece.
+fn wrapped(theta3: f64, cut: f64) -> f64 {
+    cut + (theta3 - cut).rem_euclid(PI)
+}
+
+/// Where to cut theta3 modulo pi for the run's last 20 s: the middle of the widest gap, on the circle of
+/// circumference pi, between the theta3 (mod pi) of its steps in contact (impulse above a tenth of the
+/// largest), rounded to a tenth; 0 when nothing touches.
+fn contact_cut(run: &Run) -> f64 {
+    let start = run
+        .states
+        .len()
+        .saturating_sub((20.0 / run.h).round() as usize);
+    let top = run.impulses[start..].iter().fold(0.0f64, |m, v| m.max(*v));
+    let mut touching: Vec<f64> = (start..run.states.len())
+        .filter(|&k| top > 0.0 && run.impulses[k] > 0.1 * top)
+        .map(|k| run.states[k][2].rem_euclid(PI))
+        .collect();
+    if touching.is_empty() {
+        return 0.0;
+    }
+    touching.sort_by(f64::total_cmp);
+    let (mut widest, mut cut) = (0.0, 0.0);
+    for (i, &a) in touching.iter().enumerate() {
+        let b = touching.get(i + 1).copied().unwrap_or(touching[0] + PI);
+        if b - a > widest {
+            widest = b - a;
+            cut = 0.5 * (a + b);
+        }
+    }
+    (cut.rem_euclid(PI) * 10.0).round() / 10.0
+}
+
+/// The finger's joint space `(theta1, theta2, theta3 mod pi)` (theta3 in `[cut, cut + pi)`) as a 3-D
+/// chart under `caption`, seen at `(pitch, yaw)`, with its axes drawn and named (Figs. 3 and 4).
 fn joint_space_chart<'a, DB: DrawingBackend>(
     area: &'a DrawingArea<DB, Shift>,
     caption: &str,
     (pitch, yaw): (f64, f64),
+    cut: f64,
 ) -> anyhow::Result<JointChart<'a, DB>> {
     let mut chart = ChartBuilder::on(area)
         .caption(caption, ("sans-serif", 16))
         .margin(10)
-        .build_cartesian_3d(-PI..0.0, -2.2..0.2, 0.0..PI)
+        .build_cartesian_3d(-PI..0.0, -2.2..0.2, cut..cut + PI)
         .map_err(err)?;
     chart.with_projection(|mut p| {
         p.pitch = pitch;
@@ -168,15 +215,32 @@ fn joint_space_chart<'a, DB: DrawingBackend>(
         p.scale = 0.85;
         p.into_matrix()
     });
-    chart.configure_axes().draw().map_err(err)?;
+    // theta1's tick at 0 and theta3's last share the front corner: theta1's is left out there.
+    let theta1 = |v: &f64| {
+        if v.abs() < 1e-9 {
+            String::new()
+        } else {
+            format!("{v:.1}")
+        }
+    };
+    chart
+        .configure_axes()
+        .x_formatter(&theta1)
+        .draw()
+        .map_err(err)?;
+    let name = if cut == 0.0 {
+        "theta3 mod pi (rad)".to_string()
+    } else {
+        format!("theta3 mod pi (rad, from {cut:.1})")
+    };
     axis_names(
         &mut chart,
-        // Beside the edges plotters puts each axis's ticks on (theta1 at theta3 = pi, theta3 at theta1 = 0,
-        // theta2 at theta1 = theta3 = 0).
+        // Beside the edges plotters puts each axis's ticks on: theta1 along theta3 = cut + pi, theta3
+        // along theta1 = 0, theta2 up the edge at theta1 = -pi, theta3 = cut + pi.
         [
-            ("theta1 (rad)", (-2.2, -2.6, PI)),
-            ("theta2 (rad)", (0.0, 0.35, 0.0)),
-            ("theta3 mod pi (rad)", (0.0, -2.6, 1.2)),
+            ("theta1 (rad)", (-2.2, -2.6, cut + PI)),
+            ("theta2 (rad)", (-PI, 0.45, cut + PI)),
+            (&name, (0.0, -2.6, cut + 1.2)),
         ],
     )?;
     Ok(chart)
@@ -196,15 +260,16 @@ type JointChart<'a, DB> = ChartContext<
 fn draw_states<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
     lib: &Library,
+    cut: f64,
 ) -> anyhow::Result<()> {
     let caption = format!(
         "Fig. 3: the library's {} controller states (theta1, theta2, theta3 mod pi)",
         lib.entries.len()
     );
-    let mut chart = joint_space_chart(root, &caption, (0.4, 0.7))?;
+    let mut chart = joint_space_chart(root, &caption, (0.4, 0.7), cut)?;
     chart
         .draw_series(lib.entries.iter().map(|e| {
-            let t3 = e.x[2].rem_euclid(PI);
+            let t3 = wrapped(e.x[2], cut);
             Circle::new((e.x[0], e.x[1], t3), 2, BLUE.mix(0.6).filled())
         }))
         .map_err(err)?;
@@ -299,18 +364,25 @@ fn impulse_colour(impulse: f64, top: f64) -> RGBColor {
     RGBColor((40.0 + 215.0 * w) as u8, 60, (200.0 * (1.0 - w)) as u8)
 }
 
-/// A vertical colour bar of [`impulse_colour`] from 0 to `top`, labelled.
-fn colour_bar<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, top: f64) -> anyhow::Result<()> {
+/// A vertical colour bar of `colour` over `(lo, hi)`, named `name`, with its ends labelled (and a few
+/// values between).
+fn colour_bar<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    (lo, hi): (f64, f64),
+    name: &str,
+    colour: &dyn Fn(f64) -> RGBColor,
+) -> anyhow::Result<()> {
     let mut bar = ChartBuilder::on(root)
         .margin_top(60)
         .margin_bottom(60)
         .y_label_area_size(70)
-        .build_cartesian_2d(0.0..1.0, 0.0..top)
+        .build_cartesian_2d(0.0..1.0, lo..hi)
         .map_err(err)?;
     bar.configure_mesh()
         .disable_x_mesh()
         .disable_x_axis()
-        .y_desc("contact impulse per step")
+        .disable_y_mesh()
+        .y_desc(name)
         .y_labels(6)
         .label_style(("sans-serif", 13))
         .axis_desc_style(("sans-serif", 14))
@@ -319,12 +391,22 @@ fn colour_bar<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, top: f64) -> an
     let steps = 64;
     bar.draw_series((0..steps).map(|k| {
         let (a, b) = (
-            top * k as f64 / steps as f64,
-            top * (k + 1) as f64 / steps as f64,
+            lo + (hi - lo) * k as f64 / steps as f64,
+            lo + (hi - lo) * (k + 1) as f64 / steps as f64,
         );
-        Rectangle::new([(0.0, a), (1.0, b)], impulse_colour(a, top).filled())
+        Rectangle::new([(0.0, a), (1.0, b)], colour(0.5 * (a + b)).filled())
     }))
     .map_err(err)?;
+    // The ends, whatever ticks the mesh chose: the bar's top and bottom values above and below it.
+    // The plotting area's pixels are the backend's; `root`'s drawing coordinates start at its corner.
+    let (x, y) = bar.plotting_area().get_pixel_range();
+    let (x0, y0) = root.get_base_pixel();
+    let (x, top, bottom) = (x.start - x0, y.start - y0, y.end - y0);
+    let style = ("sans-serif", 13).into_font();
+    root.draw(&Text::new(format!("{hi:.2}"), (x, top - 18), style.clone()))
+        .map_err(err)?;
+    root.draw(&Text::new(format!("{lo:.2}"), (x, bottom + 6), style))
+        .map_err(err)?;
     Ok(())
 }
 
@@ -334,6 +416,7 @@ fn draw_cycle_3d<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
     run: &Run,
     surface: &[[f64; 3]],
+    cut: f64,
 ) -> anyhow::Result<()> {
     let start = run
         .states
@@ -345,17 +428,16 @@ fn draw_cycle_3d<DB: DrawingBackend>(
         &left,
         "Fig. 4: the limit cycle's last 20 s in (theta1, theta2, theta3 mod pi) over the contact surface",
         (0.35, 0.8),
+        cut,
     )?;
     chart
-        .draw_series(
-            surface
-                .iter()
-                .map(|&[a, b, c]| Circle::new((a, b, c), 1, RGBColor(170, 170, 170).filled())),
-        )
+        .draw_series(surface.iter().map(|&[a, b, c]| {
+            Circle::new((a, b, wrapped(c, cut)), 1, RGBColor(170, 170, 170).filled())
+        }))
         .map_err(err)?;
     for k in start + 1..run.states.len() {
         let (a, b) = (&run.states[k - 1], &run.states[k]);
-        let (ta, tb) = (a[2].rem_euclid(PI), b[2].rem_euclid(PI));
+        let (ta, tb) = (wrapped(a[2], cut), wrapped(b[2], cut));
         // theta3 wraps at pi: no segment across the cut.
         if (ta - tb).abs() > PI / 2.0 {
             continue;
@@ -367,7 +449,9 @@ fn draw_cycle_3d<DB: DrawingBackend>(
             ))
             .map_err(err)?;
     }
-    colour_bar(&right, top)
+    colour_bar(&right, (0.0, top), "contact impulse per step", &|v| {
+        impulse_colour(v, top)
+    })
 }
 
 fn draw_frames<DB: DrawingBackend>(
@@ -448,13 +532,6 @@ pub fn write_all(lib: &Library, dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
         |r| draw_surface(r, &surface),
         |r| draw_surface(r, &surface),
     )?;
-    both(
-        dir,
-        "fig3_library_states",
-        (900, 700),
-        |r| draw_states(r, lib),
-        |r| draw_states(r, lib),
-    )?;
     let policy = lib.policy()?;
     let s = &lib.settings;
     let run = closed_loop(
@@ -464,12 +541,21 @@ pub fn write_all(lib: &Library, dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
         lib.x0(),
         (60.0 / s.h) as usize,
     )?;
+    // Figs. 3 and 4 cut theta3 (mod pi) where the cycle does not touch.
+    let cut = contact_cut(&run);
+    both(
+        dir,
+        "fig3_library_states",
+        (900, 700),
+        |r| draw_states(r, lib, cut),
+        |r| draw_states(r, lib, cut),
+    )?;
     both(
         dir,
         "fig4_limit_cycle",
         (900, 700),
-        |r| draw_cycle_3d(r, &run, &surface),
-        |r| draw_cycle_3d(r, &run, &surface),
+        |r| draw_cycle_3d(r, &run, &surface, cut),
+        |r| draw_cycle_3d(r, &run, &surface, cut),
     )?;
     both(
         dir,

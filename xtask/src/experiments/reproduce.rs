@@ -118,7 +118,7 @@ fn optimise(sigma: f64) -> anyhow::Result<Optimised> {
     Ok(Optimised {
         sigma,
         passes: sol.iterations.len(),
-        status: format!("{:?}", sol.status),
+        status: sol.status.to_string(),
         cost: sol.cost,
         theta3_turned: sol.states[75][2] - sol.states[0][2],
         max_gain: sol.gains.iter().flatten().fold(0.0, |m, k| m.max(k.abs())),
@@ -300,7 +300,7 @@ struct Evaluated {
 fn evaluate_built(args: &Args, lib: Library, secs: f64) -> anyhow::Result<Evaluated> {
     let sigma = match lib.settings.model {
         ContactModel::Logistic(sigma) => sigma,
-        other => anyhow::bail!("reproduce builds logistic libraries, not {other:?}"),
+        other => anyhow::bail!("reproduce builds logistic libraries, not {other}"),
     };
     let mut larger_kicks = Vec::new();
     let mut mismatched = Vec::new();
@@ -426,7 +426,7 @@ fn finish(
         run_seconds: args.seconds,
         seconds,
     };
-    let text = report(&summary);
+    let text = report(&summary, true);
     println!("{text}");
     crate::write_file(args.out.join("summary.md"), &text)?;
     crate::write_file(
@@ -451,11 +451,22 @@ fn finish(
         .iter()
         .map(|n| args.out.join("figures").join(format!("{n}.png")))
         .collect();
+    // Only inside a checkout of this repository: run elsewhere (or with another --docs that is not a
+    // documentation folder) the results above are all it writes.
+    if !args.docs.join("results.md").is_file() {
+        println!(
+            "no {}/results.md here (not run from the repository's root): wrote the results only",
+            args.docs.display()
+        );
+        return Ok(());
+    }
+    // The documentation carries the numbers without the timings, which vary from run to run and machine
+    // to machine (they are in summary.md): a rerun on the same code leaves it unchanged.
     write_docs(
         &args.docs,
         "reproduce",
         "cargo xtask reproduce",
-        &text,
+        &report(&summary, false),
         &figures,
     )?;
     println!(
@@ -474,23 +485,38 @@ const FIGURES: [&str; 4] = [
     "fig5_frames",
 ];
 
-fn report(s: &Summary) -> String {
+/// The summary as markdown; `timed`: with the run's time, each solve's and each library's (summary.md),
+/// else without them (docs/results.md, so that a rerun of the same code rewrites the same text).
+fn report(s: &Summary, timed: bool) -> String {
     let mut t = String::new();
-    let _ = writeln!(
-        t,
-        "# Reproduction summary (`cargo xtask reproduce`, {:.0} s)\n",
-        s.seconds
-    );
-    let _ = writeln!(
-        t,
-        "## Trajectory optimisation from rest (paper V-B: ~60 passes of ~5 s each)\n\n| sigma | passes | status | cost | theta3 turned | max abs K | time (ms) |\n|---:|---:|---|---:|---:|---:|---:|"
-    );
-    for o in &s.optimised {
+    if timed {
         let _ = writeln!(
             t,
-            "| {} | {} | {} | {:.4} | {:.3} | {:.1e} | {:.0} |",
-            o.sigma, o.passes, o.status, o.cost, o.theta3_turned, o.max_gain, o.milliseconds
+            "# Reproduction summary (`cargo xtask reproduce`, {:.0} s)\n",
+            s.seconds
         );
+    } else {
+        let _ = writeln!(
+            t,
+            "# Reproduction summary (`cargo xtask reproduce`)\n\nTimings vary with the machine and are left out here: `results/summary.md` has them for each run, and docs/benchmarks.md measures them.\n"
+        );
+    }
+    let _ = writeln!(
+        t,
+        "## Trajectory optimisation from rest (paper V-B: ~60 passes of ~5 s each)\n\n| sigma | passes | status | cost | theta3 turned | max abs K |{}\n|---:|---:|---|---:|---:|---:|{}",
+        if timed { " time (ms) |" } else { "" },
+        if timed { "---:|" } else { "" }
+    );
+    for o in &s.optimised {
+        let _ = write!(
+            t,
+            "| {} | {} | {} | {:.4} | {:.3} | {:.1e} |",
+            o.sigma, o.passes, o.status, o.cost, o.theta3_turned, o.max_gain
+        );
+        if timed {
+            let _ = write!(t, " {:.0} |", o.milliseconds);
+        }
+        let _ = writeln!(t);
     }
     let _ = writeln!(
         t,
@@ -548,12 +574,22 @@ fn report(s: &Summary) -> String {
             100.0 * e.contact_fraction
         );
     }
-    let _ = writeln!(
-        t,
-        "\n## Libraries (paper: 400 controllers, receding horizon with ~8 passes per shift)\n\n| library | build (s, wall time, built side by side on two cores) | controllers |\n|---|---:|---:|"
-    );
-    for (name, secs, n) in &s.libraries {
-        let _ = writeln!(t, "| {name} | {secs:.1} | {n} |");
+    if timed {
+        let _ = writeln!(
+            t,
+            "\n## Libraries (paper: 400 controllers, receding horizon with ~8 passes per shift)\n\n| library | build (s, wall time, built side by side on two cores) | controllers |\n|---|---:|---:|"
+        );
+        for (name, secs, n) in &s.libraries {
+            let _ = writeln!(t, "| {name} | {secs:.1} | {n} |");
+        }
+    } else {
+        let _ = writeln!(
+            t,
+            "\n## Libraries (paper: 400 controllers, receding horizon with ~8 passes per shift)\n\n| library | controllers |\n|---|---:|"
+        );
+        for (name, _, n) in &s.libraries {
+            let _ = writeln!(t, "| {name} | {n} |");
+        }
     }
     let _ = writeln!(
         t,

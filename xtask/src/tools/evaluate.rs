@@ -91,7 +91,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let mut out = String::new();
     let _ = writeln!(
         out,
-        "library {}: {} controllers for task {}, built on {:?} at h = {}; {}, from the library's initial state",
+        "library {}: {} controllers for task {}, built on {} at h = {}; {}, from the library's initial state",
         args.library.display(),
         library.entries.len(),
         library.task().name,

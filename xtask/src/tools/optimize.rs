@@ -197,7 +197,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             let x0 = args.x0.clone().unwrap_or_else(|| task.x0.clone());
             let horizon = args.horizon.unwrap_or(task.horizon);
             println!(
-                "task {}: h = {}, N = {horizon}, {:?}, x0 = {x0:?}",
+                "task {}: h = {}, N = {horizon}, {}, x0 = {x0:?}",
                 task.name,
                 sim.settings().h,
                 sim.settings().model
@@ -216,8 +216,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             let mut note = None;
             if !felt {
                 println!(
-                    "no contact felt: the solve at the task's {:?} never touches (the contact's gradient \
-                     is zero out of reach)",
+                    "no contact felt: the solve on the task's model ({}) never touches (the contact's \
+                     gradient is zero out of reach)",
                     base.model
                 );
                 if args.no_continuation {
@@ -233,7 +233,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                     };
                     let search = problem.feel_contact(sol, |s, stage, felt| {
                         println!(
-                            "continuation: sigma {s:.4}: {:?} after {} passes, cost {:.6}{}",
+                            "continuation: sigma {s:.4}: {} after {} passes, cost {:.6}{}",
                             stage.status,
                             stage.iterations.len(),
                             stage.cost,
@@ -325,7 +325,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     bar.finish_and_clear();
     let method = format!("{:?}", args.method).to_lowercase();
     println!(
-        "{problem} ({method}): {:?} after {} passes, cost {:.12e}, {:.1} ms",
+        "{problem} ({method}): {} after {} passes, cost {:.12e}, {:.1} ms",
         solution.status,
         solution.iterations.len(),
         solution.cost,

@@ -13,7 +13,8 @@ use viewer::{Viewer, ViewerConfig, WorldSettings};
 pub struct Args {
     /// The library for the library policy. Default, for the finger: results/finger.lib (written by
     /// `cargo xtask train` and `cargo xtask reproduce` with their default settings) if it exists, else
-    /// that library built now (about 15 s) and saved there; for another --scene: none (online MPC).
+    /// that library built now in memory (about 20-30 s; not saved: view writes no file); for another
+    /// --scene: none (online MPC).
     #[arg(long)]
     library: Option<PathBuf>,
     /// Scene file (TOML) [default: the --library's scene, else the built-in scenes/finger.toml].
@@ -58,9 +59,10 @@ fn library(args: &Args) -> anyhow::Result<Library> {
     if path.exists() {
         match Library::load(&path) {
             Ok(lib) => return Ok(lib),
-            // Written by another version of this project: the default library is rebuilt below.
+            // Written by another version of this project: the default library is built below.
             Err(library::LibraryError::Version { found, expected }) => println!(
-                "{} has format version {found}, this build reads {expected}: rebuilding it",
+                "{} has format version {found}, this build reads {expected}: building the default \
+                 library in memory instead (`cargo xtask train` writes it anew)",
                 path.display()
             ),
             Err(e) => {
@@ -76,7 +78,10 @@ fn library(args: &Args) -> anyhow::Result<Library> {
         task::ProblemFile::builtin_task().1,
     );
     let settings = LibrarySettings::default().for_task(&task);
-    println!("building the default library (as `cargo xtask train` does) ...");
+    println!(
+        "building the default library in memory, as `cargo xtask train` does (not saved: \
+         `cargo xtask train` writes {DEFAULT_LIBRARY}, which view then loads) ..."
+    );
     let bar = ProgressBar::new(settings.trajectories as u64);
     bar.set_style(
         ProgressStyle::with_template("{bar:40} {pos}/{len} trajectories  {elapsed_precise}")
@@ -84,9 +89,6 @@ fn library(args: &Args) -> anyhow::Result<Library> {
     );
     let lib = Library::build(&file, Some(&task.name), &settings, |_, _| bar.inc(1))?;
     bar.finish_and_clear();
-    std::fs::create_dir_all("results").context("creating results/")?;
-    lib.save(&path)?;
-    println!("saved {}", path.display());
     Ok(lib)
 }
 
