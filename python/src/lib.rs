@@ -293,7 +293,7 @@ impl Simulator {
             "contact_distance",
             Array1::from_iter(step.contacts.iter().map(|c| c.distance)).into_pyarray(py),
         )?;
-        out.set_item("status", status(step.info.status))?;
+        out.set_item("status", step.info.status.name())?;
         out.set_item("iterations", step.info.iterations)?;
         out.set_item("residual", step.info.residual)?;
         // The vectors move into their arrays, no copy.
@@ -400,15 +400,6 @@ impl Simulator {
             vector(u, "u", self.n_controls())?,
         ))
     }
-}
-
-/// The complementarity solve's status by its serialised name (`converged`, `max_iterations`, ...), as
-/// `cargo xtask simulate` prints it.
-fn status(s: ncp::Status) -> String {
-    serde_json::to_value(s)
-        .ok()
-        .and_then(|v| v.as_str().map(str::to_string))
-        .unwrap_or_else(|| "unknown".into())
 }
 
 /// `optimize(scene=None, task=None, horizon=None, x0=None, us=None, iterations=300, method="full",

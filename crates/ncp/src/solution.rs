@@ -26,6 +26,22 @@ pub enum Status {
     Violated,
 }
 
+impl Status {
+    /// Its serialised name (`converged`, `max_iterations`, ...): what the command line and the Python
+    /// package print.
+    pub fn name(self) -> &'static str {
+        match self {
+            Status::Converged => "converged",
+            Status::MaxIterations => "max_iterations",
+            Status::LineSearchFailed => "line_search_failed",
+            Status::SingularJacobian => "singular_jacobian",
+            Status::Inaccurate => "inaccurate",
+            Status::NonFinite => "non_finite",
+            Status::Violated => "violated",
+        }
+    }
+}
+
 /// How a solve went.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Info {
@@ -68,6 +84,26 @@ impl Solution {
                 iterations: self.info.iterations,
                 residual: self.info.residual,
             })
+        }
+    }
+}
+
+#[cfg(test)]
+mod name_tests {
+    use super::Status;
+
+    #[test]
+    fn every_status_is_named_as_it_is_serialised() {
+        for s in [
+            Status::Converged,
+            Status::MaxIterations,
+            Status::LineSearchFailed,
+            Status::SingularJacobian,
+            Status::Inaccurate,
+            Status::NonFinite,
+            Status::Violated,
+        ] {
+            assert_eq!(serde_json::to_value(s).unwrap(), s.name());
         }
     }
 }

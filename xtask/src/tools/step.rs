@@ -322,13 +322,6 @@ fn read_controls(path: &std::path::Path) -> anyhow::Result<Vec<Vec<f64>>> {
         .with_context(|| format!("{}: expected an array of control vectors", path.display()))
 }
 
-fn status_name(s: ncp::Status) -> String {
-    serde_json::to_value(s)
-        .ok()
-        .and_then(|v| v.as_str().map(str::to_string))
-        .unwrap_or_else(|| format!("{s:?}"))
-}
-
 pub fn run_simulate(args: &SimulateArgs) -> anyhow::Result<()> {
     let file = args.sim.problem_file()?;
     let scene = file.scene.clone();
@@ -433,7 +426,7 @@ pub fn run_simulate(args: &SimulateArgs) -> anyhow::Result<()> {
         if s.info.status != ncp::Status::Converged {
             unconverged += 1;
         }
-        let status = status_name(s.info.status);
+        let status = s.info.status.name();
         let t = k as f64 * h;
         let written = match args.format {
             Format::Json => {
@@ -452,7 +445,7 @@ pub fn run_simulate(args: &SimulateArgs) -> anyhow::Result<()> {
                 row.extend(x.iter().map(|v| format!("{v:e}")));
                 row.extend(u.iter().map(|v| format!("{v:e}")));
                 row.extend(s.lambda.iter().map(|v| format!("{v:e}")));
-                row.push(status);
+                row.push(status.to_string());
                 writeln!(out, "{}", row.join(","))
             }
         };
