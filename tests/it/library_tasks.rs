@@ -1045,6 +1045,39 @@ fn reaching_replaces_the_start_only_where_touching_pays() {
     }
 }
 
+/// A pull that cannot bring its pair into contact hands the task's solve nothing: pushing's block at
+/// rest 1 along the ground, where the finger's reach ends at 0.35, is pulled towards and never touched,
+/// so no task solve follows the pull and the start is kept as it was.
+#[test]
+fn a_pull_that_never_touches_is_not_followed_by_a_task_solve() {
+    let file = ProblemFile::from_toml_str(include_str!("../../scenes/pushing.toml")).unwrap();
+    let task = file.task(Some("push")).unwrap();
+    let (ddp, step) = search_setup(&file, &task);
+    let names = file.scene.coordinate_names();
+    let block_x = names.iter().position(|c| c == "block.x").unwrap();
+    let mut x0 = task.x0.clone();
+    x0[block_x] = 1.0;
+    let start = solve_from(&file, &task, step, &ddp, &x0);
+    assert!(!felt(&file, &task, step, &x0, &start));
+    let r = task::ContactProblem {
+        ddp: &ddp,
+        scene: &file.scene,
+        settings: &step,
+        cost: &task.cost,
+        x0: &x0,
+    }
+    .reach_for_contact(start.clone())
+    .unwrap();
+    assert_eq!(r.pair, None, "{:?}", r.tries);
+    assert!(!r.tries.is_empty());
+    for (pair, pulled, task_cost, found) in &r.tries {
+        assert!(pulled.is_finite(), "pair {pair}");
+        assert_eq!(*task_cost, None, "pair {pair}: a task solve followed");
+        assert!(!found);
+    }
+    assert_eq!(r.solution.controls, start.controls);
+}
+
 /// The pull's gradient is exact (central differences of its value), zero in touch, and its curvature
 /// the Gauss-Newton `w J^T J`: symmetric and positive semidefinite.
 #[test]

@@ -246,16 +246,22 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                     })?;
                     let reach = search.reach.as_ref();
                     for (pair, pulled, cost, felt) in reach.map_or(&[][..], |r| &r.tries[..]) {
-                        println!(
-                            "reach: {} pulled together (cost {pulled:.6}), then the task's own solve: cost \
-                         {cost:.6}, contact {}",
-                            pair_name(&file.scene, *pair),
-                            if *felt {
-                                "felt"
-                            } else {
-                                "not felt, or no cheaper"
-                            }
-                        );
+                        let name = pair_name(&file.scene, *pair);
+                        match cost {
+                            Some(cost) => println!(
+                                "reach: {name} pulled together (cost {pulled:.6}), then the task's own \
+                                 solve: cost {cost:.6}, contact {}",
+                                if *felt {
+                                    "felt"
+                                } else {
+                                    "not felt, or no cheaper"
+                                }
+                            ),
+                            None => println!(
+                                "reach: {name} pulled (cost {pulled:.6}), but not into contact: no task \
+                                 solve from there"
+                            ),
+                        }
                     }
                     let sigma = task::noise_scale(base.model);
                     let too_far = search.out_of_reach.map(|o| {
