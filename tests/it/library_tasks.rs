@@ -942,6 +942,25 @@ fn felt(
     task::contact_felt(&mut probe, &task.cost, x0, &sol.controls).unwrap()
 }
 
+/// `reach_for_contact` from `start`, a solve from `x0` under `step`.
+fn reach_from(
+    file: &ProblemFile,
+    task: &task::Task,
+    (ddp, step): (&ddp::Ddp, &dynamics::StepSettings),
+    x0: &[f64],
+    start: &ddp::Solution,
+) -> task::Reach {
+    task::ContactProblem {
+        ddp,
+        scene: &file.scene,
+        settings: step,
+        cost: &task.cost,
+        x0,
+    }
+    .reach_for_contact(start.clone())
+    .unwrap()
+}
+
 /// A contact out of reach is reached by pulling the pair together: the slider's fork starts with both
 /// prongs 0.45 from its block, where the task's solve feels nothing (a zero gradient) on the smoothed
 /// model and on the hard one, which has no noise scale to continue in; both prongs' pairs are needed (and
@@ -974,15 +993,7 @@ fn a_contact_out_of_reach_is_reached_by_pulling_the_pair_together() {
             "{:?}",
             step.model
         );
-        let r = task::ContactProblem {
-            ddp: &ddp,
-            scene: &file.scene,
-            settings: &step,
-            cost: &task.cost,
-            x0: &task.x0,
-        }
-        .reach_for_contact(start.clone())
-        .unwrap();
+        let r = reach_from(&file, &task, (&ddp, &step), &task.x0, &start);
         assert_eq!(r.pair, Some(1), "{:?}: {:?}", step.model, r.tries);
         assert!(felt(&file, &task, step, &task.x0, &r.solution));
         assert!(
@@ -1024,15 +1035,7 @@ fn reaching_replaces_the_start_only_where_touching_pays() {
         .unwrap();
         let start = solve_from(&file, &task, step, &ddp, &x0);
         assert!(!felt(&file, &task, step, &x0, &start));
-        let r = task::ContactProblem {
-            ddp: &ddp,
-            scene: &file.scene,
-            settings: &step,
-            cost: &task.cost,
-            x0: &x0,
-        }
-        .reach_for_contact(start.clone())
-        .unwrap();
+        let r = reach_from(&file, &task, (&ddp, &step), &x0, &start);
         if pays {
             assert!(r.pair.is_some(), "{:?}", r.tries);
             let end = r.solution.states.last().unwrap()[4];
@@ -1059,15 +1062,7 @@ fn a_pull_that_never_touches_is_not_followed_by_a_task_solve() {
     x0[block_x] = 1.0;
     let start = solve_from(&file, &task, step, &ddp, &x0);
     assert!(!felt(&file, &task, step, &x0, &start));
-    let r = task::ContactProblem {
-        ddp: &ddp,
-        scene: &file.scene,
-        settings: &step,
-        cost: &task.cost,
-        x0: &x0,
-    }
-    .reach_for_contact(start.clone())
-    .unwrap();
+    let r = reach_from(&file, &task, (&ddp, &step), &x0, &start);
     assert_eq!(r.pair, None, "{:?}", r.tries);
     assert!(!r.tries.is_empty());
     for (pair, pulled, task_cost, found) in &r.tries {
