@@ -277,7 +277,42 @@ impl<T: Ring> Kinematics<T> {
         r: &mut Vec<T>,
         scratch: &mut ForceScratch<T>,
     ) {
+        self.bias_forces_of(scene, None, v, r, scratch);
+    }
+
+    /// [`Kinematics::applied_forces_into`] for the coordinates of one kinematic tree
+    /// ([`Scene::trees`]): the entries of `r` for the tree's coordinates are the applied forces, computed
+    /// from its own bodies alone (the same arithmetic in the same order as for the whole scene); the other
+    /// entries hold their drag and controls only. What the second derivatives of the forces need, one tree
+    /// at a time, in jets over that tree's coordinates alone.
+    pub fn tree_forces_into(
+        &self,
+        scene: &Scene,
+        tree: usize,
+        (v, u): (&[T], &[T]),
+        r: &mut Vec<T>,
+        scratch: &mut ForceScratch<T>,
+    ) {
+        self.bias_forces_of(scene, Some(&scene.trees()[tree].bodies), v, r, scratch);
+        for (j, c) in scene.coordinates.iter().enumerate() {
+            if let Some(k) = c.actuator {
+                r[j] += u[k];
+            }
+        }
+    }
+
+    /// The bias forces from the bodies `bodies` (all of them for `None`; a tree's, or its velocities'
+    /// terms would be missing).
+    fn bias_forces_of(
+        &self,
+        scene: &Scene,
+        bodies: Option<&[usize]>,
+        v: &[T],
+        r: &mut Vec<T>,
+        scratch: &mut ForceScratch<T>,
+    ) {
         let n = scene.n_dof();
+        let counted = |i: usize| bodies.is_none_or(|b| b.contains(&i));
         let zero = T::from(0.0);
         r.clear();
         r.extend(
@@ -295,6 +330,9 @@ impl<T: Ring> Kinematics<T> {
         } = scratch;
         origin_velocity.clear();
         origin_velocity.extend(scene.bodies.iter().enumerate().map(|(j, b)| {
+            if !counted(j) {
+                return [zero; 2];
+            }
             let mut w = match b.parent {
                 None => [zero; 2],
                 Some(p) => self.point_velocity(scene, p, self.hinge[j], v),
@@ -310,7 +348,11 @@ impl<T: Ring> Kinematics<T> {
         // Each body's angular velocity (needed by sliding coordinates only).
         omega.clear();
         if !self.axis.is_empty() {
-            for b in &scene.bodies {
+            for (i, b) in scene.bodies.iter().enumerate() {
+                if !counted(i) {
+                    omega.push(zero);
+                    continue;
+                }
                 let mut w = b.parent.map_or(zero, |p| omega[p]);
                 for c in b.coordinates.clone() {
                     if scene.coordinates[c].kind == CoordinateKind::Angle {
@@ -321,6 +363,9 @@ impl<T: Ring> Kinematics<T> {
             }
         }
         for (i, b) in scene.bodies.iter().enumerate() {
+            if !counted(i) {
+                continue;
+            }
             let cdot = self.point_velocity(scene, i, self.centre[i], v);
             let mut accel = [T::from(0.0); 2];
             for j in 0..n {

@@ -50,7 +50,7 @@ pub use scene::{
     Body, BodySpec, ConstraintRow, ContactPair, ContactSpec, Coordinate, CoordinateKind,
     DENSITY_RANGE, Fixed, FixedSpec, JointKind, JointSpec, MAX_BODIES, MAX_CONTACTS, MAX_DAMPING,
     MAX_FRICTION, MAX_GRAVITY, MAX_LENGTH, MAX_SCENE_TEXT, Overlap, Plane, PlaneSpec, Scene,
-    SceneSpec, Side,
+    SceneSpec, Side, Tree,
 };
 pub use simulator::Simulator;
 pub use step::{

@@ -313,6 +313,19 @@ pub struct Scene {
     rows: Vec<ConstraintRow>,
     /// `moves[j * bodies + i]`: whether coordinate `j` moves body `i` ([`Scene::moves`]).
     moves: Vec<bool>,
+    /// The kinematic trees ([`Scene::trees`]).
+    trees: Vec<Tree>,
+}
+
+/// The bodies hanging from one root body (a body whose parent is the world), and their coordinates. No
+/// coordinate of one tree moves a body of another, so each tree's forces `r(q, v)` depend on its own
+/// coordinates and velocities alone; only contacts couple trees.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Tree {
+    /// The tree's bodies, in the scene's order (parents first).
+    pub bodies: Vec<usize>,
+    /// The coordinates of its bodies' joints, in `q`'s order.
+    pub coordinates: Vec<usize>,
 }
 
 impl Scene {
@@ -659,6 +672,7 @@ impl Scene {
             spec,
             rows: Vec::new(),
             moves: Vec::new(),
+            trees: Vec::new(),
         };
         scene.rows = ConstraintRow::of(&scene);
         let nb = scene.bodies.len();
@@ -675,6 +689,26 @@ impl Scene {
                 false
             })
             .collect();
+        // Each body's tree: its root's (parents come first, so a parent's is known).
+        let mut tree_of = vec![0; nb];
+        for i in 0..nb {
+            tree_of[i] = match scene.bodies[i].parent {
+                Some(p) => tree_of[p],
+                None => {
+                    scene.trees.push(Tree {
+                        bodies: Vec::new(),
+                        coordinates: Vec::new(),
+                    });
+                    scene.trees.len() - 1
+                }
+            };
+            let tree = &mut scene.trees[tree_of[i]];
+            tree.bodies.push(i);
+            tree.coordinates.extend(scene.bodies[i].coordinates.clone());
+        }
+        for tree in &mut scene.trees {
+            tree.coordinates.sort_unstable();
+        }
         Ok(scene)
     }
 
@@ -932,6 +966,11 @@ impl Scene {
     /// contact pair), in the order of a step's `lambda` and `d`.
     pub fn rows(&self) -> &[ConstraintRow] {
         &self.rows
+    }
+
+    /// The kinematic trees: the bodies under each root body, in the order of their roots.
+    pub fn trees(&self) -> &[Tree] {
+        &self.trees
     }
 
     /// Whether coordinate `j` belongs to body `i` or one of its ancestors (so it moves body `i`).

@@ -101,13 +101,14 @@ impl Taylor {
     ) -> Result<(), DynamicsError> {
         let dim = at.len();
         taylor.dim = dim;
+        // Every entry is written below (the one pass, or the pairs of blocks, which cover every block of
+        // the Hessian), so vectors already of the right length are not cleared.
         for (v, size) in [
             (&mut taylor.re, len),
             (&mut taylor.g, len * dim),
             (&mut taylor.h, len * dim * dim),
         ] {
-            v.clear();
-            v.reserve(size);
+            v.resize(size, 0.0);
         }
         let mut pass = |dirs: &[usize], first: bool| -> Result<(), DynamicsError> {
             args.clear();
@@ -126,6 +127,55 @@ impl Taylor {
         } else {
             for (i, dirs) in block_pairs(dim, K).iter().enumerate() {
                 pass(dirs, i == 0)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// `len` functions of `dim` arguments, all zero: what [`Taylor::expand_over`] fills in part by part.
+    pub(super) fn zeroed(&mut self, dim: usize, len: usize) {
+        self.dim = dim;
+        for (v, size) in [
+            (&mut self.re, len),
+            (&mut self.g, len * dim),
+            (&mut self.h, len * dim * dim),
+        ] {
+            v.clear();
+            v.resize(size, 0.0);
+        }
+    }
+
+    /// [`Taylor::expand`] over the arguments `over` alone, the others held constant, for functions that
+    /// depend on no other argument: the functions `select` (indices in the order `f` hands them over)
+    /// get their values and their gradient and Hessian entries among `over`; the others, and the entries
+    /// that mix `over` with another argument, are left as they are (zero after [`Taylor::zeroed`]). One
+    /// pass when `over` fits the jet's `K` directions, otherwise one per pair of blocks of it.
+    pub(super) fn expand_over<const K: usize, const H: usize>(
+        taylor: &mut Taylor,
+        at: &[f64],
+        (over, select): (&[usize], &[usize]),
+        args: &mut Vec<Jet<K, H>>,
+        mut f: impl FnMut(&[Jet<K, H>], &mut Sink<'_>) -> Result<(), DynamicsError>,
+    ) -> Result<(), DynamicsError> {
+        debug_assert_eq!(taylor.dim, at.len());
+        let mut pass = |dirs: &[usize]| -> Result<(), DynamicsError> {
+            args.clear();
+            args.extend(at.iter().enumerate().map(
+                |(i, &v)| match dirs.iter().position(|&d| d == i) {
+                    Some(l) => Jet::variable(v, l),
+                    None => Jet::from(v),
+                },
+            ));
+            let mut sink = Sink::new(taylor, dirs, false);
+            sink.select = Some(select);
+            f(args, &mut sink)
+        };
+        if over.len() <= K {
+            pass(over)?;
+        } else {
+            for block in block_pairs(over.len(), K) {
+                let dirs: Vec<usize> = block.iter().map(|&l| over[l]).collect();
+                pass(&dirs)?;
             }
         }
         Ok(())
@@ -165,6 +215,9 @@ pub(super) struct Sink<'a> {
     /// Whether this pass creates the functions (the first), or fills in entries of existing ones.
     first: bool,
     next: usize,
+    /// The functions whose values and entries this pass writes, when not all
+    /// ([`Taylor::expand_over`]).
+    select: Option<&'a [usize]>,
 }
 
 impl<'a> Sink<'a> {
@@ -174,6 +227,7 @@ impl<'a> Sink<'a> {
             dirs,
             first,
             next: 0,
+            select: None,
         }
     }
 
@@ -186,35 +240,41 @@ impl<'a> Sink<'a> {
     pub(super) fn emit<const K: usize, const H: usize>(&mut self, values: &[Jet<K, H>]) {
         let t = &mut *self.taylor;
         let dim = t.dim;
+        let dd = dim * dim;
         let whole = self.dirs.len() == dim;
         for v in values {
             let o = self.next;
             self.next += 1;
+            if let Some(select) = self.select {
+                if !select.contains(&o) {
+                    continue;
+                }
+                t.re[o] = v.re;
+            }
             if self.first {
-                t.re.push(v.re);
+                t.re[o] = v.re;
                 if whole {
-                    // The one pass over all arguments, in order: its leading blocks, the Hessian
-                    // filled in from the jet's packed upper triangle, row by row (row i's entries
-                    // left of the diagonal are column i's above it, written already).
-                    t.g.extend_from_slice(&v.g[..dim]);
-                    let start = t.h.len();
+                    // The one pass over all arguments, in order: the gradient's leading entries, the
+                    // Hessian unpacked from the jet's packed upper triangle (row i from the diagonal on,
+                    // and its mirror down column i).
+                    t.g[o * dim..(o + 1) * dim].copy_from_slice(&v.g[..dim]);
+                    let hb = &mut t.h[o * dd..(o + 1) * dd];
                     let packed = v.packed();
                     let mut row = 0;
                     for i in 0..dim {
-                        for j in 0..i {
-                            t.h.push(t.h[start + j * dim + i]);
+                        let upper = &packed[row..row + dim - i];
+                        hb[i * dim + i..(i + 1) * dim].copy_from_slice(upper);
+                        for (j, &e) in upper.iter().enumerate().skip(1) {
+                            hb[(i + j) * dim + i] = e;
                         }
-                        t.h.extend_from_slice(&packed[row..row + dim - i]);
                         row += K - i;
                     }
                     continue;
                 }
-                t.g.resize(t.g.len() + dim, 0.0);
-                t.h.resize(t.h.len() + dim * dim, 0.0);
             }
             for (l, &i) in self.dirs.iter().enumerate() {
                 t.g[o * dim + i] = v.g[l];
-                let row = o * dim * dim + i * dim;
+                let row = o * dd + i * dim;
                 for (l2, &j) in self.dirs.iter().enumerate() {
                     t.h[row + j] = v.hessian(l, l2);
                 }
@@ -240,6 +300,8 @@ pub(super) struct Expansion {
     pub(super) geometry: Taylor,
     /// `r(q, v)` with `B u` (`n`), over `(q, v)`.
     pub(super) forces: Taylor,
+    /// The directions of one tree's forces pass (kept to be refilled).
+    pub(super) over: Vec<usize>,
 }
 
 impl Expansion {

@@ -360,6 +360,22 @@ impl Model {
         kin.applied_forces_into(scene, &qv[n..], &w.u, &mut w.r, &mut w.forces);
     }
 
+    /// [`Model::forces`] for the coordinates of tree `tree` ([`Kinematics::tree_forces_into`]).
+    fn tree_forces<const K: usize, const H: usize>(
+        &self,
+        qv: &[Jet<K, H>],
+        u: &[f64],
+        tree: usize,
+        w: &mut JetIngredients<Jet<K, H>>,
+    ) {
+        let scene = self.scene();
+        let n = scene.n_dof();
+        w.u.clear();
+        w.u.extend(u.iter().map(|&e| Jet::from(e)));
+        let kin = Kinematics::refresh(&mut w.kin, scene, &qv[..n]);
+        kin.tree_forces_into(scene, tree, (&qv[n..], &w.u), &mut w.r, &mut w.forces);
+    }
+
     /// The second-order ingredients at `(x, u)`, any number of joints: the geometry over the joint angles
     /// and the forces over `(q, v)`, to be lifted to `y`. Three joints (the finger) take one pass of
     /// three-direction jets for the geometry and one of six for the forces; up to six joints, one pass
@@ -380,6 +396,7 @@ impl Model {
             actuated,
             geometry,
             forces,
+            over,
             ..
         } = out;
         // The narrowest jet that holds all of a group's arguments, so that one pass gives its Hessians
@@ -406,15 +423,54 @@ impl Model {
         match n {
             0..=3 => geometry_in!(3, 6),
             4 => geometry_in!(4, 10),
-            5 | 6 => geometry_in!(6, 21),
+            5 => geometry_in!(5, 15),
+            6 => geometry_in!(6, 21),
             _ => geometry_in!(8, 36),
         };
-        match 2 * n {
-            0..=6 => forces_in!(6, 21),
-            7..=8 => forces_in!(8, 36),
-            9..=10 => forces_in!(10, 55),
-            _ => forces_in!(12, 78),
-        };
+        let trees = scene.trees();
+        if trees.len() == 1 {
+            match 2 * n {
+                0..=6 => forces_in!(6, 21),
+                7..=8 => forces_in!(8, 36),
+                9..=10 => forces_in!(10, 55),
+                _ => forces_in!(12, 78),
+            };
+        } else {
+            // The trees' forces are independent (no coordinate of one moves a body of another): each
+            // tree's, over its own coordinates and velocities, in the narrowest jet that holds them;
+            // the entries between trees stay zero.
+            forces.zeroed(2 * n, n);
+            for (t, tree) in trees.iter().enumerate() {
+                over.clear();
+                over.extend(&tree.coordinates);
+                over.extend(tree.coordinates.iter().map(|&j| n + j));
+                macro_rules! tree_forces_in {
+                    ($k:literal, $h:literal) => {{
+                        let JetWork { args, ing } = jet_work::<Jet<$k, $h>>(jets, (n, m));
+                        Taylor::expand_over::<$k, $h>(
+                            forces,
+                            &x[..2 * n],
+                            (over, &tree.coordinates),
+                            args,
+                            |qv, sink| {
+                                self.tree_forces(qv, u, t, ing);
+                                sink.emit(&ing.r);
+                                Ok(())
+                            },
+                        )?
+                    }};
+                }
+                match over.len() {
+                    0 => {}
+                    1..=2 => tree_forces_in!(2, 3),
+                    3..=4 => tree_forces_in!(4, 10),
+                    5..=6 => tree_forces_in!(6, 21),
+                    7..=8 => tree_forces_in!(8, 36),
+                    9..=10 => tree_forces_in!(10, 55),
+                    _ => tree_forces_in!(12, 78),
+                }
+            }
+        }
         actuated.clear();
         actuated.extend(
             scene
@@ -1017,6 +1073,109 @@ mod tests {
             touching += usize::from(lambda > 1e-3);
         }
         touching
+    }
+
+    /// The forces' expansion tree by tree ([`Model::expansion`] on a scene of several trees) against the
+    /// whole scene's forces in one jet (block pairs of three directions): the same numbers to the last
+    /// bit, the entries between trees zero.
+    fn forces_by_tree_are_the_whole_ones(scene: Scene, states: &[Vec<f64>], u: &[f64]) {
+        let n = scene.n_dof();
+        let m = scene.n_constraints();
+        assert!(scene.trees().len() > 1);
+        let sim = Simulator::new(scene, StepSettings::default()).unwrap();
+        let model = sim.model();
+        let mut jets = Vec::new();
+        let mut by_tree = Expansion::default();
+        let mut whole = Taylor::default();
+        for x in states {
+            model.expansion((x, u), &mut by_tree, &mut jets).unwrap();
+            let JetWork { args, ing } = jet_work::<Jet<6, 21>>(&mut jets, (n, m));
+            Taylor::expand::<6, 21>(&mut whole, &x[..2 * n], n, args, |qv, sink| {
+                model.forces(qv, u, ing);
+                sink.emit(&ing.r);
+                Ok(())
+            })
+            .unwrap();
+            let tree = |j: usize| {
+                let trees = model.scene().trees();
+                (0..trees.len())
+                    .find(|&t| trees[t].coordinates.contains(&(j % n)))
+                    .unwrap()
+            };
+            let ours = &by_tree.forces;
+            for i in 0..n {
+                assert_eq!(
+                    ours.re(i).to_bits(),
+                    whole.re(i).to_bits(),
+                    "r[{i}] at {x:?}"
+                );
+                for a in 0..2 * n {
+                    let same = tree(a) == tree(i);
+                    let g = ours.g(i)[a];
+                    assert!(same || g == 0.0, "dr[{i}]/dy[{a}] = {g} across trees");
+                    assert_eq!(g, whole.g(i)[a], "dr[{i}]/dy[{a}] at {x:?}");
+                    for b in 0..2 * n {
+                        let h = ours.h(i)[a * 2 * n + b];
+                        assert!(
+                            (same && tree(b) == tree(i)) || h == 0.0,
+                            "d2r[{i}]/dy[{a}]dy[{b}] = {h} across trees"
+                        );
+                        assert_eq!(h, whole.h(i)[a * 2 * n + b], "d2r[{i}] at {x:?}");
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn each_trees_forces_are_expanded_alone_and_are_the_whole_scenes() {
+        let states = |n: usize| -> Vec<Vec<f64>> {
+            (0..5)
+                .map(|k| {
+                    (0..2 * n)
+                        .map(|i| ((i * 5 + k * 3) % 7) as f64 * 0.4 - 1.1)
+                        .collect()
+                })
+                .collect()
+        };
+        // The finger (a two-link tree and the ellipse), two fingers (three trees), pushing (a free block:
+        // two slides and an angle).
+        for (text, u) in [
+            (
+                include_str!("../../../../scenes/finger.toml"),
+                vec![0.3, -0.2],
+            ),
+            (
+                include_str!("../../../../scenes/two_fingers.toml"),
+                vec![0.2, -0.3, 0.1, 0.4],
+            ),
+            (
+                include_str!("../../../../scenes/pushing.toml"),
+                vec![0.5, -0.5],
+            ),
+        ] {
+            let scene = Scene::from_toml_str(text).unwrap();
+            let n = scene.n_dof();
+            forces_by_tree_are_the_whole_ones(scene, &states(n), &u);
+        }
+        // A tree of seven links (14 directions: passes over pairs of its blocks) beside the ellipse.
+        let mut spec = finger_scene().spec().clone();
+        for k in 3..=7 {
+            let mut link = spec.bodies[1].clone();
+            link.name = format!("link{k}");
+            link.parent = format!("link{}", k - 1);
+            link.semi_axes = [0.3, 0.1];
+            link.centre = [0.3, 0.0];
+            link.joint.limits = None;
+            link.joint.damping = 0.002 * k as f64;
+            spec.bodies.insert(k - 1, link);
+        }
+        let scene = Scene::new(spec).unwrap();
+        assert_eq!(scene.trees()[0].coordinates.len(), 7);
+        let u: Vec<f64> = (0..scene.n_controls)
+            .map(|k| 0.1 * k as f64 - 0.2)
+            .collect();
+        forces_by_tree_are_the_whole_ones(scene, &states(8), &u);
     }
 
     #[test]
