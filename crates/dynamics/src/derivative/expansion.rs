@@ -55,13 +55,28 @@ impl<T> Ingredients<T> {
 }
 
 /// Values, gradients and Hessians of a list of functions of `dim` arguments, stored flat: function `i`'s
-/// gradient is `g[i dim..(i + 1) dim]`, its Hessian the row-major `dim x dim` block after `i dim^2` of `h`.
+/// gradient is `g[i dim..(i + 1) dim]`, its Hessian's upper triangle the `dim (dim + 1) / 2` entries after
+/// `i dim (dim + 1) / 2` of `h`, packed row by row as a [`Jet`] keeps it (`(0, 0), (0, 1), .., (1, 1), ..`):
+/// the one-pass expansion copies it as it is, and the contraction reads only the upper triangle.
 #[derive(Default)]
 pub(super) struct Taylor {
     dim: usize,
     re: Vec<f64>,
     g: Vec<f64>,
     h: Vec<f64>,
+}
+
+/// The length of a packed upper triangle of a `dim x dim` matrix.
+pub(super) const fn packed_len(dim: usize) -> usize {
+    dim * (dim + 1) / 2
+}
+
+/// The index of entry `(a, b)`, `a <= b`, in a packed upper triangle of a `dim x dim` matrix: rows
+/// `0..a` hold `dim + (dim - 1) + .. + (dim - a + 1)` entries.
+#[inline]
+pub(super) fn packed_at(dim: usize, a: usize, b: usize) -> usize {
+    debug_assert!(a <= b && b < dim);
+    a * dim - a * a.saturating_sub(1) / 2 + (b - a)
 }
 
 impl Taylor {
@@ -80,10 +95,16 @@ impl Taylor {
         &self.g[i * self.dim..(i + 1) * self.dim]
     }
 
-    /// Function `i`'s Hessian (row-major `dim x dim`).
+    /// Function `i`'s Hessian, its upper triangle packed row by row ([`packed_at`]).
     pub(super) fn h(&self, i: usize) -> &[f64] {
-        let dd = self.dim * self.dim;
+        let dd = packed_len(self.dim);
         &self.h[i * dd..(i + 1) * dd]
+    }
+
+    /// Entry `(a, b)` of function `i`'s Hessian.
+    pub(super) fn hessian(&self, i: usize, a: usize, b: usize) -> f64 {
+        let (a, b) = if a <= b { (a, b) } else { (b, a) };
+        self.h(i)[packed_at(self.dim, a, b)]
     }
 
     /// The functions `f` of `dim` arguments at `at`, to second order, evaluated in `K`-direction jets: in
@@ -106,7 +127,7 @@ impl Taylor {
         for (v, size) in [
             (&mut taylor.re, len),
             (&mut taylor.g, len * dim),
-            (&mut taylor.h, len * dim * dim),
+            (&mut taylor.h, len * packed_len(dim)),
         ] {
             v.resize(size, 0.0);
         }
@@ -138,7 +159,7 @@ impl Taylor {
         for (v, size) in [
             (&mut self.re, len),
             (&mut self.g, len * dim),
-            (&mut self.h, len * dim * dim),
+            (&mut self.h, len * packed_len(dim)),
         ] {
             v.clear();
             v.resize(size, 0.0);
@@ -240,7 +261,7 @@ impl<'a> Sink<'a> {
     pub(super) fn emit<const K: usize, const H: usize>(&mut self, values: &[Jet<K, H>]) {
         let t = &mut *self.taylor;
         let dim = t.dim;
-        let dd = dim * dim;
+        let dd = packed_len(dim);
         let whole = self.dirs.len() == dim;
         for v in values {
             let o = self.next;
@@ -254,29 +275,31 @@ impl<'a> Sink<'a> {
             if self.first {
                 t.re[o] = v.re;
                 if whole {
-                    // The one pass over all arguments, in order: the gradient's leading entries, the
-                    // Hessian unpacked from the jet's packed upper triangle (row i from the diagonal on,
-                    // and its mirror down column i).
+                    // The one pass over all arguments, in order: the gradient's leading entries, and the
+                    // Hessian's packed rows (all of the jet's when its width is the arguments').
                     t.g[o * dim..(o + 1) * dim].copy_from_slice(&v.g[..dim]);
                     let hb = &mut t.h[o * dd..(o + 1) * dd];
                     let packed = v.packed();
-                    let mut row = 0;
-                    for i in 0..dim {
-                        let upper = &packed[row..row + dim - i];
-                        hb[i * dim + i..(i + 1) * dim].copy_from_slice(upper);
-                        for (j, &e) in upper.iter().enumerate().skip(1) {
-                            hb[(i + j) * dim + i] = e;
+                    if dim == K {
+                        hb.copy_from_slice(&packed[..dd]);
+                    } else {
+                        let (mut from, mut to) = (0, 0);
+                        for i in 0..dim {
+                            hb[to..to + dim - i].copy_from_slice(&packed[from..from + dim - i]);
+                            to += dim - i;
+                            from += K - i;
                         }
-                        row += K - i;
                     }
                     continue;
                 }
             }
+            let hb = &mut t.h[o * dd..(o + 1) * dd];
             for (l, &i) in self.dirs.iter().enumerate() {
                 t.g[o * dim + i] = v.g[l];
-                let row = o * dd + i * dim;
                 for (l2, &j) in self.dirs.iter().enumerate() {
-                    t.h[row + j] = v.hessian(l, l2);
+                    if i <= j {
+                        hb[packed_at(dim, i, j)] = v.hessian(l, l2);
+                    }
                 }
             }
         }
@@ -466,7 +489,7 @@ fn lift_first(t: &Taylor, i: usize, dirs: &[usize]) -> D1 {
 fn lift_second(t: &Taylor, i: usize, dirs: &[usize]) -> D2 {
     let mut grad = SMatrix::<f64, 1, DIRECTIONS>::zeros();
     let mut hess = SMatrix::<f64, DIRECTIONS, DIRECTIONS>::zeros();
-    let (g, h, dim) = (t.g(i), t.h(i), t.dim);
+    let (g, dim) = (t.g(i), t.dim);
     for (l, &a) in dirs.iter().enumerate() {
         if a >= dim {
             continue;
@@ -474,7 +497,7 @@ fn lift_second(t: &Taylor, i: usize, dirs: &[usize]) -> D2 {
         grad[(0, l)] = g[a];
         for (l2, &b) in dirs.iter().enumerate() {
             if b < dim {
-                hess[(l, l2)] = h[a * dim + b];
+                hess[(l, l2)] = t.hessian(i, a, b);
             }
         }
     }

@@ -8,7 +8,7 @@
 
 #![allow(non_snake_case)]
 
-use super::expansion::{D2, DIRECTIONS, Expansion, block_pairs};
+use super::expansion::{D2, DIRECTIONS, Expansion, block_pairs, packed_len};
 use super::linearise::{Linearised, RowKind, system};
 use crate::error::DynamicsError;
 use nalgebra::SMatrix;
@@ -132,7 +132,8 @@ impl Structured {
         let dp = &on.lin.dp;
         let row = |t: usize| &dp[t * cols..(t + 1) * cols];
         // The sum has three parts, each accumulated in its own place:
-        // - second derivatives in q of functions of q, weighted: `hq`, the leading n x n block;
+        // - second derivatives in q of functions of q, weighted: `hq`, the leading n x n block (its upper
+        //   triangle, packed as the expansion keeps the Hessians);
         // - products of a gradient in q with a row t of dp (or a unit vector): the gradients that meet
         //   row t are summed over all equations first, in `a[t n..(t + 1) n]`, and the products
         //   `P = sum_t a_t row(t)^T` (n x cols) enter as `P + P^T`;
@@ -140,7 +141,7 @@ impl Structured {
         //   upper triangle of `out`.
         // Every slice below is cut to its length first, so that with the sizes compiled in the loops
         // have constant trip counts and no bounds checks.
-        let (nn, nc) = (n * n, n * cols);
+        let (nn, nc) = (packed_len(n), n * cols);
         scratch.clear();
         scratch.resize(nn + nc + (n + m) * n, 0.0);
         let (hq, rest) = scratch.split_at_mut(nn);
@@ -182,11 +183,13 @@ impl Structured {
                 add_g(&mut a[(n + k) * n..], f, -w);
             }
             debug_assert_eq!(ex.forces.dim(), dim);
-            let hm = &ex.forces.h(i)[..dim * dim];
+            let hm = &ex.forces.h(i)[..packed_len(dim)];
             let wh = w * h;
+            let mut e = 0;
             for r in 0..dim {
                 for c in r..dim {
-                    out[r * cols + c] -= wh * hm[r * dim + c];
+                    out[r * cols + c] -= wh * hm[e];
+                    e += 1;
                 }
             }
         }
@@ -226,11 +229,13 @@ impl Structured {
             }
         }
         // The upper triangle of hq + P + P^T.
+        let mut packed = 0;
         for i in 0..n {
             for j in i..cols {
                 let mut e = pm[i * cols + j];
                 if j < n {
-                    e += hq[i * n + j] + pm[j * cols + i];
+                    e += hq[packed] + pm[j * cols + i];
+                    packed += 1;
                 }
                 out[i * cols + j] += e;
             }
@@ -257,10 +262,9 @@ pub(super) fn correction_hessians(ing: &Expansion, out: &mut Vec<f64>) {
     if any {
         out.resize(n * n * n, 0.0);
         for i in 0..n {
-            let h = geo.h(ing.correction(i));
             for a in 0..n.min(dim) {
                 for b in 0..n.min(dim) {
-                    out[i * n * n + a * n + b] = h[a * dim + b];
+                    out[i * n * n + a * n + b] = geo.hessian(ing.correction(i), a, b);
                 }
             }
         }

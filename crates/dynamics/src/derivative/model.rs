@@ -1115,12 +1115,12 @@ mod tests {
                     assert!(same || g == 0.0, "dr[{i}]/dy[{a}] = {g} across trees");
                     assert_eq!(g, whole.g(i)[a], "dr[{i}]/dy[{a}] at {x:?}");
                     for b in 0..2 * n {
-                        let h = ours.h(i)[a * 2 * n + b];
+                        let h = ours.hessian(i, a, b);
                         assert!(
                             (same && tree(b) == tree(i)) || h == 0.0,
                             "d2r[{i}]/dy[{a}]dy[{b}] = {h} across trees"
                         );
-                        assert_eq!(h, whole.h(i)[a * 2 * n + b], "d2r[{i}] at {x:?}");
+                        assert_eq!(h, whole.hessian(i, a, b), "d2r[{i}] at {x:?}");
                     }
                 }
             }
