@@ -35,13 +35,42 @@ pub fn mul_tn_into(out: &mut [f64], a: &[f64], b: &[f64], r: usize, ca: usize, c
     if ca == 0 || cb == 0 {
         return;
     }
-    for (arow, brow) in a[..r * ca].chunks_exact(ca).zip(b.chunks_exact(cb)) {
-        for (&aki, orow) in arow.iter().zip(out.chunks_exact_mut(cb)) {
+    // The example scenes' widths compiled in (rows of constant length: unrolled, no bounds checks), the
+    // same arithmetic in the same order as any other width.
+    match cb {
+        1 => mul_tn_rows::<1>(out, &a[..r * ca], b, ca),
+        2 => mul_tn_rows::<2>(out, &a[..r * ca], b, ca),
+        3 => mul_tn_rows::<3>(out, &a[..r * ca], b, ca),
+        4 => mul_tn_rows::<4>(out, &a[..r * ca], b, ca),
+        6 => mul_tn_rows::<6>(out, &a[..r * ca], b, ca),
+        8 => mul_tn_rows::<8>(out, &a[..r * ca], b, ca),
+        10 => mul_tn_rows::<10>(out, &a[..r * ca], b, ca),
+        _ => {
+            for (arow, brow) in a[..r * ca].chunks_exact(ca).zip(b.chunks_exact(cb)) {
+                for (&aki, orow) in arow.iter().zip(out.chunks_exact_mut(cb)) {
+                    if aki == 0.0 {
+                        continue;
+                    }
+                    for (o, bv) in orow.iter_mut().zip(brow) {
+                        *o += aki * bv;
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// [`mul_tn_into`]'s loop for `B` of `C` columns.
+fn mul_tn_rows<const C: usize>(out: &mut [f64], a: &[f64], b: &[f64], ca: usize) {
+    let (out, _) = out.as_chunks_mut::<C>();
+    let (b, _) = b.as_chunks::<C>();
+    for (arow, brow) in a.chunks_exact(ca).zip(b) {
+        for (&aki, orow) in arow.iter().zip(out.iter_mut()) {
             if aki == 0.0 {
                 continue;
             }
-            for (o, bv) in orow.iter_mut().zip(brow) {
-                *o += aki * bv;
+            for j in 0..C {
+                orow[j] += aki * brow[j];
             }
         }
     }
@@ -55,13 +84,40 @@ pub fn mul_into(out: &mut [f64], a: &[f64], b: &[f64], r: usize, k: usize, c: us
         return;
     }
     let b = &b[..k * c];
-    for (arow, orow) in a[..r * k].chunks_exact(k).zip(out.chunks_exact_mut(c)) {
-        for (&ail, brow) in arow.iter().zip(b.chunks_exact(c)) {
+    match c {
+        1 => mul_rows::<1>(out, &a[..r * k], b, k),
+        2 => mul_rows::<2>(out, &a[..r * k], b, k),
+        3 => mul_rows::<3>(out, &a[..r * k], b, k),
+        4 => mul_rows::<4>(out, &a[..r * k], b, k),
+        6 => mul_rows::<6>(out, &a[..r * k], b, k),
+        8 => mul_rows::<8>(out, &a[..r * k], b, k),
+        10 => mul_rows::<10>(out, &a[..r * k], b, k),
+        _ => {
+            for (arow, orow) in a[..r * k].chunks_exact(k).zip(out.chunks_exact_mut(c)) {
+                for (&ail, brow) in arow.iter().zip(b.chunks_exact(c)) {
+                    if ail == 0.0 {
+                        continue;
+                    }
+                    for (o, bv) in orow.iter_mut().zip(brow) {
+                        *o += ail * bv;
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// [`mul_into`]'s loop for `B` of `C` columns.
+fn mul_rows<const C: usize>(out: &mut [f64], a: &[f64], b: &[f64], k: usize) {
+    let (out, _) = out.as_chunks_mut::<C>();
+    let (b, _) = b.as_chunks::<C>();
+    for (arow, orow) in a.chunks_exact(k).zip(out.iter_mut()) {
+        for (&ail, brow) in arow.iter().zip(b) {
             if ail == 0.0 {
                 continue;
             }
-            for (o, bv) in orow.iter_mut().zip(brow) {
-                *o += ail * bv;
+            for j in 0..C {
+                orow[j] += ail * brow[j];
             }
         }
     }
@@ -126,5 +182,45 @@ mod tests {
         }
         assert!(cholesky(&[1.0, 2.0, 2.0, 1.0], 2).is_none());
         assert!(cholesky(&[f64::NAN], 1).is_none());
+    }
+
+    proptest::proptest! {
+        /// The products at every width (those compiled in and the others) are the plain sums over the
+        /// shared index in order, to the last bit, zero entries of `A` included.
+        #[test]
+        fn products_are_the_sums_in_order_at_every_width(
+            r in 1usize..12,
+            k in 1usize..12,
+            c in 1usize..13,
+            seed in 0u64..1000,
+        ) {
+            let entry = |i: usize| {
+                let v = ((i as u64 * 2654435761 + seed * 40503) % 1009) as f64 / 97.0 - 5.0;
+                if i.is_multiple_of(5) { 0.0 } else { v }
+            };
+            let a: Vec<f64> = (0..r * k).map(entry).collect();
+            let b: Vec<f64> = (0..k * c).map(|i| entry(i + 7)).collect();
+            let mut out = vec![f64::NAN; r * c];
+            mul_into(&mut out, &a, &b, r, k, c);
+            for i in 0..r {
+                for j in 0..c {
+                    let want = (0..k)
+                        .filter(|&l| a[i * k + l] != 0.0)
+                        .fold(0.0, |s, l| s + a[i * k + l] * b[l * c + j]);
+                    proptest::prop_assert_eq!(out[i * c + j].to_bits(), want.to_bits());
+                }
+            }
+            // A^T B with A (k x r), B (k x c).
+            let mut out = vec![f64::NAN; r * c];
+            mul_tn_into(&mut out, &a, &b, k, r, c);
+            for i in 0..r {
+                for j in 0..c {
+                    let want = (0..k)
+                        .filter(|&l| a[l * r + i] != 0.0)
+                        .fold(0.0, |s, l| s + a[l * r + i] * b[l * c + j]);
+                    proptest::prop_assert_eq!(out[i * c + j].to_bits(), want.to_bits());
+                }
+            }
+        }
     }
 }
