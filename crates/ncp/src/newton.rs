@@ -432,13 +432,20 @@ fn line_search(
     };
     let mut evaluations = 0;
     let mut all_finite = true;
+    // A constant Jacobian stays where the solve's first evaluation put it.
+    let constant = problem.constant_jacobian();
     loop {
         for i in 0..n {
             w.z_trial[i] = z[i] + t * w.dz[i];
         }
-        problem.evaluate(&w.z_trial, &mut w.f_trial, Some(&mut w.jac_trial));
+        let finite = if constant {
+            problem.evaluate(&w.z_trial, &mut w.f_trial, None);
+            w.f_trial.iter().all(|v| v.is_finite())
+        } else {
+            problem.evaluate(&w.z_trial, &mut w.f_trial, Some(&mut w.jac_trial));
+            w.f_trial.iter().chain(&w.jac_trial).all(|v| v.is_finite())
+        };
         evaluations += 1;
-        let finite = w.f_trial.iter().chain(&w.jac_trial).all(|v| v.is_finite());
         all_finite &= finite;
         let psi_trial = if finite {
             ncp_residual(
@@ -455,7 +462,9 @@ fn line_search(
         if psi_trial <= psi + s.armijo * t * slope + slack {
             z.copy_from_slice(&w.z_trial);
             std::mem::swap(&mut w.f, &mut w.f_trial);
-            std::mem::swap(&mut w.jac, &mut w.jac_trial);
+            if !constant {
+                std::mem::swap(&mut w.jac, &mut w.jac_trial);
+            }
             std::mem::swap(&mut w.phi, &mut w.phi_trial);
             std::mem::swap(&mut w.dphi, &mut w.dphi_trial);
             return Search::Accepted((t, evaluations), psi_trial);

@@ -25,6 +25,12 @@ pub trait Mcp {
     fn as_linear(&self) -> Option<&LinearMcp> {
         None
     }
+
+    /// Whether `dF/dz` is the same at every `z` (a linear problem's `M`): Newton's method then takes it
+    /// once per solve and its line search evaluates `F` alone. False by default.
+    fn constant_jacobian(&self) -> bool {
+        false
+    }
 }
 
 /// The linear case `F(z) = M z + q`: a mixed LCP, or a plain LCP when `n_free = 0`. This is the form of one
@@ -244,6 +250,10 @@ impl Mcp for LinearMcp {
 
     fn as_linear(&self) -> Option<&LinearMcp> {
         Some(self)
+    }
+
+    fn constant_jacobian(&self) -> bool {
+        true
     }
 }
 
