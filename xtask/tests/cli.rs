@@ -478,3 +478,28 @@ fn train_says_when_it_lengthened_a_stalled_horizon() {
     assert!(lib.settings.horizon > 90, "{}", lib.settings.horizon);
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn a_comparison_against_another_build_names_what_it_lacks() {
+    let run = |args: &[&str]| {
+        let out = xtask()
+            .args(["benchmarks", "--only", "against", "--dry-run"])
+            .args(args)
+            .output()
+            .unwrap();
+        assert!(!out.status.success(), "{args:?} should be refused");
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let missing = run(&[]);
+    assert!(missing.contains("--baseline"), "{missing}");
+    let absent = run(&["--baseline", "/no/such/xtask"]);
+    assert!(
+        absent.contains("/no/such/xtask") && absent.contains("not a file"),
+        "{absent}"
+    );
+    let rounds = run(&["--baseline", env!("CARGO_BIN_EXE_xtask"), "--rounds", "0"]);
+    assert!(rounds.contains("--rounds must be 1 to 50"), "{rounds}");
+    for text in [missing, absent, rounds] {
+        assert!(!text.contains("panicked"), "{text}");
+    }
+}

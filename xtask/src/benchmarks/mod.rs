@@ -3,6 +3,7 @@
 //! Timings here are medians over repeated batches on whatever machine runs the command; the criterion
 //! benches (`cargo bench -p geometry`) measure the same hot paths with statistics.
 
+mod bench_against;
 mod bench_ddp;
 mod bench_dynamics;
 mod bench_first_build;
@@ -32,6 +33,15 @@ pub struct Args {
     /// Run only these sections (default: all).
     #[arg(long, value_enum)]
     only: Vec<Section>,
+    /// For `--only against`: another build's xtask binary, run alternately with this one.
+    #[arg(long)]
+    baseline: Option<PathBuf>,
+    /// For `--only against`: what the other build is, as the table names it (a commit, a branch).
+    #[arg(long, default_value = "the baseline")]
+    baseline_label: String,
+    /// For `--only against`: rounds of alternate runs (1 to 50).
+    #[arg(long, default_value_t = 5)]
+    rounds: usize,
 }
 
 /// The generated sections of docs/benchmarks.md.
@@ -59,6 +69,9 @@ pub enum Section {
     /// The first build of a fresh clone: the README's two commands and `pip install ./python`, cold
     /// (about ten minutes; only when asked for by name).
     FirstBuild,
+    /// This build against another build's xtask (`--baseline`), run alternately: solves and a library
+    /// build, their times side by side and whether they compute the same (only when asked for by name).
+    Against,
 }
 
 pub fn run(args: &Args) -> anyhow::Result<()> {
@@ -91,6 +104,16 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     // Ten minutes of compiling, and a measure of the machine as much as of the code: by name only.
     if args.only.contains(&Section::FirstBuild) {
         sections.push(("first-build", bench_first_build::section()?));
+    }
+    // Another build to compare with: by name only, and only with the binary given.
+    if args.only.contains(&Section::Against) {
+        let baseline = args.baseline.as_ref().context(
+            "--only against needs --baseline PATH: another build's xtask binary to run alternately with this one",
+        )?;
+        sections.push((
+            "against",
+            bench_against::section(baseline, &args.baseline_label, args.rounds)?,
+        ));
     }
     if wanted(Section::LibraryTolerance) {
         sections.push(("library-tolerance", bench_library::tolerance_section()?));
