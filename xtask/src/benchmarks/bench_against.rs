@@ -165,15 +165,21 @@ pub(crate) fn section(baseline: &Path, label: &str, rounds: usize) -> anyhow::Re
     let mut out = String::new();
     writeln!(
         out,
-        "\nThis build (commit {head}) against {label} (`cargo xtask benchmarks --only against --baseline PATH --baseline-label TEXT`): {rounds} rounds, each running every row's command with {label}'s xtask and then with this one, one after the other on one core, so that both see the same machine. Solves: the time `optimize` prints for its solve (ms); builds: the build time `train` prints (s). Same result: the same passes and cost to the printed digit (solves), the same library file byte for byte (builds).\n"
+        "\nThis build (commit {head}) against {label} (`cargo xtask benchmarks --only against --baseline PATH --baseline-label TEXT`): {rounds} rounds, each running every row's command with {label}'s xtask and then with this one, one after the other on one core, so that both see the same machine. Solves: the time `optimize` prints for its solve (ms); builds: the build time `train` prints (s). Same result: the same passes and cost to the printed digit (solves), the same library file byte for byte (builds); where the two builds' solves take different numbers of passes, the last column compares the time per pass.\n"
     )?;
     writeln!(
         out,
-        "| what | {label}: min / median | this build: min / median | ratio of medians (of minima) | same result |"
+        "| what | {label}: min / median | this build: min / median | ratio of medians (of minima) | same result | passes, {label} / this | ratio of medians per pass |"
     )?;
-    writeln!(out, "|---|---:|---:|---:|---|")?;
+    writeln!(out, "|---|---:|---:|---:|---|---:|---:|")?;
     let mut times = vec![(Vec::new(), Vec::new()); JOBS.len()];
     let mut same = vec![true; JOBS.len()];
+    // A solve's passes (`after N passes`), each build's last: the builds may take different numbers.
+    let mut passes = vec![(None, None); JOBS.len()];
+    let passes_of = |result: &[u8]| -> Option<f64> {
+        let text = String::from_utf8_lossy(result);
+        text.strip_prefix("after ")?.split(' ').next()?.parse().ok()
+    };
     for round in 0..rounds {
         for (j, job) in JOBS.iter().enumerate() {
             let (tb, rb) = run(baseline, job, &scratch, "baseline")?;
@@ -181,6 +187,9 @@ pub(crate) fn section(baseline: &Path, label: &str, rounds: usize) -> anyhow::Re
             times[j].0.push(tb);
             times[j].1.push(tt);
             same[j] &= rb == rt;
+            if let Kind::Solve = job.kind {
+                passes[j] = (passes_of(&rb), passes_of(&rt));
+            }
             eprintln!("round {}: {}: {tb} vs {tt}", round + 1, job.what);
         }
     }
@@ -192,9 +201,16 @@ pub(crate) fn section(baseline: &Path, label: &str, rounds: usize) -> anyhow::Re
         };
         let (bmin, bmed) = spread(&mut times[j].0);
         let (tmin, tmed) = spread(&mut times[j].1);
+        let (per_pass_passes, per_pass) = match passes[j] {
+            (Some(pb), Some(pt)) => (
+                format!("{pb} / {pt}"),
+                format!("{:.2}", (tmed / pt) / (bmed / pb)),
+            ),
+            _ => ("-".to_string(), "-".to_string()),
+        };
         writeln!(
             out,
-            "| {} (`cargo xtask {}`) | {bmin:.1} / {bmed:.1} {unit} | {tmin:.1} / {tmed:.1} {unit} | {:.2} ({:.2}) | {} |",
+            "| {} (`cargo xtask {}`) | {bmin:.1} / {bmed:.1} {unit} | {tmin:.1} / {tmed:.1} {unit} | {:.2} ({:.2}) | {} | {per_pass_passes} | {per_pass} |",
             job.what,
             job.args.join(" "),
             tmed / bmed,
