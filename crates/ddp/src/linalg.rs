@@ -35,42 +35,32 @@ pub fn mul_tn_into(out: &mut [f64], a: &[f64], b: &[f64], r: usize, ca: usize, c
     if ca == 0 || cb == 0 {
         return;
     }
-    // The example scenes' widths compiled in (rows of constant length: unrolled, no bounds checks), the
-    // same arithmetic in the same order as any other width.
+    let (a, b) = (&a[..r * ca], &b[..r * cb]);
+    // The example scenes' widths compiled in (rows of constant length: unrolled, no bounds checks), any
+    // other at run time: the same arithmetic in the same order.
     match cb {
-        1 => mul_tn_rows::<1>(out, &a[..r * ca], b, ca),
-        2 => mul_tn_rows::<2>(out, &a[..r * ca], b, ca),
-        3 => mul_tn_rows::<3>(out, &a[..r * ca], b, ca),
-        4 => mul_tn_rows::<4>(out, &a[..r * ca], b, ca),
-        6 => mul_tn_rows::<6>(out, &a[..r * ca], b, ca),
-        8 => mul_tn_rows::<8>(out, &a[..r * ca], b, ca),
-        10 => mul_tn_rows::<10>(out, &a[..r * ca], b, ca),
-        _ => {
-            for (arow, brow) in a[..r * ca].chunks_exact(ca).zip(b.chunks_exact(cb)) {
-                for (&aki, orow) in arow.iter().zip(out.chunks_exact_mut(cb)) {
-                    if aki == 0.0 {
-                        continue;
-                    }
-                    for (o, bv) in orow.iter_mut().zip(brow) {
-                        *o += aki * bv;
-                    }
-                }
-            }
-        }
+        1 => mul_tn_rows::<1>(out, a, b, ca, cb),
+        2 => mul_tn_rows::<2>(out, a, b, ca, cb),
+        3 => mul_tn_rows::<3>(out, a, b, ca, cb),
+        4 => mul_tn_rows::<4>(out, a, b, ca, cb),
+        6 => mul_tn_rows::<6>(out, a, b, ca, cb),
+        8 => mul_tn_rows::<8>(out, a, b, ca, cb),
+        10 => mul_tn_rows::<10>(out, a, b, ca, cb),
+        _ => mul_tn_rows::<0>(out, a, b, ca, cb),
     }
 }
 
-/// [`mul_tn_into`]'s loop for `B` of `C` columns.
-fn mul_tn_rows<const C: usize>(out: &mut [f64], a: &[f64], b: &[f64], ca: usize) {
-    let (out, _) = out.as_chunks_mut::<C>();
-    let (b, _) = b.as_chunks::<C>();
-    for (arow, brow) in a.chunks_exact(ca).zip(b) {
-        for (&aki, orow) in arow.iter().zip(out.iter_mut()) {
+/// [`mul_tn_into`]'s loop, for `B` of `C` columns when `C` is not 0 (else `cb`).
+fn mul_tn_rows<const C: usize>(out: &mut [f64], a: &[f64], b: &[f64], ca: usize, cb: usize) {
+    let cb = if C > 0 { C } else { cb };
+    for (arow, brow) in a.chunks_exact(ca).zip(b.chunks_exact(cb)) {
+        let brow = &brow[..cb];
+        for (&aki, orow) in arow.iter().zip(out.chunks_exact_mut(cb)) {
             if aki == 0.0 {
                 continue;
             }
-            for j in 0..C {
-                orow[j] += aki * brow[j];
+            for (o, bv) in orow[..cb].iter_mut().zip(brow) {
+                *o += aki * bv;
             }
         }
     }
@@ -83,41 +73,30 @@ pub fn mul_into(out: &mut [f64], a: &[f64], b: &[f64], r: usize, k: usize, c: us
     if k == 0 || c == 0 {
         return;
     }
-    let b = &b[..k * c];
+    let (a, b) = (&a[..r * k], &b[..k * c]);
     match c {
-        1 => mul_rows::<1>(out, &a[..r * k], b, k),
-        2 => mul_rows::<2>(out, &a[..r * k], b, k),
-        3 => mul_rows::<3>(out, &a[..r * k], b, k),
-        4 => mul_rows::<4>(out, &a[..r * k], b, k),
-        6 => mul_rows::<6>(out, &a[..r * k], b, k),
-        8 => mul_rows::<8>(out, &a[..r * k], b, k),
-        10 => mul_rows::<10>(out, &a[..r * k], b, k),
-        _ => {
-            for (arow, orow) in a[..r * k].chunks_exact(k).zip(out.chunks_exact_mut(c)) {
-                for (&ail, brow) in arow.iter().zip(b.chunks_exact(c)) {
-                    if ail == 0.0 {
-                        continue;
-                    }
-                    for (o, bv) in orow.iter_mut().zip(brow) {
-                        *o += ail * bv;
-                    }
-                }
-            }
-        }
+        1 => mul_rows::<1>(out, a, b, k, c),
+        2 => mul_rows::<2>(out, a, b, k, c),
+        3 => mul_rows::<3>(out, a, b, k, c),
+        4 => mul_rows::<4>(out, a, b, k, c),
+        6 => mul_rows::<6>(out, a, b, k, c),
+        8 => mul_rows::<8>(out, a, b, k, c),
+        10 => mul_rows::<10>(out, a, b, k, c),
+        _ => mul_rows::<0>(out, a, b, k, c),
     }
 }
 
-/// [`mul_into`]'s loop for `B` of `C` columns.
-fn mul_rows<const C: usize>(out: &mut [f64], a: &[f64], b: &[f64], k: usize) {
-    let (out, _) = out.as_chunks_mut::<C>();
-    let (b, _) = b.as_chunks::<C>();
-    for (arow, orow) in a.chunks_exact(k).zip(out.iter_mut()) {
-        for (&ail, brow) in arow.iter().zip(b) {
+/// [`mul_into`]'s loop, for `B` of `C` columns when `C` is not 0 (else `c`).
+fn mul_rows<const C: usize>(out: &mut [f64], a: &[f64], b: &[f64], k: usize, c: usize) {
+    let c = if C > 0 { C } else { c };
+    for (arow, orow) in a.chunks_exact(k).zip(out.chunks_exact_mut(c)) {
+        let orow = &mut orow[..c];
+        for (&ail, brow) in arow.iter().zip(b.chunks_exact(c)) {
             if ail == 0.0 {
                 continue;
             }
-            for j in 0..C {
-                orow[j] += ail * brow[j];
+            for (o, bv) in orow.iter_mut().zip(&brow[..c]) {
+                *o += ail * bv;
             }
         }
     }

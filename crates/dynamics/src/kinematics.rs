@@ -250,12 +250,7 @@ impl<T: Ring> Kinematics<T> {
         r: &mut Vec<T>,
         scratch: &mut ForceScratch<T>,
     ) {
-        self.bias_forces_into(scene, v, r, scratch);
-        for (j, c) in scene.coordinates.iter().enumerate() {
-            if let Some(k) = c.actuator {
-                r[j] += u[k];
-            }
-        }
+        self.applied_forces_of(scene, None, (v, u), r, scratch);
     }
 
     /// Bias forces `r(q, v)`: gravity on every centre, `-damping * v` on every coordinate, and the Coriolis
@@ -293,7 +288,20 @@ impl<T: Ring> Kinematics<T> {
         r: &mut Vec<T>,
         scratch: &mut ForceScratch<T>,
     ) {
-        self.bias_forces_of(scene, Some(&scene.trees()[tree].bodies), v, r, scratch);
+        let bodies = &scene.trees()[tree].bodies;
+        self.applied_forces_of(scene, Some(bodies), (v, u), r, scratch);
+    }
+
+    /// The bias forces from `bodies` ([`Kinematics::bias_forces_of`]) plus the controls.
+    fn applied_forces_of(
+        &self,
+        scene: &Scene,
+        bodies: Option<&[usize]>,
+        (v, u): (&[T], &[T]),
+        r: &mut Vec<T>,
+        scratch: &mut ForceScratch<T>,
+    ) {
+        self.bias_forces_of(scene, bodies, v, r, scratch);
         for (j, c) in scene.coordinates.iter().enumerate() {
             if let Some(k) = c.actuator {
                 r[j] += u[k];

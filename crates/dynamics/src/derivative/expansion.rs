@@ -132,13 +132,7 @@ impl Taylor {
             v.resize(size, 0.0);
         }
         let mut pass = |dirs: &[usize], first: bool| -> Result<(), DynamicsError> {
-            args.clear();
-            args.extend(at.iter().enumerate().map(
-                |(i, &v)| match dirs.iter().position(|&d| d == i) {
-                    Some(l) => Jet::variable(v, l),
-                    None => Jet::from(v),
-                },
-            ));
+            seed(args, at, dirs);
             f(args, &mut Sink::new(taylor, dirs, first))
         };
         const { assert!(K <= ALL_DIRECTIONS.len()) };
@@ -180,13 +174,7 @@ impl Taylor {
     ) -> Result<(), DynamicsError> {
         debug_assert_eq!(taylor.dim, at.len());
         let mut pass = |dirs: &[usize]| -> Result<(), DynamicsError> {
-            args.clear();
-            args.extend(at.iter().enumerate().map(
-                |(i, &v)| match dirs.iter().position(|&d| d == i) {
-                    Some(l) => Jet::variable(v, l),
-                    None => Jet::from(v),
-                },
-            ));
+            seed(args, at, dirs);
             let mut sink = Sink::new(taylor, dirs, false);
             sink.select = Some(select);
             f(args, &mut sink)
@@ -201,6 +189,20 @@ impl Taylor {
         }
         Ok(())
     }
+}
+
+/// The arguments `at` as jets into `args` (refilled): argument `dirs[l]` the variable of direction `l`,
+/// the others constants.
+fn seed<const K: usize, const H: usize>(args: &mut Vec<Jet<K, H>>, at: &[f64], dirs: &[usize]) {
+    args.clear();
+    args.extend(
+        at.iter()
+            .enumerate()
+            .map(|(i, &v)| match dirs.iter().position(|&d| d == i) {
+                Some(l) => Jet::variable(v, l),
+                None => Jet::from(v),
+            }),
+    );
 }
 
 /// The directions `0, 1, ...` of the one pass over all of at most `K` arguments.

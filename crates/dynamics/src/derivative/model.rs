@@ -345,11 +345,13 @@ impl Model {
         Ok(())
     }
 
-    /// The forces `r(q, v) + B u` of `(q, v)` in any jet, `u` held constant, into `w.r`.
+    /// The forces `r(q, v) + B u` of `(q, v)` in any jet, `u` held constant, into `w.r`: of the whole
+    /// scene, or for the coordinates of one kinematic tree ([`Kinematics::tree_forces_into`]).
     fn forces<const K: usize, const H: usize>(
         &self,
         qv: &[Jet<K, H>],
         u: &[f64],
+        tree: Option<usize>,
         w: &mut JetIngredients<Jet<K, H>>,
     ) {
         let scene = self.scene();
@@ -357,23 +359,11 @@ impl Model {
         w.u.clear();
         w.u.extend(u.iter().map(|&e| Jet::from(e)));
         let kin = Kinematics::refresh(&mut w.kin, scene, &qv[..n]);
-        kin.applied_forces_into(scene, &qv[n..], &w.u, &mut w.r, &mut w.forces);
-    }
-
-    /// [`Model::forces`] for the coordinates of tree `tree` ([`Kinematics::tree_forces_into`]).
-    fn tree_forces<const K: usize, const H: usize>(
-        &self,
-        qv: &[Jet<K, H>],
-        u: &[f64],
-        tree: usize,
-        w: &mut JetIngredients<Jet<K, H>>,
-    ) {
-        let scene = self.scene();
-        let n = scene.n_dof();
-        w.u.clear();
-        w.u.extend(u.iter().map(|&e| Jet::from(e)));
-        let kin = Kinematics::refresh(&mut w.kin, scene, &qv[..n]);
-        kin.tree_forces_into(scene, tree, (&qv[n..], &w.u), &mut w.r, &mut w.forces);
+        let (v, r, scratch) = (&qv[n..], &mut w.r, &mut w.forces);
+        match tree {
+            None => kin.applied_forces_into(scene, v, &w.u, r, scratch),
+            Some(t) => kin.tree_forces_into(scene, t, (v, &w.u), r, scratch),
+        }
     }
 
     /// The second-order ingredients at `(x, u)`, any number of joints: the geometry over the joint angles
@@ -414,7 +404,7 @@ impl Model {
             ($k:literal, $h:literal) => {{
                 let JetWork { args, ing } = jet_work::<Jet<$k, $h>>(jets, (n, m));
                 Taylor::expand::<$k, $h>(forces, &x[..2 * n], n, args, |qv, sink| {
-                    self.forces(qv, u, ing);
+                    self.forces(qv, u, None, ing);
                     sink.emit(&ing.r);
                     Ok(())
                 })?
@@ -453,7 +443,7 @@ impl Model {
                             (over, &tree.coordinates),
                             args,
                             |qv, sink| {
-                                self.tree_forces(qv, u, t, ing);
+                                self.forces(qv, u, Some(t), ing);
                                 sink.emit(&ing.r);
                                 Ok(())
                             },
@@ -1091,7 +1081,7 @@ mod tests {
             model.expansion((x, u), &mut by_tree, &mut jets).unwrap();
             let JetWork { args, ing } = jet_work::<Jet<6, 21>>(&mut jets, (n, m));
             Taylor::expand::<6, 21>(&mut whole, &x[..2 * n], n, args, |qv, sink| {
-                model.forces(qv, u, ing);
+                model.forces(qv, u, None, ing);
                 sink.emit(&ing.r);
                 Ok(())
             })
