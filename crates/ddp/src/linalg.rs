@@ -9,21 +9,75 @@ pub fn cholesky(a: &[f64], n: usize) -> Option<Vec<f64>> {
 }
 
 /// Solve `L L^T x = b` in place for the `k` columns of the row-major `n x k` block `b`.
+///
+/// Row by row over all columns at once (contiguous rows, no bounds checks): each column sees the same
+/// operations in the same order as a column-by-column substitution, so the result is the same to the bit.
 pub fn cholesky_solve(l: &[f64], n: usize, b: &mut [f64], k: usize) {
-    for c in 0..k {
-        for i in 0..n {
-            let mut s = b[i * k + c];
-            for j in 0..i {
-                s -= l[i * n + j] * b[j * k + c];
+    if n == 0 || k == 0 {
+        return;
+    }
+    let (l, b) = (&l[..n * n], &mut b[..n * k]);
+    // A few controls (the scenes' 1 to 4): each column through registers, fully unrolled.
+    match n {
+        1 => return cholesky_solve_fixed::<1>(l, b, k),
+        2 => return cholesky_solve_fixed::<2>(l, b, k),
+        3 => return cholesky_solve_fixed::<3>(l, b, k),
+        4 => return cholesky_solve_fixed::<4>(l, b, k),
+        _ => {}
+    }
+    // Forward: row i of b minus L[i][j] times row j, j ascending, then over L[i][i].
+    for i in 0..n {
+        let (done, rest) = b.split_at_mut(i * k);
+        let row = &mut rest[..k];
+        let li = &l[i * n..(i + 1) * n];
+        for (&lij, bj) in li[..i].iter().zip(done.chunks_exact(k)) {
+            for (e, &bjc) in row.iter_mut().zip(bj) {
+                *e -= lij * bjc;
             }
-            b[i * k + c] = s / l[i * n + i];
         }
-        for i in (0..n).rev() {
-            let mut s = b[i * k + c];
-            for j in i + 1..n {
-                s -= l[j * n + i] * b[j * k + c];
+        let d = li[i];
+        row.iter_mut().for_each(|e| *e /= d);
+    }
+    // Backward: row i minus L[j][i] times row j, j ascending from i + 1, then over L[i][i].
+    for i in (0..n).rev() {
+        let (head, later) = b.split_at_mut((i + 1) * k);
+        let row = &mut head[i * k..];
+        for (j, bj) in (i + 1..n).zip(later.chunks_exact(k)) {
+            let lji = l[j * n + i];
+            for (e, &bjc) in row.iter_mut().zip(bj) {
+                *e -= lji * bjc;
             }
-            b[i * k + c] = s / l[i * n + i];
+        }
+        let d = l[i * n + i];
+        row.iter_mut().for_each(|e| *e /= d);
+    }
+}
+
+/// [`cholesky_solve`] for `N x N`, column by column: the same operations in the same order.
+fn cholesky_solve_fixed<const N: usize>(l: &[f64], b: &mut [f64], k: usize) {
+    let (rows, _) = l.as_chunks::<N>();
+    let l: &[[f64; N]; N] = rows.try_into().expect("an N x N factor");
+    for c in 0..k {
+        let mut x = [0.0; N];
+        for (i, e) in x.iter_mut().enumerate() {
+            *e = b[i * k + c];
+        }
+        for i in 0..N {
+            let mut s = x[i];
+            for j in 0..i {
+                s -= l[i][j] * x[j];
+            }
+            x[i] = s / l[i][i];
+        }
+        for i in (0..N).rev() {
+            let mut s = x[i];
+            for j in i + 1..N {
+                s -= l[j][i] * x[j];
+            }
+            x[i] = s / l[i][i];
+        }
+        for (i, e) in x.iter().enumerate() {
+            b[i * k + c] = *e;
         }
     }
 }
@@ -104,10 +158,14 @@ fn mul_rows<const C: usize>(out: &mut [f64], a: &[f64], b: &[f64], k: usize, c: 
 
 /// `out = A^T v` for row-major `A` (`r x c`).
 pub fn mul_tv_into(out: &mut [f64], a: &[f64], v: &[f64], r: usize, c: usize) {
-    out[..c].iter_mut().for_each(|e| *e = 0.0);
-    for k in 0..r {
-        for i in 0..c {
-            out[i] += a[k * c + i] * v[k];
+    let out = &mut out[..c];
+    out.fill(0.0);
+    if c == 0 {
+        return;
+    }
+    for (row, &vk) in a[..r * c].chunks_exact(c).zip(&v[..r]) {
+        for (o, &aki) in out.iter_mut().zip(row) {
+            *o += aki * vk;
         }
     }
 }
@@ -161,6 +219,52 @@ mod tests {
         }
         assert!(cholesky(&[1.0, 2.0, 2.0, 1.0], 2).is_none());
         assert!(cholesky(&[f64::NAN], 1).is_none());
+    }
+
+    /// The plain column-by-column substitution the compiled sizes and the row-wise loop must match.
+    fn cholesky_solve_by_columns(l: &[f64], n: usize, b: &mut [f64], k: usize) {
+        for c in 0..k {
+            for i in 0..n {
+                let mut s = b[i * k + c];
+                for j in 0..i {
+                    s -= l[i * n + j] * b[j * k + c];
+                }
+                b[i * k + c] = s / l[i * n + i];
+            }
+            for i in (0..n).rev() {
+                let mut s = b[i * k + c];
+                for j in i + 1..n {
+                    s -= l[j * n + i] * b[j * k + c];
+                }
+                b[i * k + c] = s / l[i * n + i];
+            }
+        }
+    }
+
+    #[test]
+    fn cholesky_solves_to_the_bit_as_column_by_column_at_every_size() {
+        for n in 1usize..=7 {
+            // A diagonally dominant symmetric matrix: positive definite.
+            let a: Vec<f64> = (0..n * n)
+                .map(|e| {
+                    let (i, j) = (e / n, e % n);
+                    if i == j {
+                        n as f64 + 1.0
+                    } else {
+                        ((i * j + i + j) % 5) as f64 / 7.0 - 0.3
+                    }
+                })
+                .collect();
+            let l = cholesky(&a, n).unwrap();
+            for k in 1usize..=7 {
+                let b: Vec<f64> = (0..n * k).map(|e| (e as f64 * 0.37).sin()).collect();
+                let (mut fast, mut plain) = (b.clone(), b.clone());
+                cholesky_solve(&l, n, &mut fast, k);
+                cholesky_solve_by_columns(&l, n, &mut plain, k);
+                let bits = |v: &[f64]| v.iter().map(|e| e.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&fast), bits(&plain), "n = {n}, k = {k}");
+            }
+        }
     }
 
     proptest::proptest! {

@@ -100,11 +100,11 @@ impl Workspace {
         let (fx, fu, cd) = (&self.fx, &self.fu, &self.cd);
         mul_tv_into(&mut self.qx, fx, &self.vx, n, n);
         mul_tv_into(&mut self.qu, fu, &self.vx, n, m);
-        for a in 0..n {
-            self.qx[a] += cd.lx[a];
+        for (a, b) in self.qx.iter_mut().zip(&cd.lx) {
+            *a += b;
         }
-        for a in 0..m {
-            self.qu[a] += cd.lu[a];
+        for (a, b) in self.qu.iter_mut().zip(&cd.lu) {
+            *a += b;
         }
         mul_into(&mut self.vxx_fx, &self.vxx, fx, n, n, n);
         mul_into(&mut self.vxx_fu, &self.vxx, fu, n, n, m);
@@ -121,19 +121,26 @@ impl Workspace {
             *a += b;
         }
         if full {
+            // `hess` is `(n + m) x (n + m)`: its first n rows add to Q_xx, the others split into
+            // Q_ux's row and Q_uu's.
             let nm = n + m;
-            let hess = &self.hess;
-            for a in 0..n {
-                for b in 0..n {
-                    self.qxx[a * n + b] += hess[a * nm + b];
+            let (hx, hu) = self.hess[..nm * nm].split_at(n * nm);
+            for (q, h) in self.qxx.chunks_exact_mut(n).zip(hx.chunks_exact(nm)) {
+                for (a, b) in q.iter_mut().zip(&h[..n]) {
+                    *a += b;
                 }
             }
-            for a in 0..m {
-                for b in 0..n {
-                    self.qux[a * n + b] += hess[(n + a) * nm + b];
+            let rows = self
+                .qux
+                .chunks_exact_mut(n)
+                .zip(self.quu.chunks_exact_mut(m.max(1)));
+            for ((qx, qu), h) in rows.zip(hu.chunks_exact(nm)) {
+                let (hx, hu) = h.split_at(n);
+                for (a, b) in qx.iter_mut().zip(hx) {
+                    *a += b;
                 }
-                for b in 0..m {
-                    self.quu[a * m + b] += hess[(n + a) * nm + n + b];
+                for (a, b) in qu.iter_mut().zip(hu) {
+                    *a += b;
                 }
             }
         }
@@ -231,17 +238,17 @@ impl Workspace {
         mul_into(&mut self.quu_k, &self.quu, k, m, m, 1);
         self.dv[0] += k.iter().zip(&self.qu).map(|(a, b)| a * b).sum::<f64>();
         self.dv[1] += 0.5 * k.iter().zip(&self.quu_k).map(|(a, b)| a * b).sum::<f64>();
-        for a in 0..m {
-            self.quu_k[a] += self.qu[a];
+        for (a, b) in self.quu_k.iter_mut().zip(&self.qu) {
+            *a += b;
         }
         mul_tv_into(&mut self.tmp_n, big_k, &self.quu_k, m, n);
         self.vx.copy_from_slice(&self.qx);
-        for a in 0..n {
-            self.vx[a] += self.tmp_n[a];
+        for (a, b) in self.vx.iter_mut().zip(&self.tmp_n) {
+            *a += b;
         }
         mul_tv_into(&mut self.tmp_n, &self.qux, k, m, n);
-        for a in 0..n {
-            self.vx[a] += self.tmp_n[a];
+        for (a, b) in self.vx.iter_mut().zip(&self.tmp_n) {
+            *a += b;
         }
         mul_into(&mut self.quu_bk, &self.quu, big_k, m, m, n);
         for (a, b) in self.quu_bk.iter_mut().zip(&self.qux) {

@@ -250,31 +250,16 @@ impl DenseLu {
         match &mut self.backend {
             Backend::Hand { lu, perm, .. } => {
                 // P a = L U, so a^T y = U^T L^T (P y): solve U^T w = rhs, L^T t = w, then y = P^T t.
-                let mut t = [0.0f64; 32];
-                let mut heap = Vec::new();
-                let t: &mut [f64] = if n <= 32 {
-                    &mut t[..n]
-                } else {
-                    heap.resize(n, 0.0);
-                    &mut heap
-                };
-                for i in 0..n {
-                    let mut s = rhs[i];
-                    for j in 0..i {
-                        s -= lu[j * n + i] * t[j];
-                    }
-                    t[i] = s / lu[i * n + i];
+                macro_rules! fixed {
+                    ($($k:literal)*) => {
+                        match n {
+                            $($k => return transposed_fixed::<$k>(lu, perm, rhs),)*
+                            _ => {}
+                        }
+                    };
                 }
-                for i in (0..n).rev() {
-                    let mut s = t[i];
-                    for j in i + 1..n {
-                        s -= lu[j * n + i] * t[j];
-                    }
-                    t[i] = s;
-                }
-                for i in 0..n {
-                    rhs[perm[i]] = t[i];
-                }
+                fixed!(4 5 6 7 8 9 10 11 12 13 14 15 16 17 18);
+                transposed(lu, perm, rhs);
             }
             Backend::Faer { .. } => self.faer_solve(rhs, true),
         }
@@ -344,7 +329,16 @@ impl DenseLu {
                 let mut x = [0.0f64; 32];
                 if n <= 32 {
                     let x = &mut x[..n];
-                    substitute(lu, perm, rhs, x);
+                    // The sizes `factor` compiles for, compiled here too.
+                    macro_rules! fixed {
+                        ($($k:literal)*) => {
+                            match n {
+                                $($k => substitute_fixed::<$k>(lu, perm, rhs, x),)*
+                                _ => substitute(lu, perm, rhs, x),
+                            }
+                        };
+                    }
+                    fixed!(4 5 6 7 8 9 10 11 12 13 14 15 16 17 18);
                     rhs.copy_from_slice(x);
                 } else {
                     let mut x = vec![0.0; n];
@@ -456,6 +450,84 @@ fn substitute(lu: &[f64], perm: &[usize], b: &[f64], x: &mut [f64]) {
     }
 }
 
+/// [`substitute`] for `N x N`: the same arithmetic in the same order.
+fn substitute_fixed<const N: usize>(lu: &[f64], perm: &[usize], b: &[f64], x: &mut [f64]) {
+    let (rows, _) = lu.as_chunks::<N>();
+    let rows: &[[f64; N]; N] = rows.try_into().expect("an N x N matrix");
+    let perm: &[usize; N] = perm.try_into().expect("N pivots");
+    let x: &mut [f64; N] = x.try_into().expect("N unknowns");
+    for i in 0..N {
+        let mut s = b[perm[i]];
+        for j in 0..i {
+            s -= rows[i][j] * x[j];
+        }
+        x[i] = s;
+    }
+    for i in (0..N).rev() {
+        let mut s = x[i];
+        for j in i + 1..N {
+            s -= rows[i][j] * x[j];
+        }
+        x[i] = s / rows[i][i];
+    }
+}
+
+/// [`DenseLu::solve_transposed`]'s substitutions at any size.
+fn transposed(lu: &[f64], perm: &[usize], rhs: &mut [f64]) {
+    let n = perm.len();
+    let mut t = [0.0f64; 32];
+    let mut heap = Vec::new();
+    let t: &mut [f64] = if n <= 32 {
+        &mut t[..n]
+    } else {
+        heap.resize(n, 0.0);
+        &mut heap
+    };
+    for i in 0..n {
+        let mut s = rhs[i];
+        for j in 0..i {
+            s -= lu[j * n + i] * t[j];
+        }
+        t[i] = s / lu[i * n + i];
+    }
+    for i in (0..n).rev() {
+        let mut s = t[i];
+        for j in i + 1..n {
+            s -= lu[j * n + i] * t[j];
+        }
+        t[i] = s;
+    }
+    for i in 0..n {
+        rhs[perm[i]] = t[i];
+    }
+}
+
+/// [`DenseLu::solve_transposed`]'s substitutions for `N x N`: the same arithmetic in the same order.
+fn transposed_fixed<const N: usize>(lu: &[f64], perm: &[usize], rhs: &mut [f64]) {
+    let (rows, _) = lu.as_chunks::<N>();
+    let rows: &[[f64; N]; N] = rows.try_into().expect("an N x N matrix");
+    let perm: &[usize; N] = perm.try_into().expect("N pivots");
+    let rhs: &mut [f64; N] = rhs.try_into().expect("N unknowns");
+    let mut t = [0.0f64; N];
+    for i in 0..N {
+        let mut s = rhs[i];
+        for j in 0..i {
+            s -= rows[j][i] * t[j];
+        }
+        t[i] = s / rows[i][i];
+    }
+    for i in (0..N).rev() {
+        let mut s = t[i];
+        for j in i + 1..N {
+            s -= rows[j][i] * t[j];
+        }
+        t[i] = s;
+    }
+    for i in 0..N {
+        rhs[perm[i]] = t[i];
+    }
+}
+
 /// The largest absolute entry of `v` (0 for an empty `v`): the solvers' residual and scale norm.
 pub(crate) fn inf_norm(v: &[f64]) -> f64 {
     v.iter().fold(0.0f64, |m, x| m.max(x.abs()))
@@ -465,6 +537,37 @@ pub(crate) fn inf_norm(v: &[f64]) -> f64 {
 mod tests {
     use super::*;
     use rand::{Rng, SeedableRng};
+
+    #[test]
+    fn the_sizes_compiled_in_solve_to_the_bit_as_the_run_time_loops() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(29);
+        for n in 1usize..=20 {
+            let a: Vec<f64> = (0..n * n).map(|_| rng.random_range(-1.0..1.0)).collect();
+            let b: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
+            let mut lu = DenseLu::new(n, LinearSolver::Hand);
+            lu.factor(&a).unwrap();
+            let Backend::Hand { lu: f, perm, .. } = &lu.backend else {
+                unreachable!("the hand back end")
+            };
+            let (f, perm) = (f.clone(), perm.clone());
+            let (mut x, mut general) = (b.clone(), vec![0.0; n]);
+            lu.solve(&mut x);
+            substitute(&f, &perm, &b, &mut general);
+            assert_eq!(
+                x.iter().map(|e| e.to_bits()).collect::<Vec<_>>(),
+                general.iter().map(|e| e.to_bits()).collect::<Vec<_>>(),
+                "solve, n = {n}"
+            );
+            let (mut y, mut general) = (b.clone(), b.clone());
+            lu.solve_transposed(&mut y);
+            transposed(&f, &perm, &mut general);
+            assert_eq!(
+                y.iter().map(|e| e.to_bits()).collect::<Vec<_>>(),
+                general.iter().map(|e| e.to_bits()).collect::<Vec<_>>(),
+                "transposed solve, n = {n}"
+            );
+        }
+    }
 
     #[test]
     fn the_transposed_solve_solves_the_transposed_system() {
