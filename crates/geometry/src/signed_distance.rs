@@ -269,8 +269,8 @@ pub fn signed_distance_dual<T: Forward>(
     if base.jet.ddf > f64::EPSILON * (base.jet.a.rho + base.jet.b.rho + base.jet.f.abs()) {
         for _ in 0..steps {
             let (s, c) = phi.sin_and_cos();
-            let (_, ha, dha, ddha) = dual_support(a, turn_a, c, s);
-            let (_, hb, dhb, ddhb) = dual_support(b, turn_b, c, s);
+            let (ha, dha, ddha) = dual_support(a, turn_a, c, s);
+            let (hb, dhb, ddhb) = dual_support(b, turn_b, c, s);
             let f = c * delta[0] + s * delta[1] + ha + hb;
             let df = -s * delta[0] + c * delta[1] + dha + dhb;
             // F'' = rho_A + rho_B - F, with rho = h'' + h.
@@ -279,8 +279,8 @@ pub fn signed_distance_dual<T: Forward>(
         }
     }
     let (s, c) = phi.sin_and_cos();
-    let (la, ha, _, _) = dual_support(a, turn_a, c, s);
-    let (lb, hb, _, _) = dual_support(b, turn_b, -c, -s);
+    let (la, ha) = dual_support_point(a, turn_a, c, s);
+    let (lb, hb) = dual_support_point(b, turn_b, -c, -s);
     let f = c * delta[0] + s * delta[1] + ha + hb;
     Ok(DualContact {
         distance: -f,
@@ -340,7 +340,7 @@ pub fn half_plane_distance_dual<T: Forward>(
     )?;
     let [nx, ny] = plane.normal;
     let (c, s) = (T::from(-nx), T::from(-ny));
-    let (offset, h, _, _) = dual_support(b, pose_b[2].sin_and_cos(), c, s);
+    let (offset, h) = dual_support_point(b, pose_b[2].sin_and_cos(), c, s);
     let lowest = [pose_b[0] + offset[0], pose_b[1] + offset[1]];
     let distance = (pose_b[0] + (-plane.point[0])) * nx + (pose_b[1] + (-plane.point[1])) * ny - h;
     Ok(DualContact {
@@ -352,15 +352,32 @@ pub fn half_plane_distance_dual<T: Forward>(
     })
 }
 
-/// World-frame support offset, value, and first two angle derivatives of an ellipse whose orientation
-/// has sine and cosine `(st, ct)`, along the world direction `(c, s)`.
-fn dual_support<T: Forward>(e: &Ellipse, (st, ct): (T, T), c: T, s: T) -> ([T; 2], T, T, T) {
+/// The support function's value and first two angle derivatives, `(h, h', h'')`, of an ellipse whose
+/// orientation has sine and cosine `(st, ct)`, along the world direction `(c, s)`: what a Newton step on
+/// the angle needs. [`dual_support_point`] gives the offset of the supporting point with the same `h`.
+fn dual_support<T: Forward>(e: &Ellipse, (st, ct): (T, T), c: T, s: T) -> (T, T, T) {
+    let (bc, bs, h) = support_norm(e, (st, ct), c, s);
+    let (a2, b2) = (e.a() * e.a(), e.b() * e.b());
+    let dh = bc * bs * (b2 - a2) / h;
+    let rho = T::from(a2 * b2) / (h * h * h);
+    (h, dh, rho - h)
+}
+
+/// The world-frame offset of the supporting point and the support function's value along `(c, s)` (see
+/// [`dual_support`]; each evaluates only what its caller reads, the same arithmetic as together).
+fn dual_support_point<T: Forward>(e: &Ellipse, (st, ct): (T, T), c: T, s: T) -> ([T; 2], T) {
+    let (bc, bs, h) = support_norm(e, (st, ct), c, s);
+    let (a2, b2) = (e.a() * e.a(), e.b() * e.b());
+    let (lx, ly) = (bc * a2 / h, bs * b2 / h);
+    ([ct * lx - st * ly, st * lx + ct * ly], h)
+}
+
+/// The direction `(c, s)` in the ellipse's frame, `(bc, bs)`, and the support value there.
+#[inline(always)]
+fn support_norm<T: Forward>(e: &Ellipse, (st, ct): (T, T), c: T, s: T) -> (T, T, T) {
     let bc = c * ct + s * st;
     let bs = s * ct - c * st;
     let (a2, b2) = (e.a() * e.a(), e.b() * e.b());
     let h = (bc * bc * a2 + bs * bs * b2).square_root();
-    let dh = bc * bs * (b2 - a2) / h;
-    let rho = T::from(a2 * b2) / (h * h * h);
-    let (lx, ly) = (bc * a2 / h, bs * b2 / h);
-    ([ct * lx - st * ly, st * lx + ct * ly], h, dh, rho - h)
+    (bc, bs, h)
 }
