@@ -402,7 +402,7 @@ impl Simulator {
     }
 }
 
-/// `optimize(scene=None, task=None, horizon=None, x0=None, us=None, iterations=300, method="full",
+/// `optimize(scene=None, task=None, horizon=None, x0=None, us=None, iterations=None, method="full",
 /// model=None, sigma=None, h=None, threads=1) -> dict`: iLQG / DDP on a task of a scene file, as
 /// `cargo xtask optimize` (the same names as its flags).
 ///
@@ -412,7 +412,8 @@ impl Simulator {
 ///     horizon: steps N (1 to 100000); None: the task's.
 ///     x0: the initial state; None: the task's.
 ///     us: the controls to start from, shape (N, m); None: zeros.
-///     iterations: passes at most (1 to 100000; `max_iterations` is accepted as its alias).
+///     iterations: passes at most (1 to 100000); None: 300. `max_iterations` is accepted as its alias
+///         (refused when both are given and disagree).
 ///     method: "full" (second-order DDP: the dynamics' Hessians contracted with the value gradient)
 ///         or "ilqr" (Gauss-Newton: first derivatives only).
 ///     model, sigma, h: the contact model ("logistic", "normal", "hard"), its noise scale and the time
@@ -426,7 +427,7 @@ impl Simulator {
 /// "cost converged", "step converged", "pass limit reached", "no descent", "regularisation
 /// exceeded"); `converged` (the first two); `task` (its name). The GIL is released while it runs.
 #[pyfunction]
-#[pyo3(signature = (scene=None, task=None, horizon=None, x0=None, us=None, iterations=300, method="full", model=None, sigma=None, h=None, threads=1, max_iterations=None))]
+#[pyo3(signature = (scene=None, task=None, horizon=None, x0=None, us=None, iterations=None, method="full", model=None, sigma=None, h=None, threads=1, max_iterations=None))]
 #[allow(clippy::too_many_arguments)]
 fn optimize<'py>(
     py: Python<'py>,
@@ -435,7 +436,7 @@ fn optimize<'py>(
     horizon: Option<usize>,
     x0: Option<PyArrayLike1<'py, f64, AllowTypeChange>>,
     us: Option<PyArrayLike2<'py, f64, AllowTypeChange>>,
-    iterations: usize,
+    iterations: Option<usize>,
     method: &str,
     model: Option<&str>,
     sigma: Option<f64>,
@@ -443,15 +444,16 @@ fn optimize<'py>(
     threads: usize,
     max_iterations: Option<usize>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    // `max_iterations` (the crates' name) is an alias of `iterations` (the command line's).
-    let max_iterations = match max_iterations {
-        Some(m) if iterations != 300 && m != iterations => {
+    // `max_iterations` (the crates' name) is an alias of `iterations` (the command line's): either may
+    // be given, both only when they agree (an explicit 300 included); neither means 300.
+    let max_iterations = match (iterations, max_iterations) {
+        (Some(i), Some(m)) if i != m => {
             return Err(error(format!(
-                "iterations {iterations} and its alias max_iterations {m} disagree: give one"
+                "iterations {i} and its alias max_iterations {m} disagree: give one"
             )));
         }
-        Some(m) => m,
-        None => iterations,
+        (Some(i), _) | (None, Some(i)) => i,
+        (None, None) => 300,
     };
     let file = problem_file(scene)?;
     let task = file.task(task).map_err(error)?;

@@ -296,5 +296,9 @@ def test_objects_print_what_they_are_and_iterations_has_its_alias(root):
     assert a["passes"] == b["passes"] == 3 and a["status"] == "pass limit reached"
     with pytest.raises(slcp.SlcpError, match="alias"):
         slcp.optimize(iterations=3, max_iterations=4)
+    # An explicit 300 (the default) that disagrees with its alias is refused too, not taken as unset.
+    with pytest.raises(slcp.SlcpError, match="iterations 300 and its alias max_iterations 2 disagree"):
+        slcp.optimize(iterations=300, max_iterations=2)
+    assert slcp.optimize(iterations=3, max_iterations=3)["passes"] == 3
     with pytest.raises(slcp.SlcpError, match="iterations 0 must be 1 to 100000"):
         slcp.optimize(iterations=0)
