@@ -7,7 +7,7 @@
 use crate::error::DynamicsError;
 use crate::kinematics::{Kinematics, Ring, perp};
 use crate::scene::{ConstraintRow, Scene, Side};
-use geometry::{DualContact, half_plane_distance_dual, signed_distance_dual};
+use geometry::{DualContact, DualPose, half_plane_distance_dual_posed, signed_distance_dual_posed};
 
 /// One contact pair's geometry at the start of a step.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -148,26 +148,30 @@ impl<T: Ring> Constraints<T> {
         }
         for pair in &scene.contacts {
             // An ellipse side's shape and pose: a body's from the kinematics, a fixed one's constant.
+            // (A body's angle's sine and cosine are the kinematics'.)
             let ellipse = |side: Side| match side {
                 Side::Body(i) => (
                     &scene.bodies[i].shape,
-                    [kin.centre[i][0], kin.centre[i][1], kin.phi[i]],
+                    DualPose::turned(
+                        [kin.centre[i][0], kin.centre[i][1], kin.phi[i]],
+                        kin.turn[i],
+                    ),
                 ),
                 Side::Fixed(i) => {
                     let f = &scene.fixed[i];
-                    (&f.shape, f.pose.map(T::from))
+                    (&f.shape, DualPose::new(f.pose.map(T::from)))
                 }
                 Side::Plane(_) => unreachable!("a half-plane side is handled before"),
             };
             let c = match (pair.a, pair.b) {
                 (Side::Plane(p), b) => {
                     let (shape, pose) = ellipse(b);
-                    half_plane_distance_dual(&scene.planes[p].shape, shape, pose)?
+                    half_plane_distance_dual_posed(&scene.planes[p].shape, shape, &pose)?
                 }
                 (a, Side::Plane(p)) => {
                     // The same contact seen from the ellipse: witnesses swapped, the normal reversed.
                     let (shape, pose) = ellipse(a);
-                    let c = half_plane_distance_dual(&scene.planes[p].shape, shape, pose)?;
+                    let c = half_plane_distance_dual_posed(&scene.planes[p].shape, shape, &pose)?;
                     DualContact {
                         distance: c.distance,
                         point_a: c.point_b,
@@ -178,7 +182,7 @@ impl<T: Ring> Constraints<T> {
                 }
                 (a, b) => {
                     let ((sa, pa), (sb, pb)) = (ellipse(a), ellipse(b));
-                    signed_distance_dual(sa, pa, sb, pb)?
+                    signed_distance_dual_posed(sa, &pa, sb, &pb)?
                 }
             };
             let re = |p: [T; 2]| [p[0].value(), p[1].value()];

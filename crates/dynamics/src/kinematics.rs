@@ -31,9 +31,9 @@ pub fn perp<T: Ring>(x: [T; 2]) -> [T; 2] {
     [-x[1], x[0]]
 }
 
+/// `x` turned by the angle whose `(sin, cos)` is `turn`.
 #[inline]
-fn rotate<T: Ring>(phi: T, x: [f64; 2]) -> [T; 2] {
-    let (s, c) = phi.sin_and_cos();
+fn rotate<T: Ring>((s, c): (T, T), x: [f64; 2]) -> [T; 2] {
     [c * x[0] - s * x[1], s * x[0] + c * x[1]]
 }
 
@@ -52,6 +52,8 @@ fn sub<T: Ring>(a: [T; 2], b: [T; 2]) -> [T; 2] {
 pub struct Kinematics<T = f64> {
     /// Absolute angle of each body's joint frame.
     pub phi: Vec<T>,
+    /// `(sin, cos)` of each body's `phi`, computed once for every rotation by it.
+    pub turn: Vec<(T, T)>,
     /// Origin of each body's joint frame (a hinge's pivot).
     pub hinge: Vec<[T; 2]>,
     /// Centre of each body's ellipse.
@@ -65,6 +67,7 @@ impl<T: Ring> Kinematics<T> {
     pub fn new(scene: &Scene, q: &[T]) -> Self {
         let mut kin = Kinematics {
             phi: Vec::new(),
+            turn: Vec::new(),
             hinge: Vec::new(),
             centre: Vec::new(),
             axis: Vec::new(),
@@ -92,12 +95,15 @@ impl<T: Ring> Kinematics<T> {
         let zero = T::from(0.0);
         let Kinematics {
             phi,
+            turn,
             hinge,
             centre,
             axis,
         } = self;
         phi.clear();
         phi.resize(nb, zero);
+        turn.clear();
+        turn.resize(nb, (zero, zero));
         hinge.clear();
         hinge.resize(nb, [zero; 2]);
         centre.clear();
@@ -115,14 +121,14 @@ impl<T: Ring> Kinematics<T> {
             // slides move the origin along their axes, an angle turns the frame.
             let (mut angle, mut origin) = match b.parent {
                 None => (None, [T::from(b.anchor[0]), T::from(b.anchor[1])]),
-                Some(p) => (Some(phi[p]), add(hinge[p], rotate(phi[p], b.anchor))),
+                Some(p) => (Some(phi[p]), add(hinge[p], rotate(turn[p], b.anchor))),
             };
             for c in b.coordinates.clone() {
                 match scene.coordinates[c].kind {
                     CoordinateKind::Slide { axis: a } => {
                         let world = match b.parent {
                             None => [T::from(a[0]), T::from(a[1])],
-                            Some(p) => rotate(phi[p], a),
+                            Some(p) => rotate(turn[p], a),
                         };
                         origin = add(origin, [world[0] * q[c], world[1] * q[c]]);
                         axis[c] = world;
@@ -133,8 +139,9 @@ impl<T: Ring> Kinematics<T> {
                 }
             }
             phi[i] = angle.unwrap_or(zero);
+            turn[i] = phi[i].sin_and_cos();
             hinge[i] = origin;
-            centre[i] = add(hinge[i], rotate(phi[i], b.centre));
+            centre[i] = add(hinge[i], rotate(turn[i], b.centre));
         }
     }
 

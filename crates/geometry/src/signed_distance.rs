@@ -254,6 +254,48 @@ pub fn signed_distance_dual<T: Forward>(
     b: &Ellipse,
     pose_b: [T; 3],
 ) -> Result<DualContact<T>, GeometryError> {
+    signed_distance_dual_posed(a, &DualPose::new(pose_a), b, &DualPose::new(pose_b))
+}
+
+/// A pose `[x, y, angle]` in a forward-mode scalar with the sine and cosine of its angle, computed once
+/// by whoever has them (a kinematics pass turns every body's frame by them already).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DualPose<T> {
+    /// `[x, y, angle]`.
+    pub pose: [T; 3],
+    /// `(sin, cos)` of the angle: exactly `pose[2].sin_and_cos()`.
+    pub turn: (T, T),
+}
+
+impl<T: Forward> DualPose<T> {
+    /// The pose, its angle's sine and cosine computed here.
+    pub fn new(pose: [T; 3]) -> Self {
+        DualPose {
+            pose,
+            turn: pose[2].sin_and_cos(),
+        }
+    }
+
+    /// The pose with its angle's sine and cosine as the caller computed them (`pose[2].sin_and_cos()`,
+    /// checked in debug builds).
+    pub fn turned(pose: [T; 3], turn: (T, T)) -> Self {
+        debug_assert!({
+            let (s, c) = pose[2].sin_and_cos();
+            s.value() == turn.0.value() && c.value() == turn.1.value()
+        });
+        DualPose { pose, turn }
+    }
+}
+
+/// [`signed_distance_dual`] of poses whose angles' sines and cosines are known ([`DualPose`]): the
+/// same arithmetic, without evaluating them again.
+pub fn signed_distance_dual_posed<T: Forward>(
+    a: &Ellipse,
+    posed_a: &DualPose<T>,
+    b: &Ellipse,
+    posed_b: &DualPose<T>,
+) -> Result<DualContact<T>, GeometryError> {
+    let (pose_a, pose_b) = (posed_a.pose, posed_b.pose);
     let re = |p: [T; 3]| [p[0].value(), p[1].value(), p[2].value()];
     let base = signed_distance_coords(a, re(pose_a), b, re(pose_b))?;
     let steps = match T::ORDER {
@@ -264,7 +306,7 @@ pub fn signed_distance_dual<T: Forward>(
     };
     let delta = [pose_a[0] - pose_b[0], pose_a[1] - pose_b[1]];
     // Each body's orientation as (sin, cos), shared by every support evaluation below.
-    let (turn_a, turn_b) = (pose_a[2].sin_and_cos(), pose_b[2].sin_and_cos());
+    let (turn_a, turn_b) = (posed_a.turn, posed_b.turn);
     let mut phi = T::from(base.jet.phi);
     if base.jet.ddf > f64::EPSILON * (base.jet.a.rho + base.jet.b.rho + base.jet.f.abs()) {
         for _ in 0..steps {
@@ -334,13 +376,23 @@ pub fn half_plane_distance_dual<T: Forward>(
     b: &Ellipse,
     pose_b: [T; 3],
 ) -> Result<DualContact<T>, GeometryError> {
+    half_plane_distance_dual_posed(plane, b, &DualPose::new(pose_b))
+}
+
+/// [`half_plane_distance_dual`] of a pose whose angle's sine and cosine are known ([`DualPose`]).
+pub fn half_plane_distance_dual_posed<T: Forward>(
+    plane: &HalfPlane,
+    b: &Ellipse,
+    posed_b: &DualPose<T>,
+) -> Result<DualContact<T>, GeometryError> {
+    let pose_b = posed_b.pose;
     check_pose(
         "B",
         [pose_b[0].value(), pose_b[1].value(), pose_b[2].value()],
     )?;
     let [nx, ny] = plane.normal;
     let (c, s) = (T::from(-nx), T::from(-ny));
-    let (offset, h) = dual_support_point(b, pose_b[2].sin_and_cos(), c, s);
+    let (offset, h) = dual_support_point(b, posed_b.turn, c, s);
     let lowest = [pose_b[0] + offset[0], pose_b[1] + offset[1]];
     let distance = (pose_b[0] + (-plane.point[0])) * nx + (pose_b[1] + (-plane.point[1])) * ny - h;
     Ok(DualContact {
