@@ -253,7 +253,7 @@ impl DenseLu {
                 macro_rules! fixed {
                     ($($k:literal)*) => {
                         match n {
-                            $($k => return transposed_fixed::<$k>(lu, perm, rhs),)*
+                            $($k => return transposed_sized::<$k>(lu, perm, rhs),)*
                             _ => {}
                         }
                     };
@@ -333,7 +333,7 @@ impl DenseLu {
                     macro_rules! fixed {
                         ($($k:literal)*) => {
                             match n {
-                                $($k => substitute_fixed::<$k>(lu, perm, rhs, x),)*
+                                $($k => substitute_sized::<$k>(lu, perm, rhs, x),)*
                                 _ => substitute(lu, perm, rhs, x),
                             }
                         };
@@ -432,53 +432,43 @@ fn eliminate_fixed<const N: usize>(
 }
 
 fn substitute(lu: &[f64], perm: &[usize], b: &[f64], x: &mut [f64]) {
-    let n = perm.len();
-    for i in 0..n {
-        let row = &lu[i * n..i * n + i];
-        x[i] = row
-            .iter()
-            .zip(&x[..i])
-            .fold(b[perm[i]], |s, (l, xj)| s - l * xj);
-    }
-    for i in (0..n).rev() {
-        let row = &lu[i * n..(i + 1) * n];
-        let s = row[i + 1..]
-            .iter()
-            .zip(&x[i + 1..])
-            .fold(x[i], |s, (u, xj)| s - u * xj);
-        x[i] = s / row[i];
-    }
+    substitute_sized::<0>(lu, perm, b, x);
 }
 
-/// [`substitute`] for `N x N`: the same arithmetic in the same order.
-fn substitute_fixed<const N: usize>(lu: &[f64], perm: &[usize], b: &[f64], x: &mut [f64]) {
-    let (rows, _) = lu.as_chunks::<N>();
-    let rows: &[[f64; N]; N] = rows.try_into().expect("an N x N matrix");
-    let perm: &[usize; N] = perm.try_into().expect("N pivots");
-    let x: &mut [f64; N] = x.try_into().expect("N unknowns");
-    for i in 0..N {
+/// [`substitute`] for `N x N` when `N` is not 0 (else the pivots' length): one loop for both, the sizes
+/// compiled in unrolled and without bounds checks, the same arithmetic in the same order.
+fn substitute_sized<const N: usize>(lu: &[f64], perm: &[usize], b: &[f64], x: &mut [f64]) {
+    let n = if N > 0 { N } else { perm.len() };
+    let (lu, perm, b, x) = (&lu[..n * n], &perm[..n], &b[..n], &mut x[..n]);
+    for i in 0..n {
         let mut s = b[perm[i]];
         for j in 0..i {
-            s -= rows[i][j] * x[j];
+            s -= lu[i * n + j] * x[j];
         }
         x[i] = s;
     }
-    for i in (0..N).rev() {
+    for i in (0..n).rev() {
         let mut s = x[i];
-        for j in i + 1..N {
-            s -= rows[i][j] * x[j];
+        for j in i + 1..n {
+            s -= lu[i * n + j] * x[j];
         }
-        x[i] = s / rows[i][i];
+        x[i] = s / lu[i * n + i];
     }
 }
 
 /// [`DenseLu::solve_transposed`]'s substitutions at any size.
 fn transposed(lu: &[f64], perm: &[usize], rhs: &mut [f64]) {
-    let n = perm.len();
-    let mut t = [0.0f64; 32];
+    transposed_sized::<0>(lu, perm, rhs);
+}
+
+/// [`transposed`] for `N x N` when `N` is not 0 (else the pivots' length), as [`substitute_sized`].
+fn transposed_sized<const N: usize>(lu: &[f64], perm: &[usize], rhs: &mut [f64]) {
+    let n = if N > 0 { N } else { perm.len() };
+    let (lu, perm, rhs) = (&lu[..n * n], &perm[..n], &mut rhs[..n]);
+    let mut stack = [0.0f64; 32];
     let mut heap = Vec::new();
     let t: &mut [f64] = if n <= 32 {
-        &mut t[..n]
+        &mut stack[..n]
     } else {
         heap.resize(n, 0.0);
         &mut heap
@@ -498,32 +488,6 @@ fn transposed(lu: &[f64], perm: &[usize], rhs: &mut [f64]) {
         t[i] = s;
     }
     for i in 0..n {
-        rhs[perm[i]] = t[i];
-    }
-}
-
-/// [`DenseLu::solve_transposed`]'s substitutions for `N x N`: the same arithmetic in the same order.
-fn transposed_fixed<const N: usize>(lu: &[f64], perm: &[usize], rhs: &mut [f64]) {
-    let (rows, _) = lu.as_chunks::<N>();
-    let rows: &[[f64; N]; N] = rows.try_into().expect("an N x N matrix");
-    let perm: &[usize; N] = perm.try_into().expect("N pivots");
-    let rhs: &mut [f64; N] = rhs.try_into().expect("N unknowns");
-    let mut t = [0.0f64; N];
-    for i in 0..N {
-        let mut s = rhs[i];
-        for j in 0..i {
-            s -= rows[j][i] * t[j];
-        }
-        t[i] = s / rows[i][i];
-    }
-    for i in (0..N).rev() {
-        let mut s = t[i];
-        for j in i + 1..N {
-            s -= rows[j][i] * t[j];
-        }
-        t[i] = s;
-    }
-    for i in 0..N {
         rhs[perm[i]] = t[i];
     }
 }
