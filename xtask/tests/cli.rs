@@ -437,6 +437,52 @@ fn optimize_says_when_no_contact_is_felt_and_reaches_for_it() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// A user's extreme numbers (a noise scale of 1e-300, a block 1e300 up) are printed in exponent form in
+/// every message, never as a line of three hundred digits.
+#[test]
+fn extreme_numbers_in_a_task_read_as_exponents() {
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../scenes/slider_push.toml"
+    ))
+    .unwrap()
+    .replacen("sigma = 0.05", "sigma = 1e-300", 1)
+    .replacen(
+        "x0 = { \"block.y\" = 0.25 }",
+        "x0 = { \"block.y\" = 1e300 }",
+        1,
+    );
+    let dir = std::env::temp_dir().join(format!("xtask-extreme-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("extreme.toml");
+    std::fs::write(&path, text).unwrap();
+    let out = xtask()
+        .args(["optimize", "--task", "push", "--scene"])
+        .arg(&path)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        stdout.contains("logistic contact, sigma 1e-300"),
+        "{stdout}"
+    );
+    assert!(stdout.contains("none in reach"), "{stdout}");
+    assert!(stdout.contains("e300 at its nearest"), "{stdout}");
+    for line in stdout.lines() {
+        assert!(
+            line.len() < 400,
+            "a line of {} characters: {line}",
+            line.len()
+        );
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 /// Issue 28: a receding horizon that lets the task stall is lengthened, and `train` says so. The paddle of
 /// tests/data/paddle.toml stops its wheel out of reach over 90 steps; its library is built over more, and
 /// the file records the horizon it was built over.

@@ -49,8 +49,27 @@ impl std::fmt::Display for Complementarity {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             Complementarity::Hard => write!(f, "hard contact"),
-            Complementarity::Logistic { sigma } => write!(f, "logistic contact, sigma {sigma}"),
-            Complementarity::Normal { sigma } => write!(f, "normal contact, sigma {sigma}"),
+            Complementarity::Logistic { sigma } => {
+                write!(f, "logistic contact, sigma {}", Scale(*sigma))
+            }
+            Complementarity::Normal { sigma } => {
+                write!(f, "normal contact, sigma {}", Scale(*sigma))
+            }
+        }
+    }
+}
+
+/// A noise scale as a user wrote it (`0.1`), in exponent form when it is too large or too small to read
+/// that way (`1e-300`, not three hundred digits).
+struct Scale(f64);
+
+impl std::fmt::Display for Scale {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let x = self.0;
+        if x.is_finite() && x != 0.0 && !(1e-4..1e9).contains(&x.abs()) {
+            write!(f, "{x:e}")
+        } else {
+            write!(f, "{x}")
         }
     }
 }

@@ -2,6 +2,7 @@
 //! the paper's, by default) or on the unicycle benchmark, one line per pass behind a progress bar, the
 //! trajectory and its linear policy as JSON.
 
+use crate::tools::Num;
 use crate::tools::step::SimArgs;
 use anyhow::Context;
 use ddp::problems::Unicycle;
@@ -168,11 +169,12 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let observe = |it: &Iteration| {
         pass += 1;
         bar.inc(1);
-        bar.set_message(format!("{:.9}", it.cost));
+        bar.set_message(Num(it.cost, 9).to_string());
         if !quiet {
+            let cost = Num(it.cost, 12).to_string();
             let line = format!(
-                "pass {pass:4}  cost {:>18.12}  reduction {:>10.3e}  expected {:>10.3e}  mu {:>9.2e}  alpha {:>6.4}  step {:>9.2e}",
-                it.cost, it.reduction, it.expected, it.mu, it.alpha, it.step
+                "pass {pass:4}  cost {cost:>18}  reduction {:>10.3e}  expected {:>10.3e}  mu {:>9.2e}  alpha {:>6.4}  step {:>9.2e}",
+                it.reduction, it.expected, it.mu, it.alpha, it.step
             );
             if bar.is_hidden() {
                 println!("{line}");
@@ -233,10 +235,11 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                     };
                     let search = problem.feel_contact(sol, |s, stage, felt| {
                         println!(
-                            "continuation: sigma {s:.4}: {} after {} passes, cost {:.6}{}",
+                            "continuation: sigma {}: {} after {} passes, cost {}{}",
+                            Num(s, 4),
                             stage.status,
                             stage.iterations.len(),
-                            stage.cost,
+                            Num(stage.cost, 6),
                             match felt {
                                 Some(true) => ", contact felt",
                                 Some(false) => ", contact not felt",
@@ -249,8 +252,10 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                         let name = pair_name(&file.scene, *pair);
                         match cost {
                             Some(cost) => println!(
-                                "reach: {name} pulled together (cost {pulled:.6}), then the task's own \
-                                 solve: cost {cost:.6}, contact {}",
+                                "reach: {name} pulled together (cost {}), then the task's own solve: \
+                                 cost {}, contact {}",
+                                Num(*pulled, 6),
+                                Num(*cost, 6),
                                 if *felt {
                                     "felt"
                                 } else {
@@ -258,8 +263,9 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                                 }
                             ),
                             None => println!(
-                                "reach: {name} pulled (cost {pulled:.6}), but not into contact: no task \
-                                 solve from there"
+                                "reach: {name} pulled (cost {}), but not into contact: no task solve \
+                                 from there",
+                                Num(*pulled, 6)
                             ),
                         }
                     }
@@ -267,10 +273,10 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                     let too_far = search.out_of_reach.map(|o| {
                         format!(
                             "no contact felt, and none in reach: {} stays apart over the horizon by \
-                             more than twice the driven body's reach (by {:.3} at its nearest), so no \
+                             more than twice the driven body's reach (by {} at its nearest), so no \
                              pull or continuation was tried; the solve is kept",
                             pair_name(&file.scene, o.pair),
-                            o.clearance
+                            Num(o.clearance, 3)
                         )
                     });
                     note = too_far.or_else(|| Some(match (reach.and_then(|r| r.pair), &search.continuation, sigma) {
@@ -280,17 +286,21 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                     ),
                     (None, Some(c), Some(sigma)) => match (c.felt_at, c.kept) {
                         (Some(top), true) => format!(
-                            "continued in the noise scale: contact felt at sigma {top:.4}, solved back \
-                             down to {sigma}"
+                            "continued in the noise scale: contact felt at sigma {}, solved back \
+                             down to {}",
+                            Num(top, 4),
+                            Num(sigma, 4)
                         ),
                         (Some(top), false) => format!(
-                            "no contact felt: found at sigma {top:.4}, and lost again (or no cheaper \
-                             than the solve at {sigma}) on the way back down; that solve is kept"
+                            "no contact felt: found at sigma {}, and lost again (or no cheaper \
+                             than the solve at {}) on the way back down; that solve is kept",
+                            Num(top, 4),
+                            Num(sigma, 4)
                         ),
                         (None, _) => format!(
-                            "no contact felt even at sigma {:.4} ({}x the task's): nothing the controls \
+                            "no contact felt even at sigma {} ({}x the task's): nothing the controls \
                              do reaches a contact within the horizon; the solve at the task's is kept",
-                            sigma * (1 << task::CONTINUATION_DOUBLINGS) as f64,
+                            Num(sigma * (1 << task::CONTINUATION_DOUBLINGS) as f64, 4),
                             1 << task::CONTINUATION_DOUBLINGS
                         ),
                     },
