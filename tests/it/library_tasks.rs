@@ -1346,6 +1346,26 @@ running = [{ coordinate = "wheel.angle", quadratic = 1.0, target = 1.0 }]
     assert!(err.to_string().contains("nothing to control"), "{err}");
 }
 
+/// A build whose every solve stops before its first pass (here a weight of 1e300, whose value Hessian
+/// overflows) is refused with the reason instead of saving its starting controls as a library.
+#[test]
+fn a_build_that_optimises_nothing_is_refused() {
+    let text = include_str!("../../scenes/slider_push.toml").replacen(
+        "quadratic = 1.0, target = 0.5 }",
+        "quadratic = 1e300, target = 0.5 }",
+        1,
+    );
+    let file = ProblemFile::from_toml_str(&text).unwrap();
+    let task = file.task(None).unwrap();
+    let err =
+        library::Library::build(&file, None, &small_settings(&task, 4), |_, _| {}).unwrap_err();
+    assert!(
+        matches!(err, LibraryError::NothingOptimised { trajectories: 4 }),
+        "{err}"
+    );
+    assert!(err.to_string().contains("took a single pass"), "{err}");
+}
+
 /// A task's control limits bind the policy too: the linear law far from a stored state asks for more
 /// than the actuators the trajectories were optimised under give, and the policy saturates it.
 #[test]

@@ -450,17 +450,25 @@ pub fn build_entries(
         progress(*count, entry);
         *count += 1;
     };
-    match settings.exploration {
-        Exploration::Kicks => Ok(Entries {
+    let built = match settings.exploration {
+        Exploration::Kicks => Entries {
             entries: kicked_chains(&task, &report)?,
             horizon: settings.horizon,
-        }),
+        },
         Exploration::Branches {
             trunk,
             settle,
             length,
-        } => branched(&task, trunk, settle, length, &report),
+        } => branched(&task, trunk, settle, length, &report)?,
+    };
+    // A library whose every solve stopped before its first pass holds the starting controls, not
+    // optimised ones: refused, not saved as if it were a controller.
+    if built.entries.iter().all(|e| e.passes == 0 && !e.converged) {
+        return Err(LibraryError::NothingOptimised {
+            trajectories: built.entries.len().div_ceil(settings.keep.max(1)),
+        });
     }
+    Ok(built)
 }
 
 /// What [`build_entries`] made: the entries, and the horizon their trajectories were solved over (the

@@ -27,6 +27,17 @@ pub enum LibraryError {
     /// The simulator refused the scene or the settings.
     #[error(transparent)]
     Dynamics(#[from] dynamics::DynamicsError),
+    /// Every solve of a build stopped before its first pass (a cost whose curvature no regularisation
+    /// makes definite, a scale that overflows): the library would hold its starting controls.
+    #[error(
+        "none of the {trajectories} trajectories' solves took a single pass (the optimiser stopped at \
+         once, e.g. on a Q_uu no regularisation makes positive definite: look at the task's weights \
+         with `cargo xtask optimize`); no library of unoptimised controls is built"
+    )]
+    NothingOptimised {
+        /// Trajectories solved.
+        trajectories: usize,
+    },
     /// The optimiser failed where nothing can be retried.
     #[error("trajectory {trajectory}: {source}")]
     Optimiser {
