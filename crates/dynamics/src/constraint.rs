@@ -7,7 +7,10 @@
 use crate::error::DynamicsError;
 use crate::kinematics::{Kinematics, Ring, perp};
 use crate::scene::{ConstraintRow, Scene, Side};
-use geometry::{DualContact, DualPose, half_plane_distance_dual_posed, signed_distance_dual_posed};
+use geometry::{
+    ContactSeed, DualContact, DualPose, half_plane_distance_dual_posed, signed_distance_dual_posed,
+    signed_distance_dual_seeded,
+};
 
 /// One contact pair's geometry at the start of a step.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -22,6 +25,9 @@ pub struct ContactFrame {
     pub point_b: [f64; 2],
     /// Whether the witness points are unique (else `d` is not differentiable there).
     pub witness_unique: bool,
+    /// What the geometry's search found for a pair of ellipses (`None` against a half-plane): the
+    /// derivative passes at the same configuration finish from it instead of searching again.
+    pub seed: Option<ContactSeed>,
 }
 
 /// A contact pair's impulse over one step, from its two friction-cone rows `lambda_+` and `lambda_-`:
@@ -111,13 +117,24 @@ impl<T: Ring> Constraints<T> {
         kin: &Kinematics<T>,
         q: &[T],
     ) -> Result<&'a mut Self, DynamicsError> {
-        match slot {
-            Some(cons) => {
-                cons.update(scene, kin, q)?;
-                Ok(cons)
-            }
-            None => Ok(slot.insert(Constraints::new(scene, kin, q)?)),
-        }
+        Self::refresh_seeded(slot, scene, kin, q, None)
+    }
+
+    /// [`Constraints::refresh`] from the contacts' seeds ([`Constraints::update_seeded`]).
+    pub(crate) fn refresh_seeded<'a>(
+        slot: &'a mut Option<Self>,
+        scene: &Scene,
+        kin: &Kinematics<T>,
+        q: &[T],
+        seeds: Option<&[ContactFrame]>,
+    ) -> Result<&'a mut Self, DynamicsError> {
+        let cons = slot.get_or_insert_with(|| Constraints {
+            d: Vec::with_capacity(scene.n_constraints()),
+            jacobian: Vec::with_capacity(scene.n_constraints() * scene.n_dof()),
+            contacts: Vec::with_capacity(scene.contacts.len()),
+        });
+        cons.update_seeded(scene, kin, q, seeds)?;
+        Ok(cons)
     }
 
     /// [`Constraints::new`] in place: the same vectors refilled, without allocating once they have the
@@ -127,6 +144,19 @@ impl<T: Ring> Constraints<T> {
         scene: &Scene,
         kin: &Kinematics<T>,
         q: &[T],
+    ) -> Result<(), DynamicsError> {
+        self.update_seeded(scene, kin, q, None)
+    }
+
+    /// [`Constraints::update`] at a configuration whose contacts were computed already (in `f64`, at
+    /// exactly `q`'s values): each pair of ellipses finishes from that contact's
+    /// [seed](ContactFrame::seed) instead of searching again, to the same result.
+    pub(crate) fn update_seeded(
+        &mut self,
+        scene: &Scene,
+        kin: &Kinematics<T>,
+        q: &[T],
+        seeds: Option<&[ContactFrame]>,
     ) -> Result<(), DynamicsError> {
         let n = scene.n_dof();
         let (zero, one) = (T::from(0.0), T::from(1.0));
@@ -146,7 +176,7 @@ impl<T: Ring> Constraints<T> {
                 jacobian.extend((0..n).map(|k| if k == j { -one } else { zero }));
             }
         }
-        for pair in &scene.contacts {
+        for (p, pair) in scene.contacts.iter().enumerate() {
             // An ellipse side's shape and pose: a body's from the kinematics, a fixed one's constant.
             // (A body's angle's sine and cosine are the kinematics'.)
             let ellipse = |side: Side| match side {
@@ -178,11 +208,15 @@ impl<T: Ring> Constraints<T> {
                         point_b: c.point_a,
                         normal: [-c.normal[0], -c.normal[1]],
                         witness_unique: c.witness_unique,
+                        seed: c.seed,
                     }
                 }
                 (a, b) => {
                     let ((sa, pa), (sb, pb)) = (ellipse(a), ellipse(b));
-                    signed_distance_dual_posed(sa, &pa, sb, &pb)?
+                    match seeds.and_then(|f| f.get(p)).and_then(|f| f.seed) {
+                        Some(seed) => signed_distance_dual_seeded(sa, &pa, sb, &pb, &seed),
+                        None => signed_distance_dual_posed(sa, &pa, sb, &pb)?,
+                    }
                 }
             };
             let re = |p: [T; 2]| [p[0].value(), p[1].value()];
@@ -192,6 +226,7 @@ impl<T: Ring> Constraints<T> {
                 point_a: re(c.point_a),
                 point_b: re(c.point_b),
                 witness_unique: c.witness_unique,
+                seed: c.seed,
             });
             // Per joint: the normal and tangential relative velocity of the witness points.
             let t = perp(c.normal);

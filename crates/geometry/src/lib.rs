@@ -36,9 +36,10 @@ pub use parry2d_f64;
 pub use parry2d_f64::math::{Pose, Vector};
 pub use scalar::Forward;
 pub use signed_distance::{
-    Contact, ContactDerivatives, DualContact, DualPose, HalfPlane, POSE_COORDINATES, PoseCoords,
-    half_plane_distance_dual, half_plane_distance_dual_posed, pose_coords, pose_from_coords,
-    signed_distance, signed_distance_coords, signed_distance_dual, signed_distance_dual_posed,
+    Contact, ContactDerivatives, ContactSeed, DualContact, DualPose, HalfPlane, POSE_COORDINATES,
+    PoseCoords, half_plane_distance_dual, half_plane_distance_dual_posed, pose_coords,
+    pose_from_coords, signed_distance, signed_distance_coords, signed_distance_dual,
+    signed_distance_dual_posed, signed_distance_dual_seeded,
 };
 
 /// The README's examples, compiled and run as doctests so that they cannot go stale.

@@ -239,6 +239,9 @@ pub struct DualContact<T> {
     pub normal: [T; 2],
     /// As [`Contact::witness_unique`]; where false, the derivative parts are those of one witness choice.
     pub witness_unique: bool,
+    /// What the search found, for another scalar type's pass at the same poses
+    /// ([`signed_distance_dual_seeded`]); `None` for a half-plane, whose contact is closed form.
+    pub seed: Option<ContactSeed>,
 }
 
 /// Signed distance with poses in any forward-mode dual number type of `num-dual` (first, second or third
@@ -295,9 +298,52 @@ pub fn signed_distance_dual_posed<T: Forward>(
     b: &Ellipse,
     posed_b: &DualPose<T>,
 ) -> Result<DualContact<T>, GeometryError> {
-    let (pose_a, pose_b) = (posed_a.pose, posed_b.pose);
     let re = |p: [T; 3]| [p[0].value(), p[1].value(), p[2].value()];
-    let base = signed_distance_coords(a, re(pose_a), b, re(pose_b))?;
+    let seed = ContactSeed::find(a, re(posed_a.pose), b, re(posed_b.pose))?;
+    Ok(signed_distance_dual_seeded(a, posed_a, b, posed_b, &seed))
+}
+
+/// What the search in `f64` found for a pair at the poses' values: the minimising angle of the support
+/// gap, whether Newton steps on it may refine the dual parts (a strictly convex minimum), and whether the
+/// witnesses are unique. [`signed_distance_dual_seeded`] finishes from it in any scalar type without
+/// searching again: a caller that computed the contact in `f64` at the same poses (a simulator's step)
+/// hands its seed to the derivative passes at those poses.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ContactSeed {
+    angle: f64,
+    refine: bool,
+    witness_unique: bool,
+}
+
+impl ContactSeed {
+    /// The certified search of [`signed_distance_coords`] at these poses.
+    pub fn find(
+        a: &Ellipse,
+        pose_a: PoseCoords,
+        b: &Ellipse,
+        pose_b: PoseCoords,
+    ) -> Result<Self, GeometryError> {
+        let base = signed_distance_coords(a, pose_a, b, pose_b)?;
+        let jet = base.jet;
+        Ok(ContactSeed {
+            angle: jet.phi,
+            refine: jet.ddf > f64::EPSILON * (jet.a.rho + jet.b.rho + jet.f.abs()),
+            witness_unique: base.witness_unique,
+        })
+    }
+}
+
+/// [`signed_distance_dual_posed`] from the seed the search found at the poses' values
+/// ([`ContactSeed::find`] at exactly `posed_a.pose` and `posed_b.pose`'s values: the same result to the
+/// bit as searching again; a seed found elsewhere gives the contact of another angle).
+pub fn signed_distance_dual_seeded<T: Forward>(
+    a: &Ellipse,
+    posed_a: &DualPose<T>,
+    b: &Ellipse,
+    posed_b: &DualPose<T>,
+    seed: &ContactSeed,
+) -> DualContact<T> {
+    let (pose_a, pose_b) = (posed_a.pose, posed_b.pose);
     let steps = match T::ORDER {
         0 => 0,
         1 => 1,
@@ -307,8 +353,8 @@ pub fn signed_distance_dual_posed<T: Forward>(
     let delta = [pose_a[0] - pose_b[0], pose_a[1] - pose_b[1]];
     // Each body's orientation as (sin, cos), shared by every support evaluation below.
     let (turn_a, turn_b) = (posed_a.turn, posed_b.turn);
-    let mut phi = T::from(base.jet.phi);
-    if base.jet.ddf > f64::EPSILON * (base.jet.a.rho + base.jet.b.rho + base.jet.f.abs()) {
+    let mut phi = T::from(seed.angle);
+    if seed.refine {
         for _ in 0..steps {
             let (s, c) = phi.sin_and_cos();
             let (ha, dha, ddha) = dual_support(a, turn_a, c, s);
@@ -324,13 +370,14 @@ pub fn signed_distance_dual_posed<T: Forward>(
     let (la, ha) = dual_support_point(a, turn_a, c, s);
     let (lb, hb) = dual_support_point(b, turn_b, -c, -s);
     let f = c * delta[0] + s * delta[1] + ha + hb;
-    Ok(DualContact {
+    DualContact {
         distance: -f,
         point_a: [pose_a[0] + la[0], pose_a[1] + la[1]],
         point_b: [pose_b[0] + lb[0], pose_b[1] + lb[1]],
         normal: [c, s],
-        witness_unique: base.witness_unique,
-    })
+        witness_unique: seed.witness_unique,
+        seed: Some(*seed),
+    }
 }
 
 /// A half-plane `{x : n . (x - point) <= 0}`: everything on the far side of a line (ground, a wall), with
@@ -401,6 +448,7 @@ pub fn half_plane_distance_dual_posed<T: Forward>(
         point_b: lowest,
         normal: [T::from(nx), T::from(ny)],
         witness_unique: true,
+        seed: None,
     })
 }
 

@@ -66,6 +66,19 @@ pub(super) struct Taylor {
     h: Vec<f64>,
 }
 
+#[cfg(test)]
+impl Taylor {
+    /// Every number it holds, as bits: for comparing two expansions exactly.
+    pub(super) fn bits(&self) -> Vec<u64> {
+        self.re
+            .iter()
+            .chain(&self.g)
+            .chain(&self.h)
+            .map(|e| e.to_bits())
+            .collect()
+    }
+}
+
 /// The length of a packed upper triangle of a `dim x dim` matrix.
 pub(super) const fn packed_len(dim: usize) -> usize {
     dim * (dim + 1) / 2

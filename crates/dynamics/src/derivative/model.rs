@@ -278,7 +278,7 @@ impl Model {
             }
         }));
         let (xs, us) = ys.split_at(2 * n);
-        self.geometry_into(&xs[..n], w)?;
+        self.geometry_into(&xs[..n], None, w)?;
         let (kin, cons) = (w.kin.as_ref(), w.cons.as_ref());
         let (kin, cons) = (kin.expect("made above"), cons.expect("made above"));
         kin.applied_forces_into(scene, &xs[n..], us, &mut w.r, &mut w.forces);
@@ -300,15 +300,17 @@ impl Model {
     }
 
     /// The kinematics, rows, noise, mass matrix and position correction at `q` in `w`'s vectors, as the
-    /// step sees them ([`Model::prepare_ingredients_into`]).
+    /// step sees them ([`Model::prepare_ingredients_into`]); the contacts finish from `seeds`, the step's
+    /// own contacts at `q`'s values, when given ([`Constraints::update_seeded`]).
     fn geometry_into<T: Ring>(
         &self,
         q: &[T],
+        seeds: Option<&[ContactFrame]>,
         w: &mut JetIngredients<T>,
     ) -> Result<(), DynamicsError> {
         let scene = self.scene();
         let kin = Kinematics::refresh(&mut w.kin, scene, q);
-        let cons = Constraints::refresh(&mut w.cons, scene, kin, q)?;
+        let cons = Constraints::refresh_seeded(&mut w.cons, scene, kin, q, seeds)?;
         self.noise_into(&cons.jacobian, cons.d.len(), &mut w.sigma);
         kin.mass_matrix_into(scene, &mut w.M);
         self.prepare_ingredients_into(
@@ -325,11 +327,12 @@ impl Model {
     fn geometry<const K: usize, const H: usize>(
         &self,
         q: &[Jet<K, H>],
+        seeds: Option<&[ContactFrame]>,
         w: &mut JetIngredients<Jet<K, H>>,
         (contacts, distance): (&mut Vec<ContactFrame>, &mut Vec<f64>),
         sink: &mut Sink<'_>,
     ) -> Result<(), DynamicsError> {
-        self.geometry_into(q, w)?;
+        self.geometry_into(q, seeds, w)?;
         let cons = w.cons.as_ref().expect("made above");
         if sink.first() {
             contacts.clear();
@@ -369,10 +372,12 @@ impl Model {
     /// The second-order ingredients at `(x, u)`, any number of joints: the geometry over the joint angles
     /// and the forces over `(q, v)`, to be lifted to `y`. Three joints (the finger) take one pass of
     /// three-direction jets for the geometry and one of six for the forces; up to six joints, one pass
-    /// each. Into `out`, refilled in place, the jets' working vectors among `jets`.
+    /// each. Into `out`, refilled in place, the jets' working vectors among `jets`; the contacts finish
+    /// from `seeds`, the step's own at `x`, when given.
     pub(super) fn expansion(
         &self,
         (x, u): (&[f64], &[f64]),
+        seeds: Option<&[ContactFrame]>,
         out: &mut Expansion,
         jets: &mut Vec<Box<dyn Any + Send>>,
     ) -> Result<(), DynamicsError> {
@@ -396,7 +401,7 @@ impl Model {
             ($k:literal, $h:literal) => {{
                 let JetWork { args, ing } = jet_work::<Jet<$k, $h>>(jets, (n, m));
                 Taylor::expand::<$k, $h>(geometry, &x[..n], len, args, |q, sink| {
-                    self.geometry(q, ing, (&mut *contacts, &mut *distance), sink)
+                    self.geometry(q, seeds, ing, (&mut *contacts, &mut *distance), sink)
                 })?
             }};
         }
@@ -907,8 +912,14 @@ impl Model {
             });
         }
         let DerivativeData { first, parts, .. } = diff;
+        // A stored step computed its contacts at this `x`: the expansion finishes from them.
+        let step = match &source {
+            Source::Stored(stored) => Some(stored.step),
+            Source::Solve(_) => None,
+        };
+        let seeds = step.map(|s| s.contacts.as_slice());
         with_work(|work| {
-            self.expansion((x, u), &mut parts.expansion, &mut work.jets)?;
+            self.expansion((x, u), seeds, &mut parts.expansion, &mut work.jets)?;
             let ing = &parts.expansion;
             self.linearise(x, u, Some(ing), &mut source, &mut parts.lin, work)
         })?;
@@ -1009,6 +1020,46 @@ mod tests {
         Scene::from_toml_str(include_str!("../../../../scenes/finger.toml")).unwrap()
     }
 
+    /// The expansion finished from the step's own contacts (a stored step's seeds) is the one a fresh
+    /// search gives, to the bit: on the finger, two fingers and the three-link finger (one, two and
+    /// three pairs of ellipses), along rollouts that touch, apart and in contact.
+    #[test]
+    fn the_expansion_from_the_steps_contacts_is_the_searched_one_to_the_bit() {
+        for text in [
+            include_str!("../../../../scenes/finger.toml"),
+            include_str!("../../../../scenes/two_fingers.toml"),
+            include_str!("../../../../scenes/three_link_finger.toml"),
+        ] {
+            let scene = Scene::from_toml_str(text).unwrap();
+            let (n, nu) = (scene.n_dof(), scene.n_controls);
+            let mut sim = Simulator::new(scene, StepSettings::default()).unwrap();
+            let mut x = vec![0.0; 2 * n];
+            let (mut jets, mut seeded, mut searched) =
+                (Vec::new(), Expansion::default(), Expansion::default());
+            let mut compared = 0;
+            for t in 0..40 {
+                let u: Vec<f64> = (0..nu)
+                    .map(|j| 2.0 * ((t * (j + 3)) as f64 * 0.37).sin())
+                    .collect();
+                let step = sim.step(&x, &u).unwrap();
+                let contacts = &sim.data().step().unwrap().contacts;
+                assert!(contacts.iter().any(|c| c.seed.is_some()));
+                sim.model()
+                    .expansion((&x, &u), Some(contacts), &mut seeded, &mut jets)
+                    .unwrap();
+                sim.model()
+                    .expansion((&x, &u), None, &mut searched, &mut jets)
+                    .unwrap();
+                assert_eq!(seeded.geometry.bits(), searched.geometry.bits(), "step {t}");
+                assert_eq!(seeded.forces.bits(), searched.forces.bits(), "step {t}");
+                assert_eq!(seeded.contacts, searched.contacts, "step {t}");
+                compared += 1;
+                x = step.x_next;
+            }
+            assert_eq!(compared, 40);
+        }
+    }
+
     /// The structured equation Hessians and the dual path (one pass, or one per pair of blocks of four
     /// directions) for the same step and `c`.
     fn both(sim: &mut Simulator, x: &[f64], u: &[f64], c: &[f64]) -> (Vec<f64>, Vec<f64>, f64) {
@@ -1078,7 +1129,7 @@ mod tests {
         let mut by_tree = Expansion::default();
         let mut whole = Taylor::default();
         for x in states {
-            model.expansion((x, u), &mut by_tree, &mut jets).unwrap();
+            model.expansion((x, u), None, &mut by_tree, &mut jets).unwrap();
             let JetWork { args, ing } = jet_work::<Jet<6, 21>>(&mut jets, (n, m));
             Taylor::expand::<6, 21>(&mut whole, &x[..2 * n], n, args, |qv, sink| {
                 model.forces(qv, u, None, ing);
