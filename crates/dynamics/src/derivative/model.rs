@@ -258,11 +258,13 @@ impl Model {
     }
 
     /// The ingredients in first-order duals over `y[first..first + 8]`, into `out` (refilled), the jets
-    /// they are computed in among `jets`.
+    /// they are computed in among `jets`; the contacts finish from `seeds`, the step's own at `x`, when
+    /// given.
     fn first_order_ingredients(
         &self,
         (x, u): (&[f64], &[f64]),
         first: usize,
+        seeds: Option<&[ContactFrame]>,
         jets: &mut Vec<Box<dyn Any + Send>>,
         out: &mut Ingredients<D1>,
     ) -> Result<(), DynamicsError> {
@@ -278,7 +280,7 @@ impl Model {
             }
         }));
         let (xs, us) = ys.split_at(2 * n);
-        self.geometry_into(&xs[..n], None, w)?;
+        self.geometry_into(&xs[..n], seeds, w)?;
         let (kin, cons) = (w.kin.as_ref(), w.cons.as_ref());
         let (kin, cons) = (kin.expect("made above"), cons.expect("made above"));
         kin.applied_forces_into(scene, &xs[n..], us, &mut w.r, &mut w.forces);
@@ -594,13 +596,19 @@ impl Model {
             duals,
         } = work;
         if direct.is_none() {
+            // A stored step computed its contacts at this `x`: each pass finishes from them.
+            let step = match &*source {
+                Source::Stored(stored) => Some(stored.step),
+                Source::Solve(_) => None,
+            };
+            let seeds = step.map(|s| s.contacts.as_slice());
             let count = cols.div_ceil(DIRECTIONS);
             passes.truncate(count);
             passes.resize_with(count, Ingredients::empty);
             for (pass, first) in passes.iter_mut().zip((0..cols).step_by(DIRECTIONS)) {
                 match second {
                     Some(so) => *pass = so.first_order(first, cols),
-                    _ => self.first_order_ingredients((x, u), first, jets, pass)?,
+                    _ => self.first_order_ingredients((x, u), first, seeds, jets, pass)?,
                 }
             }
         }
@@ -1053,6 +1061,30 @@ mod tests {
                 assert_eq!(seeded.geometry.bits(), searched.geometry.bits(), "step {t}");
                 assert_eq!(seeded.forces.bits(), searched.forces.bits(), "step {t}");
                 assert_eq!(seeded.contacts, searched.contacts, "step {t}");
+                // The first-order duals' ingredients (iLQR's path) as well.
+                let (mut a, mut b) = (Ingredients::empty(), Ingredients::empty());
+                let model = sim.model();
+                model
+                    .first_order_ingredients((&x, &u), 0, Some(contacts), &mut jets, &mut a)
+                    .unwrap();
+                model
+                    .first_order_ingredients((&x, &u), 0, None, &mut jets, &mut b)
+                    .unwrap();
+                let show = |i: &Ingredients<D1>| {
+                    format!(
+                        "{:?}",
+                        (
+                            &i.M,
+                            &i.r,
+                            &i.jac,
+                            &i.d,
+                            &i.sigma,
+                            &i.correction,
+                            &i.contacts
+                        )
+                    )
+                };
+                assert_eq!(show(&a), show(&b), "step {t}");
                 compared += 1;
                 x = step.x_next;
             }
@@ -1129,7 +1161,9 @@ mod tests {
         let mut by_tree = Expansion::default();
         let mut whole = Taylor::default();
         for x in states {
-            model.expansion((x, u), None, &mut by_tree, &mut jets).unwrap();
+            model
+                .expansion((x, u), None, &mut by_tree, &mut jets)
+                .unwrap();
             let JetWork { args, ing } = jet_work::<Jet<6, 21>>(&mut jets, (n, m));
             Taylor::expand::<6, 21>(&mut whole, &x[..2 * n], n, args, |qv, sink| {
                 model.forces(qv, u, None, ing);
