@@ -176,7 +176,7 @@ impl<T: Ring> Constraints<T> {
                 jacobian.extend((0..n).map(|k| if k == j { -one } else { zero }));
             }
         }
-        for (p, pair) in scene.contacts.iter().enumerate() {
+        for (index, pair) in scene.contacts.iter().enumerate() {
             // An ellipse side's shape and pose: a body's from the kinematics, a fixed one's constant.
             // (A body's angle's sine and cosine are the kinematics'.)
             let ellipse = |side: Side| match side {
@@ -213,7 +213,7 @@ impl<T: Ring> Constraints<T> {
                 }
                 (a, b) => {
                     let ((sa, pa), (sb, pb)) = (ellipse(a), ellipse(b));
-                    match seeds.and_then(|f| f.get(p)).and_then(|f| f.seed) {
+                    match seeds.and_then(|f| f.get(index)).and_then(|f| f.seed) {
                         Some(seed) => signed_distance_dual_seeded(sa, &pa, sb, &pb, &seed),
                         None => signed_distance_dual_posed(sa, &pa, sb, &pb)?,
                     }
