@@ -14,6 +14,16 @@ fn xtask() -> Command {
 }
 
 /// Spawn `args` with piped stdin and stdout; its stdout lines arrive on the returned channel.
+/// `text` written to `name` in a fresh folder of the temporary directory tagged `tag` (the folder, to
+/// remove, and the file).
+fn scene_file(tag: &str, name: &str, text: &str) -> (std::path::PathBuf, std::path::PathBuf) {
+    let dir = std::env::temp_dir().join(format!("xtask-{tag}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join(name);
+    std::fs::write(&path, text).unwrap();
+    (dir, path)
+}
+
 fn co_process(
     args: &[&str],
 ) -> (
@@ -300,10 +310,7 @@ fn simulate_without_x0_starts_from_the_files_task_or_a_checked_rest() {
     // The same scene without its task: at rest at q = 0 the block sits half in the ground.
     let text = std::fs::read_to_string(pushing).unwrap();
     let scene_only = &text[..text.find("[task.").unwrap()];
-    let dir = std::env::temp_dir().join(format!("xtask-rest-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join("pushing_scene.toml");
-    std::fs::write(&path, scene_only).unwrap();
+    let (dir, path) = scene_file("rest", "pushing_scene.toml", scene_only);
     let out = xtask()
         .args(["simulate", "--steps", "1", "--scene"])
         .arg(&path)
@@ -373,10 +380,7 @@ fn optimize_says_when_no_contact_is_felt_and_reaches_for_it() {
         1,
     )
     .replace("target = 0.6 }", "target = 1.05 }");
-    let dir = std::env::temp_dir().join(format!("xtask-reach-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join("far.toml");
-    std::fs::write(&path, text).unwrap();
+    let (dir, path) = scene_file("reach", "far.toml", &text);
     let out = xtask()
         .args([
             "optimize", "--task", "push", "--quiet", "--strict", "--scene",
@@ -452,10 +456,7 @@ fn extreme_numbers_in_a_task_read_as_exponents() {
         "x0 = { \"block.y\" = 1e300 }",
         1,
     );
-    let dir = std::env::temp_dir().join(format!("xtask-extreme-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join("extreme.toml");
-    std::fs::write(&path, text).unwrap();
+    let (dir, path) = scene_file("extreme", "extreme.toml", &text);
     let out = xtask()
         .args(["optimize", "--task", "push", "--scene"])
         .arg(&path)

@@ -100,13 +100,18 @@ pub struct Constraints<T = f64> {
 impl<T: Ring> Constraints<T> {
     /// Evaluate every row at the configuration `kin` (positions `q`).
     pub fn new(scene: &Scene, kin: &Kinematics<T>, q: &[T]) -> Result<Self, DynamicsError> {
-        let mut cons = Constraints {
+        let mut cons = Self::sized(scene);
+        cons.update(scene, kin, q)?;
+        Ok(cons)
+    }
+
+    /// Empty rows with room for the scene's.
+    fn sized(scene: &Scene) -> Self {
+        Constraints {
             d: Vec::with_capacity(scene.n_constraints()),
             jacobian: Vec::with_capacity(scene.n_constraints() * scene.n_dof()),
             contacts: Vec::with_capacity(scene.contacts.len()),
-        };
-        cons.update(scene, kin, q)?;
-        Ok(cons)
+        }
     }
 
     /// The rows in `slot` updated to `kin` ([`Constraints::update`]), or new ones made there (see
@@ -128,11 +133,7 @@ impl<T: Ring> Constraints<T> {
         q: &[T],
         seeds: Option<&[ContactFrame]>,
     ) -> Result<&'a mut Self, DynamicsError> {
-        let cons = slot.get_or_insert_with(|| Constraints {
-            d: Vec::with_capacity(scene.n_constraints()),
-            jacobian: Vec::with_capacity(scene.n_constraints() * scene.n_dof()),
-            contacts: Vec::with_capacity(scene.contacts.len()),
-        });
+        let cons = slot.get_or_insert_with(|| Self::sized(scene));
         cons.update_seeded(scene, kin, q, seeds)?;
         Ok(cons)
     }
