@@ -125,16 +125,21 @@ impl Workspace {
             // Q_ux's row and Q_uu's.
             let nm = n + m;
             let (hx, hu) = self.hess[..nm * nm].split_at(n * nm);
-            for (q, h) in self.qxx.chunks_exact_mut(n).zip(hx.chunks_exact(nm)) {
+            // (Chunk lengths of at least one: an empty state or control space adds nothing.)
+            for (q, h) in self
+                .qxx
+                .chunks_exact_mut(n.max(1))
+                .zip(hx.chunks_exact(nm.max(1)))
+            {
                 for (a, b) in q.iter_mut().zip(&h[..n]) {
                     *a += b;
                 }
             }
             let rows = self
                 .qux
-                .chunks_exact_mut(n)
+                .chunks_exact_mut(n.max(1))
                 .zip(self.quu.chunks_exact_mut(m.max(1)));
-            for ((qx, qu), h) in rows.zip(hu.chunks_exact(nm)) {
+            for ((qx, qu), h) in rows.zip(hu.chunks_exact(nm.max(1))) {
                 let (hx, hu) = h.split_at(n);
                 for (a, b) in qx.iter_mut().zip(hx) {
                     *a += b;
