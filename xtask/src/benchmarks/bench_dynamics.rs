@@ -87,6 +87,8 @@ pub fn section(reference_dir: &Path) -> anyhow::Result<String> {
         "Step time: median over the {} in-contact states of the default trajectory (x0 of SCENE.md, u = [0.3, -0.2], h = 0.05), warm-started from the previous call.\n\n| model | step (ns) | step + exact fx, fu (ns) | + Hessian of c^T f (ns) | + forward differences (ns) | + central differences (ns) |\n|---|---:|---:|---:|---:|---:|\n",
         states.len()
     ));
+    // The logistic model's step and step with exact derivatives, for the comparison with MuJoCo.
+    let mut logistic = None;
     for (name, model) in [
         ("hard (Lemke)", Complementarity::Hard),
         (
@@ -130,7 +132,11 @@ pub fn section(reference_dir: &Path) -> anyhow::Result<String> {
         out.push_str(&format!(
             "| {name} | {step:.0} | {exact:.0} | {hessian:.0} | {forward:.0} | {central:.0} |\n"
         ));
+        if matches!(model, Complementarity::Logistic { .. }) {
+            logistic = Some((step, exact));
+        }
     }
+    out.push_str(&mujoco_rows(logistic));
 
     // Scenes beyond the finger: the derivatives of any size.
     out.push_str(&scenes_table(&states)?);
@@ -280,6 +286,60 @@ pub fn section(reference_dir: &Path) -> anyhow::Result<String> {
 
 /// Median ns of a step, a step with exact `fx`, `fu`, and a step with those and the Hessian of `c^T f`,
 /// cycling through `states` under `u` (`k` counts the calls, so a caller's later timings go on cycling).
+/// MuJoCo on the same finger in the same run (`xtask/scripts/mujoco_finger.py`, with the Python of
+/// `SLCP_PYTHON`, default `python3`): a row of the step table and the ratios to the logistic model's
+/// `(step, step + exact fx, fu)`; a line saying why not when MuJoCo is not importable.
+fn mujoco_rows(logistic: Option<(f64, f64)>) -> String {
+    let python = std::env::var("SLCP_PYTHON").unwrap_or_else(|_| "python3".into());
+    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/mujoco_finger.py");
+    let output = std::process::Command::new(&python)
+        .arg(script)
+        .arg("21")
+        .output();
+    let line = match output {
+        Ok(o) if o.status.success() => String::from_utf8_lossy(&o.stdout).into_owned(),
+        Ok(o) => {
+            let why = String::from_utf8_lossy(&o.stderr);
+            let why = why.lines().last().unwrap_or("failed");
+            return format!(
+                "\nMuJoCo not run ({python}: {why}; `pip install mujoco` and set SLCP_PYTHON to compare in the same run).\n"
+            );
+        }
+        Err(e) => return format!("\nMuJoCo not run ({python}: {e}).\n"),
+    };
+    let Ok(v) = serde_json::from_str::<serde_json::Value>(line.trim()) else {
+        return format!("\nMuJoCo's script printed no result ({}).\n", line.trim());
+    };
+    let (Some(version), Some(states), Some(step), Some(forward), Some(central), Some(call)) = (
+        v["version"].as_str(),
+        v["states"].as_u64(),
+        v["step_ns"].as_f64(),
+        v["step_fd_forward_ns"].as_f64(),
+        v["step_fd_central_ns"].as_f64(),
+        v["python_call_ns"].as_f64(),
+    ) else {
+        return format!("\nMuJoCo's script printed no result ({}).\n", line.trim());
+    };
+    let mut out = format!(
+        "| MuJoCo {version} (soft contact; derivatives by `mjd_transitionFD`, eps 1e-6; median over the {states} in-contact states of its own rollout) | {step:.0} | - | - | {forward:.0} | {central:.0} |\n"
+    );
+    out.push_str(&format!(
+        "\nThe MuJoCo row is the same finger in MuJoCo, in the same run (`xtask/scripts/mujoco_finger.py`: ellipsoids in the plane, hinges about z with the file's limits and damping, SCENE.md's masses and moments of inertia, friction 0.5, h = 0.05, its default Euler integrator and soft contact): its step timed in C over the batch of states (`mujoco.rollout`), its derivatives of the transition (A = dx'/dx, B = dx'/du, each with the step) by one Python call per state, whose own overhead is about {call:.0} ns (included)."
+    ));
+    if let Some((our_step, our_exact)) = logistic {
+        out.push_str(&format!(
+            " Against it, the logistic step takes {:.2} of MuJoCo's step's time ({:.1}x as fast), and the logistic step with its exact fx, fu {:.2} of MuJoCo's step with forward differences ({:.1}x as fast; {:.1}x against its central differences).",
+            our_step / step,
+            step / our_step,
+            our_exact / forward,
+            forward / our_exact,
+            central / our_exact,
+        ));
+    }
+    out.push('\n');
+    out
+}
+
 fn derivative_times(
     s: &mut Simulator,
     states: &[Vec<f64>],
