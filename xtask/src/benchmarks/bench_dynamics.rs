@@ -284,8 +284,6 @@ pub fn section(reference_dir: &Path) -> anyhow::Result<String> {
     Ok(out)
 }
 
-/// Median ns of a step, a step with exact `fx`, `fu`, and a step with those and the Hessian of `c^T f`,
-/// cycling through `states` under `u` (`k` counts the calls, so a caller's later timings go on cycling).
 /// MuJoCo on the same finger in the same run (`xtask/scripts/mujoco_finger.py`, with the Python of
 /// `SLCP_PYTHON`, default `python3`): a row of the step table and the ratios to the logistic model's
 /// `(step, step + exact fx, fu)`; a line saying why not when MuJoCo is not importable.
@@ -340,6 +338,8 @@ fn mujoco_rows(logistic: Option<(f64, f64)>) -> String {
     out
 }
 
+/// Median ns of a step, a step with exact `fx`, `fu`, and a step with those and the Hessian of `c^T f`,
+/// cycling through `states` under `u` (`k` counts the calls, so a caller's later timings go on cycling).
 fn derivative_times(
     s: &mut Simulator,
     states: &[Vec<f64>],
