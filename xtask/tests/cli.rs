@@ -441,6 +441,82 @@ fn optimize_says_when_no_contact_is_felt_and_reaches_for_it() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// A contact the controls can reach but the task's cost does not pay for: a paddle below a hanging door
+/// whose bob it can only push up, which turns the door away from its target. The pull touches, the
+/// task's own solve from there lets go again, and `optimize` says that, not that nothing the controls do
+/// reaches a contact (which it said before).
+#[test]
+fn optimize_tells_a_contact_that_does_not_pay_from_one_out_of_reach() {
+    let text = r#"
+gravity = [0.0, -4.0]
+
+[[body]]
+name = "paddle"
+semi_axes = [0.7, 0.12]
+parent = "world"
+anchor = [-1.0, 0.0]
+centre = [0.7, 0.0]
+joint = { limits = [-1.2, 1.2], damping = 0.2, actuated = true }
+
+[[body]]
+name = "door"
+semi_axes = [0.6, 0.1]
+parent = "world"
+anchor = [0.0, 0.9]
+centre = [0.0, -0.6]
+joint = { damping = 0.4 }
+
+[[contact]]
+a = "paddle"
+b = "door"
+friction = 0.4
+
+[task.close]
+h = 0.05
+horizon = 60
+model = "logistic"
+sigma = 0.05
+x0 = { "paddle.angle" = -0.6 }
+control_weight = 0.05
+running = [{ coordinate = "door.angle", quadratic = 10.0, target = 0.3 }]
+final = [
+    { coordinate = "door.angle", quadratic = 20.0, target = 0.3 },
+    { coordinate = "door.angle", velocity = true, quadratic = 2.0 },
+]
+"#;
+    let (dir, path) = scene_file("door", "door.toml", text);
+    let out = xtask()
+        .args(["optimize", "--quiet", "--scene"])
+        .arg(&path)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        stdout.contains("reach: paddle-door pulled together (cost"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains(
+            "no contact kept: the controls can reach it (pulling paddle-door together touched)"
+        ),
+        "{stdout}"
+    );
+    assert!(
+        !stdout.contains("nothing the controls do reaches a contact"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("status: no contact felt, nothing moved through a contact"),
+        "{stdout}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 /// A user's extreme numbers (a noise scale of 1e-300, a block 1e300 up) are printed in exponent form in
 /// every message, never as a line of three hundred digits.
 #[test]

@@ -279,10 +279,26 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                             Num(o.clearance, 3)
                         )
                     });
+                    // The pairs a pull brought into contact (the task's solve from there then left it,
+                    // or cost more than never touching).
+                    let touched: Vec<String> = reach
+                        .map_or(&[][..], |r| &r.tries[..])
+                        .iter()
+                        .filter(|t| t.2.is_some())
+                        .map(|t| pair_name(&file.scene, t.0))
+                        .collect();
                     note = too_far.or_else(|| Some(match (reach.and_then(|r| r.pair), &search.continuation, sigma) {
                     (Some(p), _, _) => format!(
                         "reached the contact by pulling {} together, then solved the task's own cost",
                         pair_name(&file.scene, p)
+                    ),
+                    (None, ..) if !touched.is_empty() => format!(
+                        "no contact kept: the controls can reach it (pulling {} together touched), but the \
+                         task's own solve from there let go again or cost more than the solve that never \
+                         touches (cost {}), which is kept: no solve found through the contact pays by \
+                         the task's cost from this start",
+                        touched.join(", "),
+                        Num(search.solution.cost, 6)
                     ),
                     (None, Some(c), Some(sigma)) => match (c.felt_at, c.kept) {
                         (Some(top), true) => format!(
