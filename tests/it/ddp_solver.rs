@@ -593,3 +593,128 @@ fn the_value_model_of_a_linear_quadratic_problem_predicts_the_optimal_cost_from_
         assert!((last.cost_to_go - ddp::Cost::terminal(&cost, &sol.states[horizon])).abs() < 1e-12);
     }
 }
+
+/// A clock whose derivatives fail at some of its ticks: the state counts the steps (`x' = x + 1`, the
+/// control unused), and `calc_diff` (and full DDP's `calc_diff2_prepare`) fail where `x` is one of `bad`.
+struct FailingClock {
+    bad: Vec<f64>,
+}
+
+#[derive(Debug)]
+struct Tick(f64);
+
+impl std::fmt::Display for Tick {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "no derivatives at tick {}", self.0)
+    }
+}
+
+impl std::error::Error for Tick {}
+
+impl FailingClock {
+    fn check(&self, x: &[f64]) -> Result<(), Tick> {
+        match self.bad.contains(&x[0]) {
+            true => Err(Tick(x[0])),
+            false => Ok(()),
+        }
+    }
+}
+
+impl Dynamics for FailingClock {
+    type Error = Tick;
+    type Data = ();
+
+    fn state_dim(&self) -> usize {
+        1
+    }
+
+    fn control_dim(&self) -> usize {
+        1
+    }
+
+    fn create_data(&self) {}
+
+    fn calc(
+        &self,
+        _: &mut (),
+        _: Option<&()>,
+        x: &[f64],
+        _: &[f64],
+        next: &mut [f64],
+    ) -> Result<(), Tick> {
+        next[0] = x[0] + 1.0;
+        Ok(())
+    }
+
+    fn calc_diff(
+        &self,
+        _: &mut (),
+        x: &[f64],
+        _: &[f64],
+        fx: &mut [f64],
+        fu: &mut [f64],
+    ) -> Result<(), Tick> {
+        self.check(x)?;
+        fx[0] = 1.0;
+        fu[0] = 0.0;
+        Ok(())
+    }
+
+    fn second_order(&self) -> Option<&dyn SecondOrder<(), Error = Tick>> {
+        Some(self)
+    }
+}
+
+impl SecondOrder<()> for FailingClock {
+    type Error = Tick;
+
+    fn calc_diff2_prepare(&self, _: &mut (), x: &[f64], _: &[f64]) -> Result<(), Tick> {
+        self.check(x)
+    }
+
+    fn calc_diff2(
+        &self,
+        data: &mut (),
+        x: &[f64],
+        u: &[f64],
+        _: &[f64],
+        fx: &mut [f64],
+        fu: &mut [f64],
+        hess: &mut [f64],
+    ) -> Result<(), Tick> {
+        hess.fill(0.0);
+        self.calc_diff(data, x, u, fx, fu)
+    }
+}
+
+/// Knots differentiated on several threads (the calling thread takes the first run of knots, the pool
+/// the others) report the first knot that fails, as one thread does: where ticks 10 and 60 of 75 fail
+/// (in the calling thread's run and in a pool thread's), on 1, 2 and 3 threads, for full DDP and iLQR,
+/// the error names step 10 and its cause; where only tick 60 fails (a pool thread's run alone), step 60.
+#[test]
+fn knots_on_several_threads_report_the_first_that_fails() {
+    let cost = QuadraticCost::diagonal(&[1.0], &[1.0], &[1.0]);
+    for (bad, first) in [(vec![60.0, 10.0], 10), (vec![60.0], 60)] {
+        let clock = FailingClock { bad };
+        for method in [Method::Full, Method::GaussNewton] {
+            for threads in [1, 2, 3] {
+                let ddp = Ddp::new(DdpSettings {
+                    method,
+                    threads,
+                    ..DdpSettings::default()
+                })
+                .unwrap();
+                match ddp.solve(&clock, &cost, &[0.0], &vec![vec![0.0]; 75]) {
+                    Err(DdpError::Derivatives { step, source }) => {
+                        assert_eq!(step, first, "{method:?} on {threads} threads");
+                        assert_eq!(
+                            source.to_string(),
+                            format!("no derivatives at tick {first}")
+                        );
+                    }
+                    other => panic!("{method:?} on {threads} threads: {other:?}"),
+                }
+            }
+        }
+    }
+}

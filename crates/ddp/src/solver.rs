@@ -131,8 +131,9 @@ fn shared_pool(threads: usize) -> Result<Arc<rayon::ThreadPool>, DdpError> {
     if let Some((_, pool)) = pools.iter().find(|(t, _)| *t == threads) {
         return Ok(pool.clone());
     }
+    // The calling thread differentiates a run of knots too: the pool holds the others.
     let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
+        .num_threads(threads - 1)
         .thread_name(|i| format!("ddp-knots-{i}"))
         .build()
         .map_err(|e| DdpError::Input {
@@ -552,30 +553,62 @@ impl Ddp {
             }
             return Ok(());
         };
-        use rayon::prelude::*;
-        let failures: Vec<(usize, D::Error)> = pool.install(|| {
-            let run = |(i, d): (usize, &mut D::Data), fx: &mut [f64], fu: &mut [f64]| {
-                knot(i, d, fx, fu).err().map(|e| (i, e))
+        // One contiguous run of knots per thread, the first on the calling thread (whose caches hold
+        // the knots the forward pass just wrote), the others on the pool's `threads - 1` threads.
+        let threads = pool.current_num_threads() + 1;
+        let chunk = data.len().div_ceil(threads).max(1);
+        let failures = std::sync::Mutex::new(Vec::<(usize, D::Error)>::new());
+        let run_chunk =
+            |start: usize, data: &mut [D::Data], fx: &mut [Vec<f64>], fu: &mut [Vec<f64>]| {
+                for (j, d) in data.iter_mut().enumerate() {
+                    let (fx, fu) = match full {
+                        true => (&mut [][..], &mut [][..]),
+                        false => (&mut fx[j][..], &mut fu[j][..]),
+                    };
+                    if let Err(e) = knot(start + j, d, fx, fu) {
+                        failures
+                            .lock()
+                            .unwrap_or_else(|p| p.into_inner())
+                            .push((start + j, e));
+                        // A sequential pass stops at its first failure: the later knots of this run need
+                        // not be differentiated.
+                        break;
+                    }
+                }
             };
-            // One contiguous run of knots per thread: the fewest hand-overs, and each thread's knots
-            // adjacent in memory.
-            let chunk = data.len().div_ceil(pool.current_num_threads());
-            match full {
-                true => data
-                    .par_iter_mut()
-                    .enumerate()
-                    .with_min_len(chunk)
-                    .filter_map(|k| run(k, &mut [], &mut []))
-                    .collect(),
-                false => data
-                    .par_iter_mut()
-                    .enumerate()
-                    .zip(lin_fx.par_iter_mut().zip(lin_fu.par_iter_mut()))
-                    .with_min_len(chunk)
-                    .filter_map(|(k, (fx, fu))| run(k, fx, fu))
-                    .collect(),
+        let empty = |len: usize| (0..len).map(|_| Vec::new()).collect::<Vec<Vec<f64>>>();
+        let (mut no_fx, mut no_fu) = (empty(0), empty(0));
+        let (fx_all, fu_all): (&mut [Vec<f64>], &mut [Vec<f64>]) = match full {
+            true => (&mut no_fx[..], &mut no_fu[..]),
+            false => (&mut lin_fx[..], &mut lin_fu[..]),
+        };
+        pool.in_place_scope(|scope| {
+            let mut runs = data.chunks_mut(chunk).enumerate();
+            let first = runs.next();
+            let (mut fx_rest, mut fu_rest) = (fx_all, fu_all);
+            let mut take = |len: usize| {
+                let len_fx = len.min(fx_rest.len());
+                let (a, b) = std::mem::take(&mut fx_rest).split_at_mut(len_fx);
+                fx_rest = b;
+                let len_fu = len.min(fu_rest.len());
+                let (c, d) = std::mem::take(&mut fu_rest).split_at_mut(len_fu);
+                fu_rest = d;
+                (a, c)
+            };
+            let first = first.map(|(_, d)| {
+                let (fx, fu) = take(d.len());
+                (d, fx, fu)
+            });
+            for (c, d) in runs {
+                let (fx, fu) = take(d.len());
+                let run_chunk = &run_chunk;
+                scope.spawn(move |_| run_chunk(c * chunk, d, fx, fu));
+            }
+            if let Some((d, fx, fu)) = first {
+                run_chunk(0, d, fx, fu);
             }
         });
+        let failures = failures.into_inner().unwrap_or_else(|p| p.into_inner());
         match failures.into_iter().min_by_key(|f| f.0) {
             Some((i, e)) => Err(fail(i, e)),
             None => Ok(()),
