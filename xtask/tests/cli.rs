@@ -13,7 +13,6 @@ fn xtask() -> Command {
     c
 }
 
-/// Spawn `args` with piped stdin and stdout; its stdout lines arrive on the returned channel.
 /// `text` written to `name` in a fresh folder of the temporary directory tagged `tag` (the folder, to
 /// remove, and the file).
 fn scene_file(tag: &str, name: &str, text: &str) -> (std::path::PathBuf, std::path::PathBuf) {
@@ -23,6 +22,26 @@ fn scene_file(tag: &str, name: &str, text: &str) -> (std::path::PathBuf, std::pa
     std::fs::write(&path, text).unwrap();
     (dir, path)
 }
+
+/// The standard output of `xtask optimize ARGS --scene SCENE`, which must succeed.
+fn optimize_ok(args: &[&str], scene: &std::path::Path) -> String {
+    let out = xtask()
+        .arg("optimize")
+        .args(args)
+        .arg("--scene")
+        .arg(scene)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(
+        out.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    stdout
+}
+
+/// Spawn `args` with piped stdin and stdout; its stdout lines arrive on the returned channel.
 
 fn co_process(
     args: &[&str],
@@ -381,19 +400,7 @@ fn optimize_says_when_no_contact_is_felt_and_reaches_for_it() {
     )
     .replace("target = 0.6 }", "target = 1.05 }");
     let (dir, path) = scene_file("reach", "far.toml", &text);
-    let out = xtask()
-        .args([
-            "optimize", "--task", "push", "--quiet", "--strict", "--scene",
-        ])
-        .arg(&path)
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{stdout}{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let stdout = optimize_ok(&["--task", "push", "--quiet", "--strict"], &path);
     assert!(stdout.contains("no contact felt"), "{stdout}");
     // The pull brings the finger no nearer than the block's reach: no task solve follows it.
     assert!(
@@ -485,17 +492,7 @@ final = [
 ]
 "#;
     let (dir, path) = scene_file("door", "door.toml", text);
-    let out = xtask()
-        .args(["optimize", "--quiet", "--scene"])
-        .arg(&path)
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{stdout}{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let stdout = optimize_ok(&["--quiet"], &path);
     assert!(
         stdout.contains("reach: paddle-door pulled together (cost"),
         "{stdout}"
@@ -533,17 +530,7 @@ fn extreme_numbers_in_a_task_read_as_exponents() {
         1,
     );
     let (dir, path) = scene_file("extreme", "extreme.toml", &text);
-    let out = xtask()
-        .args(["optimize", "--task", "push", "--scene"])
-        .arg(&path)
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{stdout}{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let stdout = optimize_ok(&["--task", "push"], &path);
     assert!(
         stdout.contains("logistic contact, sigma 1e-300"),
         "{stdout}"

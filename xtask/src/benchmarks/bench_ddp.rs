@@ -165,22 +165,14 @@ fn max_gain(sol: &Solution) -> f64 {
 /// the Python of `SLCP_PYTHON`, default `python3`), as rows of the unicycle table; a line saying why not
 /// when crocoddyl is not importable.
 fn crocoddyl_rows() -> String {
-    let python = std::env::var("SLCP_PYTHON").unwrap_or_else(|_| "python3".into());
     let script = concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/crocoddyl_unicycle.py");
-    let output = std::process::Command::new(&python)
-        .arg(script)
-        .arg("21")
-        .output();
-    let lines = match output {
-        Ok(o) if o.status.success() => String::from_utf8_lossy(&o.stdout).into_owned(),
-        Ok(o) => {
-            let why = String::from_utf8_lossy(&o.stderr);
-            let why = why.lines().last().unwrap_or("failed");
+    let lines = match super::run_python(script, &["21"]) {
+        Ok(lines) => lines,
+        Err((python, why)) => {
             return format!(
                 "\ncrocoddyl not run ({python}: {why}; `pip install crocoddyl` and set SLCP_PYTHON to compare in the same run).\n"
             );
         }
-        Err(e) => return format!("\ncrocoddyl not run ({python}: {e}).\n"),
     };
     let mut rows = String::new();
     for line in lines.lines() {

@@ -288,22 +288,14 @@ pub fn section(reference_dir: &Path) -> anyhow::Result<String> {
 /// `SLCP_PYTHON`, default `python3`): a row of the step table and the ratios to the logistic model's
 /// `(step, step + exact fx, fu)`; a line saying why not when MuJoCo is not importable.
 fn mujoco_rows(logistic: Option<(f64, f64)>) -> String {
-    let python = std::env::var("SLCP_PYTHON").unwrap_or_else(|_| "python3".into());
     let script = concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/mujoco_finger.py");
-    let output = std::process::Command::new(&python)
-        .arg(script)
-        .arg("21")
-        .output();
-    let line = match output {
-        Ok(o) if o.status.success() => String::from_utf8_lossy(&o.stdout).into_owned(),
-        Ok(o) => {
-            let why = String::from_utf8_lossy(&o.stderr);
-            let why = why.lines().last().unwrap_or("failed");
+    let line = match super::run_python(script, &["21"]) {
+        Ok(line) => line,
+        Err((python, why)) => {
             return format!(
                 "\nMuJoCo not run ({python}: {why}; `pip install mujoco` and set SLCP_PYTHON to compare in the same run).\n"
             );
         }
-        Err(e) => return format!("\nMuJoCo not run ({python}: {e}).\n"),
     };
     let Ok(v) = serde_json::from_str::<serde_json::Value>(line.trim()) else {
         return format!("\nMuJoCo's script printed no result ({}).\n", line.trim());

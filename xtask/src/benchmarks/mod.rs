@@ -130,26 +130,36 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
 
 /// The Python package's call overhead: python/benchmarks/overhead.py's table, or a line saying why it
 /// did not run.
-fn python_section() -> anyhow::Result<String> {
+/// The standard output of `script args` run by the Python of `SLCP_PYTHON` (default `python3`), or why
+/// not: the interpreter's name and the last line of its standard error (or why it could not start).
+pub(crate) fn run_python(script: &str, args: &[&str]) -> Result<String, (String, String)> {
     let python = std::env::var("SLCP_PYTHON").unwrap_or_else(|_| "python3".into());
+    match std::process::Command::new(&python)
+        .arg(script)
+        .args(args)
+        .output()
+    {
+        Ok(o) if o.status.success() => Ok(String::from_utf8_lossy(&o.stdout).into_owned()),
+        Ok(o) => {
+            let why = String::from_utf8_lossy(&o.stderr);
+            let why = why.lines().last().unwrap_or("failed").to_string();
+            Err((python, why))
+        }
+        Err(e) => Err((python, e.to_string())),
+    }
+}
+
+fn python_section() -> anyhow::Result<String> {
     let script = concat!(
         env!("CARGO_MANIFEST_DIR"),
         "/../python/benchmarks/overhead.py"
     );
     let intro = "\nCalling the crates from Python (`pip install ./python`, docs/python.md): what one call adds to the work it asks for. Target: at most 1 us per `step` call.\n\n";
-    let output = std::process::Command::new(&python).arg(script).output();
-    Ok(match output {
-        Ok(o) if o.status.success() => {
-            format!("{intro}{}", String::from_utf8_lossy(&o.stdout))
-        }
-        Ok(o) => format!(
-            "{intro}Not run ({python}: {}; `pip install ./python` and set SLCP_PYTHON).\n",
-            String::from_utf8_lossy(&o.stderr)
-                .lines()
-                .last()
-                .unwrap_or("failed")
+    Ok(match run_python(script, &[]) {
+        Ok(stdout) => format!("{intro}{stdout}"),
+        Err((python, why)) => format!(
+            "{intro}Not run ({python}: {why}; `pip install ./python` and set SLCP_PYTHON).\n"
         ),
-        Err(e) => format!("{intro}Not run ({python}: {e}).\n"),
     })
 }
 
