@@ -42,7 +42,6 @@ fn optimize_ok(args: &[&str], scene: &std::path::Path) -> String {
 }
 
 /// Spawn `args` with piped stdin and stdout; its stdout lines arrive on the returned channel.
-
 fn co_process(
     args: &[&str],
 ) -> (
