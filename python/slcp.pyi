@@ -79,23 +79,28 @@ def optimize(
     horizon: Optional[int] = None,
     x0: Optional[ArrayLike] = None,
     us: Optional[ArrayLike] = None,
-    iterations: int = 300,
+    iterations: Optional[int] = None,
     method: str = "full",
     model: Optional[str] = None,
     sigma: Optional[float] = None,
     h: Optional[float] = None,
     threads: int = 1,
     max_iterations: Optional[int] = None,
+    continuation: bool = True,
 ) -> dict[str, Any]:
     """iLQG / DDP on a task of a scene file (its only task when ``task`` is None; the finger's
     ``spin`` without a scene), full second-order DDP (``method="full"``) or Gauss-Newton iLQR
-    (``"ilqr"``), from zero controls or ``us``, at most ``iterations`` passes (``max_iterations`` is its
-    alias), each pass's knots differentiated on ``threads`` threads. Returns ``states`` (N+1, n),
-    ``controls`` (N, m), ``gains`` (N, m, n) with ``u = controls[i] + gains[i] @ (x - states[i])``, the
-    local value model ``cost_to_go`` (N+1,), ``value_gradient`` (N+1, n) and ``value_hessian`` (N+1, n,
-    n), ``cost``, ``passes``, ``status`` (``"cost converged"``, ``"step converged"``, ``"pass limit
-    reached"``, ``"no descent"``, ``"regularisation exceeded"``), ``converged`` and ``task``. Releases
-    the GIL."""
+    (``"ilqr"``), from zero controls or ``us``, at most ``iterations`` passes (300 when neither it nor
+    its alias ``max_iterations`` is given), each pass's knots differentiated on ``threads`` threads.
+    Where the solve never touches the contact its task needs, it reaches for it as ``cargo xtask
+    optimize`` does (pulls, then continuation in the noise scale), unless ``continuation`` is False.
+    Returns ``states`` (N+1, n), ``controls`` (N, m), ``gains`` (N, m, n) with ``u = controls[i] +
+    gains[i] @ (x - states[i])``, the local value model ``cost_to_go`` (N+1,), ``value_gradient`` (N+1,
+    n) and ``value_hessian`` (N+1, n, n), ``cost``, ``passes``, ``status`` (``"cost converged"``,
+    ``"step converged"``, ``"pass limit reached"``, ``"no descent"``, ``"regularisation exceeded"``, or
+    ``"no contact felt"``), ``optimiser_status`` (the optimiser's alone), ``converged`` (converged with
+    the contact felt), ``contact`` (``"felt"``, ``"pulled A-B together"``, ``"continued in the noise
+    scale"`` or ``"not felt: ..."``) and ``task``. Releases the GIL."""
 
 class Library:
     """A controller library (paper section IV-C) and its global nearest-neighbour policy."""

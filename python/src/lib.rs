@@ -425,9 +425,18 @@ impl Simulator {
 /// `u = controls[i] + gains[i] @ (x - states[i])`; the local value model `cost_to_go` (N+1,),
 /// `value_gradient` (N+1, n), `value_hessian` (N+1, n, n); `cost`; `passes`; `status` (why it stopped:
 /// "cost converged", "step converged", "pass limit reached", "no descent", "regularisation
-/// exceeded"); `converged` (the first two); `task` (its name). The GIL is released while it runs.
+/// exceeded", or "no contact felt" where the solve never touches the contact its task needs);
+/// `optimiser_status` (why the optimiser stopped, whatever the contact); `converged` (the first two,
+/// with the contact felt); `contact` (how the contact was felt: "felt" by the first solve, "pulled
+/// A-B together", "continued in the noise scale", or "not felt" with the reason); `task` (its name). The
+/// GIL is released while it runs.
+///
+/// `continuation` (default True): where the first solve never touches the contact the task's cost needs
+/// (its gradient is zero out of reach), reach for it as `cargo xtask optimize` does: pull each needed pair
+/// together, then continue in the noise scale (docs/tasks.md); the result replaces the first solve only
+/// where it feels the contact and costs less. False only reports it.
 #[pyfunction]
-#[pyo3(signature = (scene=None, task=None, horizon=None, x0=None, us=None, iterations=None, method="full", model=None, sigma=None, h=None, threads=1, max_iterations=None))]
+#[pyo3(signature = (scene=None, task=None, horizon=None, x0=None, us=None, iterations=None, method="full", model=None, sigma=None, h=None, threads=1, max_iterations=None, continuation=true))]
 #[allow(clippy::too_many_arguments)]
 fn optimize<'py>(
     py: Python<'py>,
@@ -443,6 +452,7 @@ fn optimize<'py>(
     h: Option<f64>,
     threads: usize,
     max_iterations: Option<usize>,
+    continuation: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
     // `max_iterations` (the crates' name) is an alias of `iterations` (the command line's): either may
     // be given, both only when they agree (an explicit 300 included); neither means 300.
@@ -514,10 +524,55 @@ fn optimize<'py>(
     })
     .map_err(error)?;
     let cost = task.cost.clone();
-    let sol = py.allow_threads(move || {
+    let scene = file.scene.clone();
+    let (sol, felt, contact) = py.allow_threads(move || {
         shielded(|| {
-            ddp.solve(&SceneDynamics::new(sim), &cost, &x0, &us)
-                .map_err(error)
+            let settings = *sim.settings();
+            let mut probe = RsSimulator::new(scene.clone(), settings).map_err(error)?;
+            let sol = ddp
+                .solve(&SceneDynamics::new(sim), &cost, &x0, &us)
+                .map_err(error)?;
+            if !continuation {
+                let felt =
+                    ::task::contact_felt(&mut probe, &cost, &x0, &sol.controls).map_err(error)?;
+                let contact = match felt {
+                    true => "felt".to_string(),
+                    false => "not felt (continuation=False)".to_string(),
+                };
+                return Ok((sol, felt, contact));
+            }
+            let problem = ::task::ContactProblem {
+                ddp: &ddp,
+                scene: &scene,
+                settings: &settings,
+                cost: &cost,
+                x0: &x0,
+            };
+            let search = problem.feel_contact(sol, |_, _, _| {}).map_err(error)?;
+            let name = |pair: usize| {
+                scene
+                    .pair_name(pair)
+                    .unwrap_or_else(|| format!("contact pair {pair}"))
+            };
+            let kept = search.continuation.as_ref().is_some_and(|c| c.kept);
+            let contact = match (&search.reach, &search.out_of_reach) {
+                _ if search.felt => "felt".to_string(),
+                (Some(::task::Reach { pair: Some(p), .. }), _) => {
+                    format!("pulled {} together", name(*p))
+                }
+                _ if kept => "continued in the noise scale".to_string(),
+                (_, Some(o)) => format!(
+                    "not felt: {} stays apart by more than twice the driven body's reach",
+                    name(o.pair)
+                ),
+                (Some(r), _) if r.tries.iter().any(|t| t.2.is_some()) => {
+                    "not felt: a pull touched, but no solve through the contact costs less"
+                        .to_string()
+                }
+                _ => "not felt: no pull or continuation found it".to_string(),
+            };
+            let felt = search.found();
+            Ok((search.solution, felt, contact))
         })
     })?;
     let out = PyDict::new(py);
@@ -554,8 +609,14 @@ fn optimize<'py>(
     )?;
     out.set_item("cost", sol.cost)?;
     out.set_item("passes", sol.iterations.len())?;
-    out.set_item("status", sol.status.to_string())?;
-    out.set_item("converged", sol.status.converged())?;
+    let status = match felt {
+        true => sol.status.to_string(),
+        false => "no contact felt".to_string(),
+    };
+    out.set_item("status", status)?;
+    out.set_item("optimiser_status", sol.status.to_string())?;
+    out.set_item("converged", felt && sol.status.converged())?;
+    out.set_item("contact", contact)?;
     out.set_item("task", task.name)?;
     Ok(out)
 }

@@ -118,10 +118,25 @@ def test_bad_input_raises_with_the_crates_message_and_never_crashes(root, tmp_pa
     assert issubclass(slcp.SlcpError, ValueError)
 
 
+def test_optimize_reaches_for_a_contact_out_of_reach_and_says_so(root):
+    # The slider's prongs start 0.45 from the block (sigma 0.05): the first solve never touches it.
+    scene = root / "scenes" / "slider_push.toml"
+    sol = slcp.optimize(scene)
+    assert sol["contact"] == "pulled pusher-block together", sol["contact"]
+    assert sol["converged"] and sol["status"] == sol["optimiser_status"]
+    assert abs(sol["cost"] - 3.120149) < 1e-5, sol["cost"]
+    # Without the search it says so, and does not call that converged.
+    alone = slcp.optimize(scene, continuation=False)
+    assert alone["contact"] == "not felt (continuation=False)"
+    assert alone["status"] == "no contact felt" and not alone["converged"]
+    assert alone["optimiser_status"] in ("cost converged", "step converged")
+    assert alone["cost"] > sol["cost"]
+
+
 def test_optimize_returns_the_trajectory_its_gains_and_value_model(root):
     sol = slcp.optimize(root / "scenes" / "pushing.toml", task="push", iterations=300)
     n, m, N = 10, 2, 60
-    assert sol["converged"] and sol["task"] == "push"
+    assert sol["converged"] and sol["task"] == "push" and sol["contact"] == "felt"
     # Why it stopped, in the command line's words.
     assert sol["status"] in ("cost converged", "step converged"), sol["status"]
     assert sol["states"].shape == (N + 1, n) and sol["controls"].shape == (N, m)

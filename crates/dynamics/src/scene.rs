@@ -881,6 +881,23 @@ impl Scene {
         i
     }
 
+    /// The name the scene file gives a side of a contact pair (its body's, half-plane's or fixed
+    /// ellipse's); `None` for an index the scene does not have.
+    pub fn side_name(&self, side: Side) -> Option<&str> {
+        match side {
+            Side::Body(i) => self.bodies.get(i).map(|b| b.name.as_str()),
+            Side::Fixed(i) => self.fixed.get(i).map(|f| f.name.as_str()),
+            Side::Plane(i) => self.planes.get(i).map(|p| p.name.as_str()),
+        }
+    }
+
+    /// Contact pair `pair` named by its two sides, `a-b` (`link2-ellipse`, `ground-block`); `None` for a
+    /// pair the scene does not have.
+    pub fn pair_name(&self, pair: usize) -> Option<String> {
+        let c = self.contacts.get(pair)?;
+        Some(format!("{}-{}", self.side_name(c.a)?, self.side_name(c.b)?))
+    }
+
     /// Whether a control acts on `body`'s own joint (its carrier's, for a welded body): a driven body, not
     /// a free object of a task.
     pub fn actuated(&self, body: usize) -> bool {

@@ -428,10 +428,7 @@ fn task_summary(scene: &dynamics::Scene, task: &task::Task, states: &[Vec<f64>])
 
 /// A contact pair as `a-b`, by its bodies' names.
 fn pair_name(scene: &dynamics::Scene, pair: usize) -> String {
-    let side = |s: dynamics::Side| match s {
-        dynamics::Side::Body(i) => scene.bodies[i].name.clone(),
-        other => format!("{other:?}"),
-    };
-    let c = &scene.contacts[pair];
-    format!("{}-{}", side(c.a), side(c.b))
+    scene
+        .pair_name(pair)
+        .unwrap_or_else(|| format!("contact pair {pair}"))
 }
