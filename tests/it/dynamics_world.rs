@@ -138,6 +138,22 @@ fn the_world_geometry_is_read_and_checked() {
     ));
 }
 
+/// Each contact pair is named by its file's names, whatever its sides are (a half-plane, a body, a fixed
+/// ellipse), in the file's order; a pair or side the scene does not have has no name.
+#[test]
+fn contact_pairs_are_named_by_their_sides_names() {
+    let scene = pendulum();
+    let names: Vec<String> = (0..scene.contacts.len())
+        .map(|k| scene.pair_name(k).unwrap())
+        .collect();
+    assert_eq!(names, ["ground-lower", "upper-peg", "lower-peg"]);
+    assert_eq!(scene.pair_name(3), None);
+    assert_eq!(scene.side_name(dynamics::Side::Plane(0)), Some("ground"));
+    assert_eq!(scene.side_name(dynamics::Side::Fixed(0)), Some("peg"));
+    assert_eq!(scene.side_name(dynamics::Side::Body(1)), Some("lower"));
+    assert_eq!(scene.side_name(dynamics::Side::Plane(1)), None);
+}
+
 #[test]
 fn the_hard_world_holds_the_pendulum_on_the_ground_and_never_adds_energy() {
     let scene = pendulum();
