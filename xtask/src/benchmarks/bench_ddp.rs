@@ -198,7 +198,7 @@ fn crocoddyl_rows() -> String {
 
 pub fn section() -> anyhow::Result<String> {
     let mut out = String::new();
-    out.push_str("The unicycle benchmark of the ddp issue: x0 = [-1, -1, 1], dt = 0.1, T = 75, running cost 50 |x|^2 + 0.5 |u|^2 (not scaled by dt), final 50 |x_T|^2, zero initial controls (`cargo xtask optimize --problem unicycle [--method ilqr] [--regularisation control] [--limit 2]`). Time: median of 5 solves. The regularisation is the state one (`Q_uu + mu f_u^T f_u`) unless the row says control (`Q_uu + mu I`, as crocoddyl regularises). With the state one, full DDP's `V_x f_xx` terms keep `V_xx` indefinite early on, so `mu` climbs to about 1e4 and the first twenty passes are small steps; with the control one the same optimum takes 15 passes.\n\n| method | controls | passes | status | final cost | solve (ms) | per pass (us) |\n|---|---|---:|---|---:|---:|---:|\n");
+    out.push_str("The unicycle benchmark of the ddp issue: x0 = [-1, -1, 1], dt = 0.1, T = 75, running cost 50 |x|^2 + 0.5 |u|^2 (not scaled by dt), final 50 |x_T|^2, zero initial controls (`cargo xtask optimize --problem unicycle [--method ilqr] [--regularisation control] [--limit 2]`). Time: median of 21 solves, as for crocoddyl below. The regularisation is the state one (`Q_uu + mu f_u^T f_u`) unless the row says control (`Q_uu + mu I`, as crocoddyl regularises). With the state one, full DDP's `V_x f_xx` terms keep `V_xx` indefinite early on, so `mu` climbs to about 1e4 and the first twenty passes are small steps; with the control one the same optimum takes 15 passes.\n\n| method | controls | passes | status | final cost | solve (ms) | per pass (us) |\n|---|---|---:|---|---:|---:|---:|\n");
     for (method, regularisation, name) in [
         (Method::Full, Regularisation::State, "full DDP"),
         (
@@ -221,7 +221,7 @@ pub fn section() -> anyhow::Result<String> {
             let ddp = Ddp::new(s)?;
             let mut times = Vec::new();
             let mut last = None;
-            for _ in 0..5 {
+            for _ in 0..21 {
                 let t = Instant::now();
                 let sol = ddp.solve(
                     &Unicycle { dt: 0.1 },
