@@ -542,22 +542,13 @@ impl Ddp {
             Some(second) => second.calc_diff2_prepare(data, &x[i], &u[i]),
             None => dynamics.calc_diff(data, &x[i], &u[i], fx, fu),
         };
-        let (lin_fx, lin_fu) = (&mut work.lin_fx, &mut work.lin_fu);
-        let Some(pool) = &self.pool else {
-            for (i, d) in data.iter_mut().enumerate() {
-                let (fx, fu) = match full {
-                    true => (&mut [][..], &mut [][..]),
-                    false => (&mut lin_fx[i][..], &mut lin_fu[i][..]),
-                };
-                knot(i, d, fx, fu).map_err(|e| fail(i, e))?;
-            }
-            return Ok(());
+        // Gauss-Newton writes each knot's fx, fu into the workspace; full DDP keeps all in the data.
+        let (fx_all, fu_all): (&mut [Vec<f64>], &mut [Vec<f64>]) = match full {
+            true => (&mut [], &mut []),
+            false => (&mut work.lin_fx[..], &mut work.lin_fu[..]),
         };
-        // One contiguous run of knots per thread, the first on the calling thread (whose caches hold
-        // the knots the forward pass just wrote), the others on the pool's `threads - 1` threads.
-        let threads = pool.current_num_threads() + 1;
-        let chunk = data.len().div_ceil(threads).max(1);
         let failures = std::sync::Mutex::new(Vec::<(usize, D::Error)>::new());
+        // Knots `start..` of `data` in order, up to the first that fails.
         let run_chunk =
             |start: usize, data: &mut [D::Data], fx: &mut [Vec<f64>], fu: &mut [Vec<f64>]| {
                 for (j, d) in data.iter_mut().enumerate() {
@@ -570,44 +561,43 @@ impl Ddp {
                             .lock()
                             .unwrap_or_else(|p| p.into_inner())
                             .push((start + j, e));
-                        // A sequential pass stops at its first failure: the later knots of this run need
-                        // not be differentiated.
                         break;
                     }
                 }
             };
-        let empty = |len: usize| (0..len).map(|_| Vec::new()).collect::<Vec<Vec<f64>>>();
-        let (mut no_fx, mut no_fu) = (empty(0), empty(0));
-        let (fx_all, fu_all): (&mut [Vec<f64>], &mut [Vec<f64>]) = match full {
-            true => (&mut no_fx[..], &mut no_fu[..]),
-            false => (&mut lin_fx[..], &mut lin_fu[..]),
-        };
-        pool.in_place_scope(|scope| {
-            let mut runs = data.chunks_mut(chunk).enumerate();
-            let first = runs.next();
-            let (mut fx_rest, mut fu_rest) = (fx_all, fu_all);
-            let mut take = |len: usize| {
-                let len_fx = len.min(fx_rest.len());
-                let (a, b) = std::mem::take(&mut fx_rest).split_at_mut(len_fx);
-                fx_rest = b;
-                let len_fu = len.min(fu_rest.len());
-                let (c, d) = std::mem::take(&mut fu_rest).split_at_mut(len_fu);
-                fu_rest = d;
-                (a, c)
-            };
-            let first = first.map(|(_, d)| {
-                let (fx, fu) = take(d.len());
-                (d, fx, fu)
-            });
-            for (c, d) in runs {
-                let (fx, fu) = take(d.len());
-                let run_chunk = &run_chunk;
-                scope.spawn(move |_| run_chunk(c * chunk, d, fx, fu));
+        match &self.pool {
+            None => run_chunk(0, data, fx_all, fu_all),
+            Some(pool) => {
+                // One contiguous run of knots per thread, the first on the calling thread (whose caches
+                // hold the knots the forward pass just wrote), the others on the pool's `threads - 1`.
+                let chunk = data.len().div_ceil(pool.current_num_threads() + 1).max(1);
+                pool.in_place_scope(|scope| {
+                    let (mut fx_rest, mut fu_rest) = (fx_all, fu_all);
+                    // The next `len` knots' fx and fu (none for full DDP).
+                    let mut take = |len: usize| {
+                        let (fx_len, fu_len) = (len.min(fx_rest.len()), len.min(fu_rest.len()));
+                        let (fx, rest) = std::mem::take(&mut fx_rest).split_at_mut(fx_len);
+                        fx_rest = rest;
+                        let (fu, rest) = std::mem::take(&mut fu_rest).split_at_mut(fu_len);
+                        fu_rest = rest;
+                        (fx, fu)
+                    };
+                    let mut runs = data.chunks_mut(chunk);
+                    let first = runs.next().map(|d| {
+                        let (fx, fu) = take(d.len());
+                        (d, fx, fu)
+                    });
+                    for (c, d) in runs.enumerate() {
+                        let (fx, fu) = take(d.len());
+                        let run_chunk = &run_chunk;
+                        scope.spawn(move |_| run_chunk((c + 1) * chunk, d, fx, fu));
+                    }
+                    if let Some((d, fx, fu)) = first {
+                        run_chunk(0, d, fx, fu);
+                    }
+                });
             }
-            if let Some((d, fx, fu)) = first {
-                run_chunk(0, d, fx, fu);
-            }
-        });
+        }
         let failures = failures.into_inner().unwrap_or_else(|p| p.into_inner());
         match failures.into_iter().min_by_key(|f| f.0) {
             Some((i, e)) => Err(fail(i, e)),
