@@ -447,13 +447,9 @@ fn optimize_says_when_no_contact_is_felt_and_reaches_for_it() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
-/// A contact the controls can reach but the task's cost does not pay for: a paddle below a hanging door
-/// whose bob it can only push up, which turns the door away from its target. The pull touches, the
-/// task's own solve from there lets go again, and `optimize` says that, not that nothing the controls do
-/// reaches a contact (which it said before).
-#[test]
-fn optimize_tells_a_contact_that_does_not_pay_from_one_out_of_reach() {
-    let text = r#"
+/// A paddle below a hanging door whose bob it can only push up, which turns the door away from its
+/// target: a contact the controls reach but the task's cost does not pay for.
+const DOOR: &str = r#"
 gravity = [0.0, -4.0]
 
 [[body]]
@@ -490,7 +486,14 @@ final = [
     { coordinate = "door.angle", velocity = true, quadratic = 2.0 },
 ]
 "#;
-    let (dir, path) = scene_file("door", "door.toml", text);
+
+/// A contact the controls can reach but the task's cost does not pay for: a paddle below a hanging door
+/// whose bob it can only push up, which turns the door away from its target. The pull touches, the
+/// task's own solve from there lets go again, and `optimize` says that, not that nothing the controls do
+/// reaches a contact (which it said before).
+#[test]
+fn optimize_tells_a_contact_that_does_not_pay_from_one_out_of_reach() {
+    let (dir, path) = scene_file("door", "door.toml", DOOR);
     let stdout = optimize_ok(&["--quiet"], &path);
     assert!(
         stdout.contains("reach: paddle-door pulled together (cost"),
@@ -508,6 +511,39 @@ final = [
     );
     assert!(
         stdout.contains("status: no contact felt, nothing moved through a contact"),
+        "{stdout}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// `train` ends with how the library's policy does without kicks on `evaluate`'s worlds, by the task's
+/// criterion, and where it succeeds on none says where to look: the door's task cannot succeed.
+#[test]
+fn train_reports_its_policys_unkicked_verdict() {
+    let (dir, path) = scene_file("door-train", "door.toml", DOOR);
+    let out = xtask()
+        .args(["train", "--trajectories", "20", "--scene"])
+        .arg(&path)
+        .arg("--out")
+        .arg(dir.join("door.lib"))
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        stdout.contains("without kicks for 40 s from the task's start, its policy succeeds on 0 of 4 worlds (door.angle -> 0.3 within 0.05"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("not on logistic 0.05 at h = 0.05, hard at h = 0.05"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("On none: `cargo xtask optimize`"),
         "{stdout}"
     );
     std::fs::remove_dir_all(&dir).ok();

@@ -188,7 +188,52 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     }
     library.save(&args.out)?;
     println!("wrote {}", args.out.display());
+    println!("{}", unkicked_verdict(&library)?);
     Ok(())
+}
+
+/// Simulated seconds of the check `train` reports: `evaluate`'s unkicked run of `examples` (and the
+/// build's final check).
+const CHECK_SECONDS: f64 = 40.0;
+
+/// How the library's policy does from the task's start without kicks, on the worlds `evaluate` runs,
+/// by the task's own success criterion: one line, with a hint where no world succeeds.
+fn unkicked_verdict(library: &Library) -> anyhow::Result<String> {
+    let policy = library.policy()?;
+    let worlds = crate::tools::evaluate::worlds(library);
+    let mut failed = Vec::new();
+    for (world, model, h) in &worlds {
+        let settings = library::EvaluationSettings {
+            model: *model,
+            h: *h,
+            seconds: CHECK_SECONDS,
+            kick_every: 0.0,
+            kick_std: 0.0,
+            seed: 0,
+            x0: library.x0().to_vec(),
+        };
+        if !library::evaluate(library, &policy, &settings)?
+            .success
+            .passed
+        {
+            failed.push(format!("{world} at h = {h}"));
+        }
+    }
+    let succeeding = worlds.len() - failed.len();
+    let criterion = library.success().describe(&library.scene().state_names());
+    let mut line = format!(
+        "without kicks for {CHECK_SECONDS} s from the task's start, its policy succeeds on {succeeding} of {} worlds ({criterion})",
+        worlds.len()
+    );
+    if !failed.is_empty() {
+        line.push_str(&format!("; not on {}", failed.join(", ")));
+    }
+    if succeeding == 0 {
+        line.push_str(
+            ". On none: `cargo xtask optimize` on the task says whether a solve from its start feels the contact the task needs and whether that contact pays (docs/tasks.md), and `cargo xtask evaluate` gives the measures",
+        );
+    }
+    Ok(line)
 }
 
 /// `train`'s settings for `task` with no flag but `--seed`: the default recipe on the task's model, time
