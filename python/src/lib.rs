@@ -554,22 +554,23 @@ fn optimize<'py>(
                     .pair_name(pair)
                     .unwrap_or_else(|| format!("contact pair {pair}"))
             };
-            let kept = search.continuation.as_ref().is_some_and(|c| c.kept);
-            let contact = match (&search.reach, &search.out_of_reach) {
-                _ if search.felt => "felt".to_string(),
-                (Some(::task::Reach { pair: Some(p), .. }), _) => {
-                    format!("pulled {} together", name(*p))
-                }
-                _ if kept => "continued in the noise scale".to_string(),
-                (_, Some(o)) => format!(
+            let contact = match search.outcome() {
+                ::task::ContactOutcome::Felt => "felt".to_string(),
+                ::task::ContactOutcome::Pulled(p) => format!("pulled {} together", name(p)),
+                ::task::ContactOutcome::Continued(_) => "continued in the noise scale".to_string(),
+                ::task::ContactOutcome::OutOfReach(o) => format!(
                     "not felt: {} stays apart by more than twice the driven body's reach",
                     name(o.pair)
                 ),
-                (Some(r), _) if r.tries.iter().any(|t| t.2.is_some()) => {
+                ::task::ContactOutcome::TouchedNotKept(_) => {
                     "not felt: a pull touched, but no solve through the contact costs less"
                         .to_string()
                 }
-                _ => "not felt: no pull or continuation found it".to_string(),
+                ::task::ContactOutcome::Lost(_)
+                | ::task::ContactOutcome::NeverFelt
+                | ::task::ContactOutcome::NoContinuation => {
+                    "not felt: no pull or continuation found it".to_string()
+                }
             };
             let felt = search.found();
             Ok((search.solution, felt, contact))

@@ -23,15 +23,9 @@ fn scene_file(tag: &str, name: &str, text: &str) -> (std::path::PathBuf, std::pa
     (dir, path)
 }
 
-/// The standard output of `xtask optimize ARGS --scene SCENE`, which must succeed.
-fn optimize_ok(args: &[&str], scene: &std::path::Path) -> String {
-    let out = xtask()
-        .arg("optimize")
-        .args(args)
-        .arg("--scene")
-        .arg(scene)
-        .output()
-        .unwrap();
+/// The standard output of `command`, which must succeed (else both its outputs are shown).
+fn succeeds(command: &mut Command) -> String {
+    let out = command.output().unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
     assert!(
         out.status.success(),
@@ -39,6 +33,11 @@ fn optimize_ok(args: &[&str], scene: &std::path::Path) -> String {
         String::from_utf8_lossy(&out.stderr)
     );
     stdout
+}
+
+/// The standard output of `xtask optimize ARGS --scene SCENE`, which must succeed.
+fn optimize_ok(args: &[&str], scene: &std::path::Path) -> String {
+    succeeds(xtask().arg("optimize").args(args).arg("--scene").arg(scene))
 }
 
 /// Spawn `args` with piped stdin and stdout; its stdout lines arrive on the returned channel.
@@ -521,18 +520,12 @@ fn optimize_tells_a_contact_that_does_not_pay_from_one_out_of_reach() {
 #[test]
 fn train_reports_its_policys_unkicked_verdict() {
     let (dir, path) = scene_file("door-train", "door.toml", DOOR);
-    let out = xtask()
-        .args(["train", "--trajectories", "20", "--scene"])
-        .arg(&path)
-        .arg("--out")
-        .arg(dir.join("door.lib"))
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{stdout}{}",
-        String::from_utf8_lossy(&out.stderr)
+    let stdout = succeeds(
+        xtask()
+            .args(["train", "--trajectories", "20", "--scene"])
+            .arg(&path)
+            .arg("--out")
+            .arg(dir.join("door.lib")),
     );
     assert!(
         stdout.contains("without kicks for 40 s from the task's start, its policy succeeds on 0 of 4 worlds (door.angle -> 0.3 within 0.05"),
@@ -590,29 +583,23 @@ fn train_says_when_it_lengthened_a_stalled_horizon() {
     let dir = std::env::temp_dir().join(format!("xtask-horizon-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let paddle = concat!(env!("CARGO_MANIFEST_DIR"), "/../tests/data/paddle.toml");
-    let out = xtask()
-        .args([
-            "train",
-            "--scene",
-            paddle,
-            "--trajectories",
-            "80",
-            "--trunk",
-            "80",
-            "--settle",
-            "5",
-            "--growth",
-            "0",
-            "--out",
-        ])
-        .arg(dir.join("paddle.lib"))
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{stdout}{}",
-        String::from_utf8_lossy(&out.stderr)
+    let stdout = succeeds(
+        xtask()
+            .args([
+                "train",
+                "--scene",
+                paddle,
+                "--trajectories",
+                "80",
+                "--trunk",
+                "80",
+                "--settle",
+                "5",
+                "--growth",
+                "0",
+                "--out",
+            ])
+            .arg(dir.join("paddle.lib")),
     );
     assert!(
         stdout.contains("the receding horizon of 90 steps let the task stall")

@@ -22,9 +22,9 @@ pub use problem::{
 };
 pub use progress::Progress;
 pub use reach::{
-    CONTINUATION_DOUBLINGS, ContactProblem, ContactSearch, Continuation, OUT_OF_REACH_SLACK,
-    OutOfReach, REACH_PULL, REACH_PULL_PASSES, Reach, ReachCost, contact_felt, needed_pairs,
-    noise_scale,
+    CONTINUATION_DOUBLINGS, ContactOutcome, ContactProblem, ContactSearch, Continuation,
+    OUT_OF_REACH_SLACK, OutOfReach, REACH_PULL, REACH_PULL_PASSES, Reach, ReachCost, contact_felt,
+    needed_pairs, noise_scale,
 };
 pub use scene_dynamics::{SceneDynamics, StepError};
 

@@ -286,6 +286,64 @@ impl ContactSearch {
             || self.reach.as_ref().is_some_and(|r| r.pair.is_some())
             || self.continuation.as_ref().is_some_and(|c| c.kept)
     }
+
+    /// How the search ended, the first that applies in this order: the one classification `optimize`'s
+    /// message and Python's `contact` are written from.
+    pub fn outcome(&self) -> ContactOutcome {
+        if self.felt {
+            return ContactOutcome::Felt;
+        }
+        if let Some(o) = self.out_of_reach {
+            return ContactOutcome::OutOfReach(o);
+        }
+        let tries = self.reach.as_ref().map_or(&[][..], |r| &r.tries[..]);
+        if let Some(p) = self.reach.as_ref().and_then(|r| r.pair) {
+            return ContactOutcome::Pulled(p);
+        }
+        let touched: Vec<usize> = tries
+            .iter()
+            .filter(|t| t.2.is_some())
+            .map(|t| t.0)
+            .collect();
+        if !touched.is_empty() {
+            return ContactOutcome::TouchedNotKept(touched);
+        }
+        match &self.continuation {
+            Some(Continuation {
+                felt_at: Some(top),
+                kept: true,
+                ..
+            }) => ContactOutcome::Continued(*top),
+            Some(Continuation {
+                felt_at: Some(top), ..
+            }) => ContactOutcome::Lost(*top),
+            Some(_) => ContactOutcome::NeverFelt,
+            None => ContactOutcome::NoContinuation,
+        }
+    }
+}
+
+/// How a [`ContactSearch`] ended ([`ContactSearch::outcome`]).
+#[derive(Debug, Clone, PartialEq)]
+pub enum ContactOutcome {
+    /// The start felt the contact: nothing else was tried.
+    Felt,
+    /// Too far to search ([`ContactProblem::out_of_reach`]): no pull or continuation was tried.
+    OutOfReach(OutOfReach),
+    /// The pull of this pair led to the solve kept.
+    Pulled(usize),
+    /// The pulls of these pairs touched, but the task's own solve from there let go again or cost more
+    /// than the start, which is kept: from this start the contact does not pay by the task's cost.
+    TouchedNotKept(Vec<usize>),
+    /// Continuation in the noise scale felt the contact at this sigma and kept it down to the task's.
+    Continued(f64),
+    /// Continuation felt the contact at this sigma and lost it (or found no cheaper solve) on the way
+    /// back down; the start is kept.
+    Lost(f64),
+    /// Continuation never felt the contact, up to [`CONTINUATION_DOUBLINGS`] doublings of sigma.
+    NeverFelt,
+    /// No pull found it, and the model has no noise scale to continue in (the hard model).
+    NoContinuation,
 }
 
 /// A solve's problem for the contact searches: the optimiser, the scene under a step setting (its

@@ -6,14 +6,15 @@
 
 use crate::experiments::draw::register_font;
 use crate::experiments::task_pictures::task_pictures;
+use crate::tools::evaluate::in_world;
 use anyhow::Context;
 use ddp::{Ddp, DdpSettings};
-use library::{Evaluation, EvaluationSettings, Library, LibrarySettings, evaluate};
+use library::{Evaluation, Library, LibrarySettings};
 use serde::Serialize;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
-use task::{ContactModel, ProblemFile, SceneDynamics, Task};
+use task::{ProblemFile, SceneDynamics, Task};
 
 /// Options of `cargo xtask examples`.
 #[derive(Debug, clap::Args)]
@@ -297,31 +298,6 @@ impl ExampleResult {
     }
 }
 
-/// The closed loop of `lib`'s policy from the task's x0 in one world, with kicks every `kick_every` s
-/// (0: none): its evaluation.
-fn evaluated(
-    lib: &Library,
-    policy: &library::Policy,
-    task: &Task,
-    (model, h): (ContactModel, f64),
-    seconds: f64,
-    (kick_every, kick_seed): (f64, u64),
-) -> anyhow::Result<Evaluation> {
-    Ok(evaluate(
-        lib,
-        policy,
-        &EvaluationSettings {
-            model,
-            h,
-            seconds,
-            kick_every,
-            kick_std: KICK_STD,
-            seed: kick_seed,
-            x0: task.x0.clone(),
-        },
-    )?)
-}
-
 /// A run's measure in words: its rate, its distance, and whether it passed.
 fn measure(e: &Evaluation) -> String {
     let mut parts = Vec::new();
@@ -376,9 +352,10 @@ fn run_example(
         };
         let policy = lib.policy()?;
         for (w, (name, model, h)) in crate::tools::evaluate::worlds(&lib).into_iter().enumerate() {
-            let calm = evaluated(&lib, &policy, &task, (model, h), seconds, (0.0, 0))?;
-            let kicks = (KICK_EVERY, KICK_SEED_BASE + seed);
-            let kicked = evaluated(&lib, &policy, &task, (model, h), seconds, kicks)?;
+            let world = (model, h);
+            let calm = in_world(&lib, &policy, world, seconds, (0.0, KICK_STD, 0))?;
+            let kicks = (KICK_EVERY, KICK_STD, KICK_SEED_BASE + seed);
+            let kicked = in_world(&lib, &policy, world, seconds, kicks)?;
             if w < 2 {
                 let steps = (seconds / h).round() as usize;
                 let trace = crate::experiments::figures::closed_loop(

@@ -59,6 +59,27 @@ pub fn worlds(library: &Library) -> Vec<(String, ContactModel, f64)> {
     out
 }
 
+/// `library`'s policy in closed loop from its task's start in the world `(model, h)` for `seconds`, with
+/// velocity kicks `(every, std, seed)` (every 0: none): its evaluation.
+pub fn in_world(
+    library: &Library,
+    policy: &library::Policy,
+    (model, h): (ContactModel, f64),
+    seconds: f64,
+    (kick_every, kick_std, seed): (f64, f64, u64),
+) -> anyhow::Result<Evaluation> {
+    let settings = EvaluationSettings {
+        model,
+        h,
+        seconds,
+        kick_every,
+        kick_std,
+        seed,
+        x0: library.x0().to_vec(),
+    };
+    Ok(evaluate(library, policy, &settings)?)
+}
+
 /// A mean time in seconds, or "-" when there was nothing to average.
 pub fn seconds(v: Option<f64>) -> String {
     v.map_or("-".into(), |v| format!("{v:.1} s"))
@@ -114,16 +135,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     }
     let mut rows = Vec::new();
     for (world, model, h) in worlds(&library) {
-        let settings = EvaluationSettings {
-            model,
-            h,
-            seconds: args.seconds,
-            kick_every: args.kick_every,
-            kick_std: args.kick_std,
-            seed: args.seed,
-            x0: library.x0().to_vec(),
-        };
-        let e = evaluate(&library, &policy, &settings)?;
+        let kicks = (args.kick_every, args.kick_std, args.seed);
+        let e = in_world(&library, &policy, (model, h), args.seconds, kicks)?;
         let kicked = e.kicks > 0;
         if spin {
             let _ = writeln!(

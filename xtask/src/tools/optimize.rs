@@ -269,62 +269,60 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                             ),
                         }
                     }
-                    let sigma = task::noise_scale(base.model);
-                    let too_far = search.out_of_reach.map(|o| {
-                        format!(
+                    // The task's noise scale (a continuation ran only for a smoothed model).
+                    let sigma = task::noise_scale(base.model).unwrap_or(0.0);
+                    let pairs = |ps: &[usize]| {
+                        ps.iter()
+                            .map(|&p| pair_name(&file.scene, p))
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    };
+                    note = Some(match search.outcome() {
+                        task::ContactOutcome::Felt => "contact felt".to_string(),
+                        task::ContactOutcome::OutOfReach(o) => format!(
                             "no contact felt, and none in reach: {} stays apart over the horizon by \
                              more than twice the driven body's reach (by {} at its nearest), so no \
                              pull or continuation was tried; the solve is kept",
                             pair_name(&file.scene, o.pair),
                             Num(o.clearance, 3)
-                        )
-                    });
-                    // The pairs a pull brought into contact (the task's solve from there then left it,
-                    // or cost more than never touching).
-                    let touched: Vec<String> = reach
-                        .map_or(&[][..], |r| &r.tries[..])
-                        .iter()
-                        .filter(|t| t.2.is_some())
-                        .map(|t| pair_name(&file.scene, t.0))
-                        .collect();
-                    note = too_far.or_else(|| Some(match (reach.and_then(|r| r.pair), &search.continuation, sigma) {
-                    (Some(p), _, _) => format!(
-                        "reached the contact by pulling {} together, then solved the task's own cost",
-                        pair_name(&file.scene, p)
-                    ),
-                    (None, ..) if !touched.is_empty() => format!(
-                        "no contact kept: the controls can reach it (pulling {} together touched), but the \
-                         task's own solve from there let go again or cost more than the solve that never \
-                         touches (cost {}), which is kept: no solve found through the contact pays by \
-                         the task's cost from this start",
-                        touched.join(", "),
-                        Num(search.solution.cost, 6)
-                    ),
-                    (None, Some(c), Some(sigma)) => match (c.felt_at, c.kept) {
-                        (Some(top), true) => format!(
+                        ),
+                        task::ContactOutcome::Pulled(p) => format!(
+                            "reached the contact by pulling {} together, then solved the task's own cost",
+                            pair_name(&file.scene, p)
+                        ),
+                        task::ContactOutcome::TouchedNotKept(touched) => format!(
+                            "no contact kept: the controls can reach it (pulling {} together touched), \
+                             but the task's own solve from there let go again or cost more than the \
+                             solve that never touches (cost {}), which is kept: no solve found through \
+                             the contact pays by the task's cost from this start",
+                            pairs(&touched),
+                            Num(search.solution.cost, 6)
+                        ),
+                        task::ContactOutcome::Continued(top) => format!(
                             "continued in the noise scale: contact felt at sigma {}, solved back \
                              down to {}",
                             Num(top, 4),
                             Num(sigma, 4)
                         ),
-                        (Some(top), false) => format!(
+                        task::ContactOutcome::Lost(top) => format!(
                             "no contact felt: found at sigma {}, and lost again (or no cheaper \
                              than the solve at {}) on the way back down; that solve is kept",
                             Num(top, 4),
                             Num(sigma, 4)
                         ),
-                        (None, _) => format!(
+                        task::ContactOutcome::NeverFelt => format!(
                             "no contact felt even at sigma {} ({}x the task's): nothing the controls \
                              do reaches a contact within the horizon; the solve at the task's is kept",
                             Num(sigma * (1 << task::CONTINUATION_DOUBLINGS) as f64, 4),
                             1 << task::CONTINUATION_DOUBLINGS
                         ),
-                    },
-                    (None, _, _) => "no contact felt: no pull found a cheaper solve that feels it, \
-                                     and the hard model has no action at a distance to continue from \
-                                     (--model logistic can feel it)"
-                        .to_string(),
-                }));
+                        task::ContactOutcome::NoContinuation => {
+                            "no contact felt: no pull found a cheaper solve that feels it, and the \
+                             hard model has no action at a distance to continue from (--model \
+                             logistic can feel it)"
+                                .to_string()
+                        }
+                    });
                     never_felt = !search.found();
                     sol = search.solution;
                 }

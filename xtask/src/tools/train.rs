@@ -203,19 +203,14 @@ fn unkicked_verdict(library: &Library) -> anyhow::Result<String> {
     let worlds = crate::tools::evaluate::worlds(library);
     let mut failed = Vec::new();
     for (world, model, h) in &worlds {
-        let settings = library::EvaluationSettings {
-            model: *model,
-            h: *h,
-            seconds: CHECK_SECONDS,
-            kick_every: 0.0,
-            kick_std: 0.0,
-            seed: 0,
-            x0: library.x0().to_vec(),
-        };
-        if !library::evaluate(library, &policy, &settings)?
-            .success
-            .passed
-        {
+        let e = crate::tools::evaluate::in_world(
+            library,
+            &policy,
+            (*model, *h),
+            CHECK_SECONDS,
+            (0.0, 0.0, 0),
+        )?;
+        if !e.success.passed {
             failed.push(format!("{world} at h = {h}"));
         }
     }
