@@ -215,7 +215,7 @@ type Malformed = (
 #[test]
 fn malformed_tasks_are_refused_with_the_field_named() {
     let base = "h = 0.05\nhorizon = 10\nmodel = \"logistic\"\nsigma = 0.1\ncontrol_weight = 0.05\n";
-    let cases: [Malformed; 16] = [
+    let cases: [Malformed; 18] = [
         ("speed = 3.0\n", None, "unknown field `speed`"),
         (
             "running = [{ coordinate = \"ellipse.angle\", lineer = 1.0 }]\n",
@@ -246,6 +246,16 @@ fn malformed_tasks_are_refused_with_the_field_named() {
             "periods = { \"ellipse.angle\" = 0.0 }\n",
             None,
             "task t, periods: the period of ellipse.angle is 0",
+        ),
+        (
+            "periods = { \"ellipse.angle\" = 1e-300 }\n",
+            None,
+            "task t, periods: the period of ellipse.angle is 1e-300, it must be finite and at least 1e-6",
+        ),
+        (
+            "periods = { \"link1.angle\" = 1.0 }\n",
+            None,
+            "task t, periods: link1.angle has joint limits [-3.141592653589793, 0], wider than its period 1: a coordinate its limits stop is not periodic",
         ),
         (
             "control_limits = [2.0, -2.0]\n",

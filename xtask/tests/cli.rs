@@ -542,6 +542,36 @@ fn train_reports_its_policys_unkicked_verdict() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// A library whose own time step is too short for the check's 40 s (1e-12 s: 4e13 steps) is still
+/// written, and the check says which worlds it could not run and why instead of failing `train` after the
+/// file is on disk; the worlds at 0.03 s are judged as ever.
+#[test]
+fn train_without_a_verdict_on_a_world_says_why_and_keeps_the_library() {
+    let (dir, path) = scene_file(
+        "door-tiny-h",
+        "door.toml",
+        &DOOR.replacen("h = 0.05", "h = 1e-12", 1),
+    );
+    let out = dir.join("door.lib");
+    let stdout = succeeds(
+        xtask()
+            .args(["train", "--trajectories", "20", "--scene"])
+            .arg(&path)
+            .arg("--out")
+            .arg(&out),
+    );
+    assert!(out.exists(), "{stdout}");
+    assert!(
+        stdout.contains("no verdict on logistic 0.05 at h = 1e-12 (setting seconds = 40.0 is out of range: at most 1e7 time steps)"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("not on logistic 0.05 at h = 0.03, hard at h = 0.03"),
+        "{stdout}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 /// A user's extreme numbers (a noise scale of 1e-300, a block 1e300 up) are printed in exponent form in
 /// every message, never as a line of three hundred digits.
 #[test]

@@ -54,7 +54,7 @@ pub use scene::{
 };
 pub use simulator::Simulator;
 pub use step::{
-    CORRECTION_TRUST, Complementarity, Drag, Model, STEP_TOLERANCE, StateCovariance, Step,
+    CORRECTION_TRUST, Complementarity, Drag, Model, STEP_TOLERANCE, Scale, StateCovariance, Step,
     StepData, StepSettings,
 };
 

@@ -61,7 +61,8 @@ impl std::fmt::Display for Complementarity {
 
 /// A noise scale as a user wrote it (`0.1`), in exponent form when it is too large or too small to read
 /// that way (`1e-300`, not three hundred digits).
-struct Scale(f64);
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Scale(pub f64);
 
 impl std::fmt::Display for Scale {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {

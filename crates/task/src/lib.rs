@@ -17,8 +17,8 @@ pub use anneal::{AnnealStep, anneal};
 pub use error::TaskError;
 pub use model::ContactModel;
 pub use problem::{
-    BUILTIN_SCENE_FILE, DEFAULT_SETTLE, ProblemFile, START_TOLERANCE, Success, SuccessSpec, Task,
-    TaskCost, TaskSpec, Term, TermSpec,
+    BUILTIN_SCENE_FILE, DEFAULT_SETTLE, ProblemFile, SHORTEST_PERIOD, START_TOLERANCE, Success,
+    SuccessSpec, Task, TaskCost, TaskSpec, Term, TermSpec,
 };
 pub use progress::Progress;
 pub use reach::{

@@ -235,6 +235,10 @@ impl Cost for TaskCost {
     }
 }
 
+/// The shortest period a coordinate may have: far below any body's size in a scene's units, far above
+/// the rounding of a coordinate wrapped into it.
+pub const SHORTEST_PERIOD: f64 = 1e-6;
+
 /// How far a task's initial state may break a constraint (bodies overlapping, a joint past its limit):
 /// rounding in a hand-written start, no more.
 pub const START_TOLERANCE: f64 = 1e-6;
@@ -331,10 +335,27 @@ impl Task {
         let mut periods = vec![None; 2 * n];
         for (c, &p) in &spec.periods {
             let i = index("periods", c)?;
-            if !(p.is_finite() && p > 0.0) {
+            if !(p.is_finite() && p >= SHORTEST_PERIOD) {
                 return Err(bad(
                     "periods",
-                    format!("the period of {c} is {p}, it must be positive"),
+                    format!(
+                        "the period of {c} is {}, it must be finite and at least {SHORTEST_PERIOD:e}",
+                        dynamics::Scale(p)
+                    ),
+                ));
+            }
+            // A joint stopped by its limits does not come back to the same state a period on: states
+            // a period apart are different states, which the wrapped costs and the policy's distances
+            // would take for one.
+            if let Some(coordinate) = scene.coordinates.get(i)
+                && let Some([lower, upper]) = coordinate.limits
+                && upper - lower > p
+            {
+                return Err(bad(
+                    "periods",
+                    format!(
+                        "{c} has joint limits [{lower}, {upper}], wider than its period {p}: a coordinate its limits stop is not periodic"
+                    ),
                 ));
             }
             periods[i] = Some(p);

@@ -45,8 +45,8 @@ pub fn worlds(library: &Library) -> Vec<(String, ContactModel, f64)> {
     let h = library.settings.h;
     let name = |m: ContactModel| match m {
         ContactModel::Hard => "hard".to_string(),
-        ContactModel::Logistic(s) => format!("logistic {s}"),
-        ContactModel::Normal(s) => format!("normal {s}"),
+        ContactModel::Logistic(s) => format!("logistic {}", dynamics::Scale(s)),
+        ContactModel::Normal(s) => format!("normal {}", dynamics::Scale(s)),
     };
     let mut out = Vec::new();
     for step in [h, library::WORLD_TIME_STEP] {

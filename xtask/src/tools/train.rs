@@ -202,19 +202,23 @@ fn unkicked_verdict(library: &Library) -> anyhow::Result<String> {
     let policy = library.policy()?;
     let worlds = crate::tools::evaluate::worlds(library);
     let mut failed = Vec::new();
+    // A world the closed loop cannot run (a time step too short for the check's seconds, a step that
+    // fails) has no verdict: said with its reason, after the library is written, not as train's failure.
+    let mut unrun = Vec::new();
     for (world, model, h) in &worlds {
-        let e = crate::tools::evaluate::in_world(
+        match crate::tools::evaluate::in_world(
             library,
             &policy,
             (*model, *h),
             CHECK_SECONDS,
             (0.0, 0.0, 0),
-        )?;
-        if !e.success.passed {
-            failed.push(format!("{world} at h = {h}"));
+        ) {
+            Ok(e) if e.success.passed => {}
+            Ok(_) => failed.push(format!("{world} at h = {}", dynamics::Scale(*h))),
+            Err(e) => unrun.push(format!("{world} at h = {} ({e:#})", dynamics::Scale(*h))),
         }
     }
-    let succeeding = worlds.len() - failed.len();
+    let succeeding = worlds.len() - failed.len() - unrun.len();
     let criterion = library.success().describe(&library.scene().state_names());
     let mut line = format!(
         "without kicks for {CHECK_SECONDS} s from the task's start, its policy succeeds on {succeeding} of {} worlds ({criterion})",
@@ -223,7 +227,10 @@ fn unkicked_verdict(library: &Library) -> anyhow::Result<String> {
     if !failed.is_empty() {
         line.push_str(&format!("; not on {}", failed.join(", ")));
     }
-    if succeeding == 0 {
+    if !unrun.is_empty() {
+        line.push_str(&format!("; no verdict on {}", unrun.join(", ")));
+    }
+    if succeeding == 0 && !failed.is_empty() {
         line.push_str(
             ". On none: `cargo xtask optimize` on the task says whether a solve from its start feels the contact the task needs and whether that contact pays (docs/tasks.md), and `cargo xtask evaluate` gives the measures",
         );
