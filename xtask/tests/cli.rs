@@ -375,6 +375,41 @@ fn train_defaults_fit_target_tasks_and_small_budgets() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
+    // A horizon shorter than the recipe's shift of 4 steps is taken (each trajectory shifts by the whole
+    // horizon: it stopped on `shift = 4 is out of range`, a setting no flag names); one past the longest
+    // a library solves over is refused with the range at once, where 100001 steps ran for minutes.
+    succeeds(
+        xtask()
+            .args([
+                "train",
+                "--trajectories",
+                "6",
+                "--growth",
+                "0",
+                "--horizon",
+                "2",
+                "--out",
+            ])
+            .arg(dir.join("short.lib")),
+    );
+    let out = xtask()
+        .args([
+            "train",
+            "--trajectories",
+            "6",
+            "--horizon",
+            "100001",
+            "--out",
+        ])
+        .arg(dir.join("long.lib"))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        stderr.contains("horizon = 100001.0 is out of range: between 1 and 1000 steps"),
+        "{stderr}"
+    );
     std::fs::remove_dir_all(&dir).ok();
 }
 

@@ -266,8 +266,14 @@ impl LibrarySettings {
         {
             return bad("sigma", s, "finite and positive");
         }
-        if self.horizon == 0 {
-            return bad("horizon", 0.0, "at least 1");
+        // A bound on the work: every trajectory is a solve over the horizon (a stalled trunk is
+        // lengthened to no more than this either).
+        if !(1..=LONGEST_HORIZON).contains(&self.horizon) {
+            return bad(
+                "horizon",
+                self.horizon as f64,
+                "between 1 and 1000 steps (LONGEST_HORIZON)",
+            );
         }
         if self.shift == 0 || self.shift > self.horizon {
             return bad("shift", self.shift as f64, "between 1 and the horizon");

@@ -46,7 +46,8 @@ pub struct Args {
     /// branches off it, four controllers per trajectory, the best of eight by value, twelve growth rounds).
     #[arg(long)]
     paper: bool,
-    /// Optimisation horizon in steps (default: the task's with --task, else 90, the paper's recipe 75).
+    /// Optimisation horizon in steps, 1 to 1000 (default: the task's with --task, else 90, the paper's
+    /// recipe 75); one shorter than the recipe's shift of 4 steps shifts by the whole horizon.
     #[arg(long)]
     horizon: Option<usize>,
     /// Nearest controllers the policy ranks by their value models (1: the nearest alone, eq. 20).
@@ -127,7 +128,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             kicks
         }
     };
-    let settings = LibrarySettings {
+    let mut settings = LibrarySettings {
         model,
         h: args.h.unwrap_or(base.h),
         trajectories: args.trajectories,
@@ -143,6 +144,14 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         exploration,
         ..base
     };
+    // A horizon shorter than the recipe's shift (the steps between consecutive trajectories of a
+    // chain) shifts by the whole horizon, keeping no more controllers than that per trajectory.
+    if args.horizon.is_some() && settings.horizon < settings.shift {
+        settings.shift = settings.horizon.max(1);
+        if args.keep.is_none() {
+            settings.keep = settings.keep.min(settings.shift);
+        }
+    }
     let progress = task::Progress::of_task(&task)?;
     let watched = problem.scene.coordinate_names()[progress.coordinate].clone();
     // One tick per optimised trajectory (each keeps `keep` controllers); growth adds trajectories beyond
