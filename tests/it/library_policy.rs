@@ -174,6 +174,11 @@ fn bad_evaluation_settings_are_typed_errors() {
             kick_std: -1.0,
             ..EvaluationSettings::default()
         },
+        // A kick that would overflow the step into a NaN.
+        EvaluationSettings {
+            kick_std: 1e300,
+            ..EvaluationSettings::default()
+        },
         EvaluationSettings {
             x0: vec![0.0; 3],
             ..EvaluationSettings::default()

@@ -700,3 +700,45 @@ fn a_comparison_against_another_build_names_what_it_lacks() {
         assert!(!text.contains("panicked"), "{text}");
     }
 }
+
+/// `optimize --x0` is not checked as a task file's start is (a user may solve from any state), but a
+/// start past a joint's limit or with bodies inside each other is said, as `simulate` says it, and the
+/// summary of a start 1e300 past the finger's limit reads in exponents, not a hundred digits.
+#[test]
+fn optimize_from_a_start_that_breaks_a_constraint_says_so() {
+    let out = xtask()
+        .args([
+            "optimize",
+            "--quiet",
+            "--iterations",
+            "3",
+            "--x0=1e300,0,0,0,0,0",
+        ])
+        .output()
+        .unwrap();
+    let (stdout, stderr) = (
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr),
+    );
+    assert!(
+        stderr.contains(
+            "warning: --x0 starts with link1.angle above its upper limit by 1.000e300; the first steps undo it"
+        ),
+        "{stderr}"
+    );
+    let summary = stdout
+        .lines()
+        .find(|l| l.starts_with("over the horizon:"))
+        .unwrap_or_else(|| panic!("{stdout}"));
+    assert!(summary.len() < 120, "{summary}");
+    // From the task's own start, no warning.
+    let out = xtask()
+        .args(["optimize", "--quiet", "--iterations", "3"])
+        .output()
+        .unwrap();
+    assert!(
+        !String::from_utf8_lossy(&out.stderr).contains("warning"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}

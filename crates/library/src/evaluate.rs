@@ -421,11 +421,13 @@ pub(crate) fn closed_loop(
             expected: "finite and non-negative (0: no kicks)",
         });
     }
-    if !(settings.kick_std.is_finite() && settings.kick_std >= 0.0) {
+    // A kick of 1e300 overflows the step (a NaN in its complementarity problem); a million units of
+    // velocity is already far past any scene's own scale.
+    if !(settings.kick_std.is_finite() && (0.0..=1e6).contains(&settings.kick_std)) {
         return Err(LibraryError::Setting {
             name: "kick_std",
             value: settings.kick_std,
-            expected: "finite and non-negative",
+            expected: "between 0 and 1e6",
         });
     }
     let x0 = crate::start(&settings.x0, judge.x0);

@@ -375,7 +375,7 @@ impl Task {
                 "x0",
                 format!(
                     "the initial state starts with {} by {:.3e} (more than START_TOLERANCE = {START_TOLERANCE:e}{}); \
-                     move them apart",
+                     start without it",
                     o.what,
                     o.depth,
                     match overlaps.len() {

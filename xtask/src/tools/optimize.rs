@@ -197,6 +197,9 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             let sim = args.sim.simulator_of(file.scene.clone(), Some(&task))?;
             let m = file.scene.n_controls;
             let x0 = args.x0.clone().unwrap_or_else(|| task.x0.clone());
+            if args.x0.is_some() {
+                crate::tools::step::warn_of_overlap(&file.scene, &x0);
+            }
             let horizon = args.horizon.unwrap_or(task.horizon);
             println!(
                 "task {}: h = {}, N = {horizon}, {}, x0 = {x0:?}",
@@ -418,7 +421,12 @@ fn task_summary(scene: &dynamics::Scene, task: &task::Task, states: &[Vec<f64>])
         .into_iter()
         .map(|(i, target)| {
             let target = target.map_or(String::new(), |t| format!(" (target {t})"));
-            format!("{} {:.4} -> {:.4}{target}", names[i], first[i], last[i])
+            format!(
+                "{} {} -> {}{target}",
+                names[i],
+                crate::tools::Num(first[i], 4),
+                crate::tools::Num(last[i], 4)
+            )
         })
         .collect();
     format!("over the horizon: {}", parts.join("; "))

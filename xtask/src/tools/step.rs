@@ -322,6 +322,26 @@ fn read_controls(path: &std::path::Path) -> anyhow::Result<Vec<Vec<f64>>> {
         .with_context(|| format!("{}: expected an array of control vectors", path.display()))
 }
 
+/// Warn (on stderr) where a `--x0` the user gave starts with bodies inside each other or a joint past
+/// its limit, the deepest named: the first steps undo it, which is what `simulate` may be for and
+/// not what `optimize` is asked to do. A state of the wrong length is left to the caller's own check.
+pub(crate) fn warn_of_overlap(scene: &dynamics::Scene, x: &[f64]) {
+    let overlap = (x.len() == scene.n_state())
+        .then(|| {
+            scene
+                .overlaps(&x[..scene.n_dof()], task::START_TOLERANCE)
+                .ok()
+        })
+        .flatten()
+        .and_then(|overlaps| overlaps.into_iter().next());
+    if let Some(o) = overlap {
+        eprintln!(
+            "warning: --x0 starts with {} by {:.3e}; the first steps undo it",
+            o.what, o.depth
+        );
+    }
+}
+
 pub fn run_simulate(args: &SimulateArgs) -> anyhow::Result<()> {
     let file = args.sim.problem_file()?;
     let scene = file.scene.clone();
@@ -334,20 +354,7 @@ pub fn run_simulate(args: &SimulateArgs) -> anyhow::Result<()> {
     let mut sim = args.sim.simulator_of(scene.clone(), task.as_ref())?;
     let x0 = match (&args.x0, &task) {
         (Some(x), _) => {
-            let overlap = (x.len() == scene.n_state())
-                .then(|| {
-                    scene
-                        .overlaps(&x[..scene.n_dof()], task::START_TOLERANCE)
-                        .ok()
-                })
-                .flatten()
-                .and_then(|overlaps| overlaps.into_iter().next());
-            if let Some(o) = overlap {
-                eprintln!(
-                    "warning: --x0 starts with {} by {:.3e}; the first steps push them apart",
-                    o.what, o.depth
-                );
-            }
+            warn_of_overlap(&scene, x);
             x.clone()
         }
         (None, Some(task)) => {
