@@ -115,6 +115,11 @@ pub enum NcpError {
 
 /// `Err(NonFinite)` naming the first non-finite entry of `values`.
 pub(crate) fn check_finite(what: &'static str, values: &[f64]) -> Result<(), NcpError> {
+    // All finite in one branch-free pass (NaN and infinities fail `<= MAX`), the first that is not
+    // looked for only then: the check runs on every solve's data.
+    if values.iter().fold(true, |ok, v| ok & (v.abs() <= f64::MAX)) {
+        return Ok(());
+    }
     match values.iter().position(|v| !v.is_finite()) {
         None => Ok(()),
         Some(index) => Err(NcpError::NonFinite {
@@ -135,5 +140,29 @@ pub(crate) fn check_len(what: &'static str, got: usize, expected: usize) -> Resu
             got,
             expected,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn check_finite_names_the_first_entry_that_is_not_finite() {
+        assert!(check_finite("q", &[]).is_ok());
+        assert!(check_finite("q", &[0.0, -f64::MAX, f64::MIN_POSITIVE]).is_ok());
+        for (values, first) in [
+            (vec![1.0, f64::INFINITY, f64::NAN], 1),
+            (vec![f64::NAN, 2.0], 0),
+            (vec![1.0, 2.0, 3.0, f64::NEG_INFINITY], 3),
+        ] {
+            match check_finite("q", &values) {
+                Err(NcpError::NonFinite { what, index, value }) => {
+                    assert_eq!((what, index), ("q", first));
+                    assert_eq!(value.to_bits(), values[first].to_bits());
+                }
+                other => panic!("{other:?}"),
+            }
+        }
     }
 }
