@@ -277,31 +277,11 @@ impl DenseLu {
                 // solve: no allocation once it has the largest size.
                 copy.clear();
                 copy.extend_from_slice(rhs);
-                let b: &[f64] = copy;
-                for i in 0..n {
-                    let (done, rest) = rhs.split_at_mut(i * k);
-                    let xi = &mut rest[..k];
-                    xi.copy_from_slice(&b[perm[i] * k..(perm[i] + 1) * k]);
-                    for j in 0..i {
-                        let l = lu[i * n + j];
-                        for (x, xj) in xi.iter_mut().zip(&done[j * k..(j + 1) * k]) {
-                            *x -= l * xj;
-                        }
-                    }
-                }
-                for i in (0..n).rev() {
-                    let (head, rest) = rhs.split_at_mut((i + 1) * k);
-                    let xi = &mut head[i * k..];
-                    for j in i + 1..n {
-                        let u = lu[i * n + j];
-                        for (x, xj) in xi.iter_mut().zip(&rest[(j - i - 1) * k..(j - i) * k]) {
-                            *x -= u * xj;
-                        }
-                    }
-                    let inv = 1.0 / lu[i * n + i];
-                    for x in xi.iter_mut() {
-                        *x *= inv;
-                    }
+                // The step's derivatives' eight right-hand sides (six states, two controls) get a copy
+                // compiled for that width: the same arithmetic, each row's update one unrolled block.
+                match k {
+                    8 => substitute_many::<8>(lu, perm, copy, rhs, n, k),
+                    _ => substitute_many::<0>(lu, perm, copy, rhs, n, k),
                 }
             }
             Backend::Faer { .. } => {
@@ -431,6 +411,44 @@ fn eliminate_fixed<const N: usize>(
     Ok(())
 }
 
+/// [`DenseLu::solve_many`]'s substitutions for `K` right-hand sides when `K` is not 0 (else `k`): `b`
+/// the right-hand sides as given, `rhs` their solutions.
+fn substitute_many<const K: usize>(
+    lu: &[f64],
+    perm: &[usize],
+    b: &[f64],
+    rhs: &mut [f64],
+    n: usize,
+    k: usize,
+) {
+    let k = if K > 0 { K } else { k };
+    for i in 0..n {
+        let (done, rest) = rhs.split_at_mut(i * k);
+        let xi = &mut rest[..k];
+        xi.copy_from_slice(&b[perm[i] * k..(perm[i] + 1) * k]);
+        for j in 0..i {
+            let l = lu[i * n + j];
+            for (x, xj) in xi.iter_mut().zip(&done[j * k..(j + 1) * k]) {
+                *x -= l * xj;
+            }
+        }
+    }
+    for i in (0..n).rev() {
+        let (head, rest) = rhs.split_at_mut((i + 1) * k);
+        let xi = &mut head[i * k..(i + 1) * k];
+        for j in i + 1..n {
+            let u = lu[i * n + j];
+            for (x, xj) in xi.iter_mut().zip(&rest[(j - i - 1) * k..(j - i) * k]) {
+                *x -= u * xj;
+            }
+        }
+        let inv = 1.0 / lu[i * n + i];
+        for x in xi.iter_mut() {
+            *x *= inv;
+        }
+    }
+}
+
 fn substitute(lu: &[f64], perm: &[usize], b: &[f64], x: &mut [f64]) {
     substitute_sized::<0>(lu, perm, b, x);
 }
@@ -518,6 +536,39 @@ mod tests {
         assert_eq!(inf_norm(&[-0.0]).to_bits(), 0.0f64.to_bits());
         let v: Vec<f64> = (0..37).map(|i| ((i * 7919) % 101) as f64 - 50.0).collect();
         assert_eq!(inf_norm(&v), v.iter().fold(0.0f64, |m, x| m.max(x.abs())));
+    }
+
+    /// Eight right-hand sides at once (the width compiled in) solve to the bit as the run-time loop
+    /// does, and solve the system.
+    #[test]
+    fn eight_right_hand_sides_solve_to_the_bit_as_the_run_time_loop() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(8);
+        for n in [1usize, 3, 9, 14] {
+            let a: Vec<f64> = (0..n * n).map(|_| rng.random_range(-1.0..1.0)).collect();
+            let b: Vec<f64> = (0..n * 8).map(|_| rng.random_range(-1.0..1.0)).collect();
+            let mut lu = DenseLu::new(n, LinearSolver::Hand);
+            lu.factor(&a).unwrap();
+            let mut x = b.clone();
+            lu.solve_many(&mut x, 8);
+            let Backend::Hand { lu: f, perm, .. } = &lu.backend else {
+                unreachable!("the hand back end")
+            };
+            let mut general = b.clone();
+            substitute_many::<0>(f, perm, &b, &mut general, n, 8);
+            assert_eq!(
+                x.iter().map(|e| e.to_bits()).collect::<Vec<_>>(),
+                general.iter().map(|e| e.to_bits()).collect::<Vec<_>>(),
+                "n = {n}"
+            );
+            let residual = (0..n)
+                .flat_map(|i| (0..8).map(move |c| (i, c)))
+                .map(|(i, c)| {
+                    let ax: f64 = (0..n).map(|j| a[i * n + j] * x[j * 8 + c]).sum();
+                    (ax - b[i * 8 + c]).abs()
+                })
+                .fold(0.0, f64::max);
+            assert!(residual < 1e-10, "n = {n}: {residual}");
+        }
     }
 
     #[test]
