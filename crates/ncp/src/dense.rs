@@ -277,10 +277,16 @@ impl DenseLu {
                 // solve: no allocation once it has the largest size.
                 copy.clear();
                 copy.extend_from_slice(rhs);
-                // The step's derivatives' eight right-hand sides (six states, two controls) get a copy
-                // compiled for that width: the same arithmetic, each row's update one unrolled block.
+                // The step derivatives' right-hand sides (states and controls) of the example scenes
+                // get a copy compiled for their width (the finger's 8, the slider's 9, the three-link
+                // finger's 11, two fingers' and pushing's 12, 14): the same arithmetic, each row's
+                // update one unrolled block.
                 match k {
                     8 => substitute_many::<8>(lu, perm, copy, rhs, n, k),
+                    9 => substitute_many::<9>(lu, perm, copy, rhs, n, k),
+                    11 => substitute_many::<11>(lu, perm, copy, rhs, n, k),
+                    12 => substitute_many::<12>(lu, perm, copy, rhs, n, k),
+                    14 => substitute_many::<14>(lu, perm, copy, rhs, n, k),
                     _ => substitute_many::<0>(lu, perm, copy, rhs, n, k),
                 }
             }
@@ -538,33 +544,42 @@ mod tests {
         assert_eq!(inf_norm(&v), v.iter().fold(0.0f64, |m, x| m.max(x.abs())));
     }
 
-    /// Eight right-hand sides at once (the width compiled in) solve to the bit as the run-time loop
+    /// Several right-hand sides at once (the widths compiled in) solve to the bit as the run-time loop
     /// does, and solve the system.
     #[test]
-    fn eight_right_hand_sides_solve_to_the_bit_as_the_run_time_loop() {
+    fn compiled_widths_of_right_hand_sides_solve_to_the_bit_as_the_run_time_loop() {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(8);
-        for n in [1usize, 3, 9, 14] {
+        for (n, k) in [
+            (1usize, 8usize),
+            (3, 8),
+            (9, 8),
+            (14, 8),
+            (4, 11),
+            (5, 12),
+            (4, 9),
+            (5, 14),
+        ] {
             let a: Vec<f64> = (0..n * n).map(|_| rng.random_range(-1.0..1.0)).collect();
-            let b: Vec<f64> = (0..n * 8).map(|_| rng.random_range(-1.0..1.0)).collect();
+            let b: Vec<f64> = (0..n * k).map(|_| rng.random_range(-1.0..1.0)).collect();
             let mut lu = DenseLu::new(n, LinearSolver::Hand);
             lu.factor(&a).unwrap();
             let mut x = b.clone();
-            lu.solve_many(&mut x, 8);
+            lu.solve_many(&mut x, k);
             let Backend::Hand { lu: f, perm, .. } = &lu.backend else {
                 unreachable!("the hand back end")
             };
             let mut general = b.clone();
-            substitute_many::<0>(f, perm, &b, &mut general, n, 8);
+            substitute_many::<0>(f, perm, &b, &mut general, n, k);
             assert_eq!(
                 x.iter().map(|e| e.to_bits()).collect::<Vec<_>>(),
                 general.iter().map(|e| e.to_bits()).collect::<Vec<_>>(),
                 "n = {n}"
             );
             let residual = (0..n)
-                .flat_map(|i| (0..8).map(move |c| (i, c)))
+                .flat_map(|i| (0..k).map(move |c| (i, c)))
                 .map(|(i, c)| {
-                    let ax: f64 = (0..n).map(|j| a[i * n + j] * x[j * 8 + c]).sum();
-                    (ax - b[i * 8 + c]).abs()
+                    let ax: f64 = (0..n).map(|j| a[i * n + j] * x[j * k + c]).sum();
+                    (ax - b[i * k + c]).abs()
                 })
                 .fold(0.0, f64::max);
             assert!(residual < 1e-10, "n = {n}: {residual}");
