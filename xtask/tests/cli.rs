@@ -637,6 +637,41 @@ fn extreme_numbers_in_a_task_read_as_exponents() {
             line.len()
         );
     }
+    // The same in the refusals of flags and of a period.
+    for (args, expected) in [
+        (
+            &["examples", "--no-docs", "--seconds", "1e300"][..],
+            "--seconds 1e300 must be between 1 and 10000",
+        ),
+        (
+            &["seeds", "--no-docs", "--seconds", "1e300"][..],
+            "--seconds must be in (0, 1e5], not 1e300",
+        ),
+    ] {
+        let out = xtask().args(args).output().unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            !out.status.success() && stderr.contains(expected),
+            "{stderr}"
+        );
+    }
+    let tiny = text.replacen(
+        "sigma = 1e-300",
+        "sigma = 0.05\nperiods = { \"block.angle\" = 1e-300 }",
+        1,
+    );
+    let path = dir.join("tiny_period.toml");
+    std::fs::write(&path, tiny).unwrap();
+    let out = xtask()
+        .args(["optimize", "--task", "push", "--scene"])
+        .arg(&path)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("the period of block.angle is 1e-300, it must be finite and at least 1e-6"),
+        "{stderr}"
+    );
     std::fs::remove_dir_all(&dir).ok();
 }
 

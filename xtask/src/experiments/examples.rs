@@ -533,7 +533,10 @@ fn report(results: &[ExampleResult], seconds: f64) -> String {
 /// Run `cargo xtask examples`.
 pub fn run(args: &Args) -> anyhow::Result<()> {
     if !(args.seconds.is_finite() && (1.0..=10_000.0).contains(&args.seconds)) {
-        anyhow::bail!("--seconds {} must be between 1 and 10000", args.seconds);
+        anyhow::bail!(
+            "--seconds {} must be between 1 and 10000",
+            dynamics::Scale(args.seconds)
+        );
     }
     let list = match &args.scene {
         Some(path) => {

@@ -48,7 +48,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     anyhow::ensure!(
         args.seconds.is_finite() && args.seconds > 0.0 && args.seconds <= 1e5,
         "--seconds must be in (0, 1e5], not {}",
-        args.seconds
+        dynamics::Scale(args.seconds)
     );
     let start = Instant::now();
     std::fs::create_dir_all(&args.out)?;
