@@ -225,11 +225,12 @@ impl Simulator {
         };
         let model = match self.model {
             ContactModel::Hard => "model='hard'".to_string(),
-            ContactModel::Logistic(s) => format!("model='logistic', sigma={s}"),
-            ContactModel::Normal(s) => format!("model='normal', sigma={s}"),
+            // Debug's float form is Python's own: 0.1, and 1e-300 rather than three hundred digits.
+            ContactModel::Logistic(s) => format!("model='logistic', sigma={s:?}"),
+            ContactModel::Normal(s) => format!("model='normal', sigma={s:?}"),
         };
         format!(
-            "Simulator(scene={scene}, {model}, h={}) ({} states, {} controls)",
+            "Simulator(scene={scene}, {model}, h={:?}) ({} states, {} controls)",
             self.h,
             self.scene.n_state(),
             self.scene.n_controls

@@ -303,6 +303,8 @@ def test_objects_print_what_they_are_and_iterations_has_its_alias(root):
     assert text.startswith("Simulator(scene=") and "pushing.toml" in text and "model='hard'" in text, text
     assert "(10 states, 2 controls)" in text, text
     assert repr(slcp.Simulator()) == "Simulator(scene=None, model='logistic', sigma=0.1, h=0.05) (6 states, 2 controls)"
+    # Extreme numbers read as Python writes them, not as hundreds of digits.
+    assert repr(slcp.Simulator(sigma=1e-300)) == "Simulator(scene=None, model='logistic', sigma=1e-300, h=0.05) (6 states, 2 controls)"
     lib = small_library()
     assert repr(lib) == "<slcp.Library: 32 controllers for task 'spin', logistic contact, sigma 0.1, h = 0.05>", repr(lib)
     # `iterations` is the command line's name; `max_iterations` its alias, refused when they disagree.
