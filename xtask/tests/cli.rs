@@ -407,7 +407,7 @@ fn train_defaults_fit_target_tasks_and_small_budgets() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success());
     assert!(
-        stderr.contains("horizon = 100001.0 is out of range: between 1 and 1000 steps"),
+        stderr.contains("horizon = 100001 is out of range: between 1 and 1000 steps"),
         "{stderr}"
     );
     std::fs::remove_dir_all(&dir).ok();
@@ -597,7 +597,7 @@ fn train_without_a_verdict_on_a_world_says_why_and_keeps_the_library() {
     );
     assert!(out.exists(), "{stdout}");
     assert!(
-        stdout.contains("no verdict on logistic 0.05 at h = 1e-12 (setting seconds = 40.0 is out of range: at most 1e7 time steps)"),
+        stdout.contains("no verdict on logistic 0.05 at h = 1e-12 (setting seconds = 40 is out of range: at most 1e7 time steps)"),
         "{stdout}"
     );
     assert!(

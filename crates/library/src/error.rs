@@ -7,7 +7,7 @@ use thiserror::Error;
 #[derive(Debug, Error)]
 pub enum LibraryError {
     /// A setting out of its range.
-    #[error("setting {name} = {value:?} is out of range: {expected}")]
+    #[error("setting {name} = {} is out of range: {expected}", dynamics::Scale(*value))]
     Setting {
         /// The setting.
         name: &'static str,
