@@ -292,12 +292,24 @@ impl<'a> Sink<'a> {
                 if whole {
                     // The one pass over all arguments, in order: the gradient's leading entries, and the
                     // Hessian's packed rows (all of the jet's when its width is the arguments').
-                    t.g[o * dim..(o + 1) * dim].copy_from_slice(&v.g[..dim]);
-                    let hb = &mut t.h[o * dd..(o + 1) * dd];
                     let packed = v.packed();
-                    if dim == K {
-                        hb.copy_from_slice(&packed[..dd]);
+                    if dim == K && dd == H {
+                        // Whole jets: copies of the jet's own sizes, which compile to a few moves
+                        // where slices of the run-time sizes called memcpy.
+                        let g: &mut [f64; K] = (&mut t.g[o * K..(o + 1) * K])
+                            .try_into()
+                            .expect("K entries");
+                        *g = v.g;
+                        let hb: &mut [f64; H] = (&mut t.h[o * H..(o + 1) * H])
+                            .try_into()
+                            .expect("H entries");
+                        *hb = *packed;
+                    } else if dim == K {
+                        t.g[o * dim..(o + 1) * dim].copy_from_slice(&v.g[..dim]);
+                        t.h[o * dd..(o + 1) * dd].copy_from_slice(&packed[..dd]);
                     } else {
+                        t.g[o * dim..(o + 1) * dim].copy_from_slice(&v.g[..dim]);
+                        let hb = &mut t.h[o * dd..(o + 1) * dd];
                         let (mut from, mut to) = (0, 0);
                         for i in 0..dim {
                             hb[to..to + dim - i].copy_from_slice(&packed[from..from + dim - i]);
