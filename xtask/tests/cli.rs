@@ -777,3 +777,26 @@ fn optimize_from_a_start_that_breaks_a_constraint_says_so() {
         String::from_utf8_lossy(&out.stderr)
     );
 }
+
+/// Refusals name what the user can change: a pass limit of 0 is out of `--iterations`' range, and a
+/// time step too long for the scene's drag names the longest that is not, without a flag of another command.
+#[test]
+fn refusals_name_the_flags_range_and_a_time_step_that_works() {
+    let out = xtask()
+        .args(["optimize", "--iterations", "0"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && stderr.contains("0 is not in 1..=100000"),
+        "{stderr}"
+    );
+    let out = xtask().args(["optimize", "--h", "2"]).output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("take a time step below 5.812e-1"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("--drag"), "{stderr}");
+}

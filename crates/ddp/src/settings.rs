@@ -153,12 +153,17 @@ impl DdpSettings {
                 expected: "from 1 to 256",
             });
         }
-        if self.max_iterations == 0 || self.line_search_steps == 0 {
-            return Err(DdpError::Setting {
-                name: "max_iterations / line_search_steps",
-                value: 0.0,
-                expected: "at least 1",
-            });
+        for (name, count) in [
+            ("max_iterations", self.max_iterations),
+            ("line_search_steps", self.line_search_steps),
+        ] {
+            if count == 0 {
+                return Err(DdpError::Setting {
+                    name,
+                    value: 0.0,
+                    expected: "at least 1",
+                });
+            }
         }
         if let Some(l) = &self.control_limits
             && (l.lower.len() != l.upper.len()

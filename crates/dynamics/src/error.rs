@@ -45,7 +45,7 @@ pub enum DynamicsError {
     },
     /// Explicit drag would create energy at this state ([`crate::Drag`]): `h lambda_max(M^-1 D) > 2`.
     #[error(
-        "explicit drag is unstable here: h lambda_max(M^-1 D) = {rate:.3e} > 2, mostly joint `{joint}` (its drag is too strong for its inertia at this h); use implicit drag (StepSettings::drag, --drag implicit) or h below {h_max:.3e}"
+        "explicit drag is unstable here: h lambda_max(M^-1 D) = {rate:.3e} > 2, mostly joint `{joint}` (its drag is too strong for its inertia at this h): take a time step below {h_max:.3e}, or step with implicit drag (`Drag::Implicit`)"
     )]
     UnstableDrag {
         /// The body whose joint dominates the unstable mode.

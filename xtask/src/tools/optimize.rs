@@ -62,9 +62,9 @@ pub struct Args {
     #[arg(long,
           value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=100_000))]
     horizon: Option<usize>,
-    /// Passes at most (up to 100000).
+    /// Passes at most (1 to 100000).
     #[arg(long, default_value_t = 300,
-          value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(0..=100_000))]
+          value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=100_000))]
     iterations: usize,
     /// Backward pass.
     #[arg(long, value_enum, default_value = "full")]
