@@ -215,7 +215,7 @@ type Malformed = (
 #[test]
 fn malformed_tasks_are_refused_with_the_field_named() {
     let base = "h = 0.05\nhorizon = 10\nmodel = \"logistic\"\nsigma = 0.1\ncontrol_weight = 0.05\n";
-    let cases: [Malformed; 18] = [
+    let cases: [Malformed; 19] = [
         ("speed = 3.0\n", None, "unknown field `speed`"),
         (
             "running = [{ coordinate = \"ellipse.angle\", lineer = 1.0 }]\n",
@@ -291,6 +291,11 @@ fn malformed_tasks_are_refused_with_the_field_named() {
             "",
             Some(("sigma = 0.1", "sigma = -1.0")),
             "task t, sigma: -1 must be positive and finite",
+        ),
+        (
+            "",
+            Some(("sigma = 0.1", "sigma = 1e300")),
+            "task t, sigma: 1e300 is beyond this scene's noise scales: at most 8 (10 per second times its largest semi-axis)",
         ),
         (
             "",

@@ -43,6 +43,17 @@ pub enum DynamicsError {
         /// The admissible range.
         expected: &'static str,
     },
+    /// A smoothed model's noise scale beyond the scene's ([`crate::Scene::largest_noise_scale`]).
+    #[error(
+        "setting `sigma` = {} is out of range for this scene: at most {} ({} per second times its largest semi-axis); beyond it every constraint pushes at any distance and the smoothed step can create energy",
+        crate::Scale(*sigma), crate::Scale(*largest), crate::NOISE_SCALE_PER_SIZE
+    )]
+    NoiseScale {
+        /// The noise scale asked for.
+        sigma: f64,
+        /// The scene's largest.
+        largest: f64,
+    },
     /// Explicit drag would create energy at this state ([`crate::Drag`]): `h lambda_max(M^-1 D) > 2`.
     #[error(
         "explicit drag is unstable here: h lambda_max(M^-1 D) = {rate:.3e} > 2, mostly joint `{joint}` (its drag is too strong for its inertia at this h): take a time step below {h_max:.3e}, or step with implicit drag (`Drag::Implicit`)"

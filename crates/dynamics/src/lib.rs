@@ -49,8 +49,8 @@ pub use kinematics::{ForceScratch, Kinematics, Ring, Scalar};
 pub use scene::{
     Body, BodySpec, ConstraintRow, ContactPair, ContactSpec, Coordinate, CoordinateKind,
     DENSITY_RANGE, Fixed, FixedSpec, JointKind, JointSpec, MAX_BODIES, MAX_CONTACTS, MAX_DAMPING,
-    MAX_FRICTION, MAX_GRAVITY, MAX_LENGTH, MAX_SCENE_TEXT, Overlap, Plane, PlaneSpec, Scene,
-    SceneSpec, Side, Tree,
+    MAX_FRICTION, MAX_GRAVITY, MAX_LENGTH, MAX_SCENE_TEXT, NOISE_SCALE_PER_SIZE, Overlap, Plane,
+    PlaneSpec, Scene, SceneSpec, Side, Tree,
 };
 pub use simulator::Simulator;
 pub use step::{

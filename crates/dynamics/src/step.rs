@@ -423,6 +423,15 @@ impl Model {
     /// logged as a warning: a body that does cannot rest.
     pub fn new(scene: Scene, settings: StepSettings) -> Result<Self, DynamicsError> {
         settings.validate()?;
+        if let Complementarity::Logistic { sigma } | Complementarity::Normal { sigma } =
+            settings.model
+            && sigma > scene.largest_noise_scale()
+        {
+            return Err(DynamicsError::NoiseScale {
+                sigma,
+                largest: scene.largest_noise_scale(),
+            });
+        }
         NewtonSolver::new(settings.newton)?;
         if let Some(limit) = scene.rocking_limit().filter(|&l| settings.h > l) {
             tracing::warn!(

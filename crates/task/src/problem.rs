@@ -23,7 +23,7 @@
 use crate::error::TaskError;
 use crate::model::ContactModel;
 use ddp::{ControlLimits, Cost, CostDerivatives};
-use dynamics::Scene;
+use dynamics::{Scale, Scene};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
@@ -305,8 +305,22 @@ impl Task {
         }
         let sigma = |model: &str| -> Result<f64, TaskError> {
             match spec.sigma {
-                Some(s) if s.is_finite() && s > 0.0 => Ok(s),
-                Some(s) => Err(bad("sigma", format!("{s} must be positive and finite"))),
+                Some(s) if s.is_finite() && s > 0.0 && s <= scene.largest_noise_scale() => Ok(s),
+                Some(s) if s.is_finite() && s > 0.0 => Err(bad(
+                    "sigma",
+                    format!(
+                        "{} is beyond this scene's noise scales: at most {} ({} per second times its \
+                         largest semi-axis); beyond it every constraint pushes at any distance and the smoothed \
+                         step can create energy",
+                        Scale(s),
+                        Scale(scene.largest_noise_scale()),
+                        dynamics::NOISE_SCALE_PER_SIZE
+                    ),
+                )),
+                Some(s) => Err(bad(
+                    "sigma",
+                    format!("{} must be positive and finite", Scale(s)),
+                )),
                 None => Err(bad(
                     "sigma",
                     format!("the {model} model needs a noise scale sigma"),
@@ -340,7 +354,7 @@ impl Task {
                     "periods",
                     format!(
                         "the period of {c} is {}, it must be finite and at least {SHORTEST_PERIOD:e}",
-                        dynamics::Scale(p)
+                        Scale(p)
                     ),
                 ));
             }

@@ -539,9 +539,9 @@ impl ContactProblem<'_> {
     }
 
     /// Continuation in the noise scale from `start`, a solve under `settings` (a smoothed model) whose
-    /// trajectory felt no contact: sigma doubled, each solve warm-started from the last, until a solve feels
-    /// the contact and lowers the cost by a percent of its size, then halved back to the task's, each stage
-    /// reported to `stage` as it ends. `Err` for the hard model, which has no noise scale.
+    /// trajectory felt no contact: sigma doubled (at most to [`Scene::largest_noise_scale`]), each solve
+    /// warm-started from the last, until a solve feels the contact and lowers the cost by a percent of its
+    /// size, then halved back to the task's, each stage reported to `stage` as it ends. `Err` for the hard model, which has no noise scale.
     pub fn continue_in_noise(
         &self,
         start: Solution,
@@ -564,7 +564,12 @@ impl ContactProblem<'_> {
         let mut sol = start.clone();
         let mut felt_at = None;
         let mut s = sigma;
+        // Never past the scene's largest noise scale, where the smoothed step stops dissipating.
+        let most = self.scene.largest_noise_scale();
         for _ in 0..CONTINUATION_DOUBLINGS {
+            if s * 2.0 > most {
+                break;
+            }
             s *= 2.0;
             sol = solve(s, &sol.controls)?;
             let felt = self.felt(at(s), &sol.controls)? && lowers(untouched, sol.cost);
