@@ -1507,3 +1507,55 @@ fn trunk_only(task: &task::Task, trunk: usize) -> library::LibrarySettings {
         ..default_recipe(task, trunk)
     }
 }
+
+/// The finger's scene with `from` replaced by `to` (once; it must be there).
+fn finger_changed(from: &str, to: &str) -> ProblemFile {
+    let text = task::BUILTIN_SCENE_FILE;
+    assert!(text.contains(from), "{from}");
+    ProblemFile::from_toml_str(&text.replacen(from, to, 1)).unwrap()
+}
+
+/// How far the unperturbed chain of `lib` turned coordinate `c` from the start of its trajectory `from`
+/// to that of `to`.
+fn trunk_advance(lib: &library::Library, (from, to): (usize, usize), c: usize) -> f64 {
+    let keep = lib.settings.keep;
+    lib.entries[to * keep].x[c] - lib.entries[from * keep].x[c]
+}
+
+/// Issue 28: a receding horizon that lets go of its contact reaches for it again. Without gravity the
+/// finger swings clear of the ellipse after a flick, and from there no solve feels the contact (its
+/// gradient is zero): the chain rested for ever, its horizon was doubled twice in vain, and 12 growth
+/// rounds could not mend the policy (3 of 16 runs succeeded, builds of 107 to 131 s). A re-solve of a
+/// progress task's chain whose plan stalls now reaches for the contact as the first solve does.
+#[test]
+fn a_chain_that_lets_go_of_its_contact_reaches_for_it_again() {
+    let file = finger_changed("gravity = [0.0, -4.0]", "gravity = [0.0, 0.0]");
+    let task = file.task(None).unwrap();
+    let trunk = 60;
+    let settings = trunk_only(&task, trunk);
+    let lib = library::Library::build(&file, None, &settings, |_, _| {}).unwrap();
+    // Its second half (6 s) still turns the ellipse: before, it stopped for good 4 s in.
+    let advance = trunk_advance(&lib, (trunk / 2, trunk - 1), 2);
+    assert!(
+        advance > 2.0,
+        "the chain's second half turned the ellipse {advance}"
+    );
+}
+
+/// Issue 28: a progress task whose first solve turns its object the wrong way is solved again from
+/// smooth random starts. A finger above an ellipse of semi-axes 0.9 by 0.35 falls onto its near end and,
+/// from zero controls, the optimiser only limits the damage (-0.52 rad over the horizon); striking the
+/// far half turns it forward. Before, every library of it failed (0 of 16 runs, builds of 200 s).
+#[test]
+fn a_first_solve_that_turns_the_wrong_way_is_explored() {
+    let file = finger_changed("semi_axes = [0.7, 0.5]", "semi_axes = [0.9, 0.35]");
+    let task = file.task(None).unwrap();
+    let trunk = 40;
+    let settings = trunk_only(&task, trunk);
+    let lib = library::Library::build(&file, None, &settings, |_, _| {}).unwrap();
+    let advance = trunk_advance(&lib, (0, trunk - 1), 2);
+    assert!(
+        advance > 3.0,
+        "the chain turned the ellipse {advance} in {trunk} trajectories"
+    );
+}

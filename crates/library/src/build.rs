@@ -142,6 +142,13 @@ impl Exploration {
 /// The second time step the policy is evaluated at and grown for, besides its own (the paper's 0.03 s).
 pub const WORLD_TIME_STEP: f64 = 0.03;
 
+/// Smooth random warm starts a progress task's stalled first solve is tried from ([`Build::explore`]).
+pub const EXPLORE_STARTS: usize = 12;
+/// Their amplitudes (the controls' units), as many starts at each.
+pub const EXPLORE_AMPLITUDES: [f64; 3] = [1.0, 3.0, 10.0];
+/// The random stream the starts are drawn from (the branches use 1 and up, growth rounds from the top).
+const EXPLORE_STREAM: u64 = 1 << 40;
+
 /// A growth round's closed loop counts as stalled when the free angle advances less than this (rad) ...
 pub const STALL_ADVANCE: f64 = 0.3;
 /// ... over this many seconds.
@@ -639,6 +646,68 @@ impl<'a> Build<'a> {
         forward * (self.coordinate_at(built, last) - self.coordinate_at(built, from.min(last)))
     }
 
+    /// A progress task's first solve that advances less than [`STALL_ADVANCE`] even after reaching for
+    /// its contact, solved again from [`EXPLORE_STARTS`] smooth random control sequences (each control a
+    /// sum of three sines over the horizon at amplitudes [`EXPLORE_AMPLITUDES`], clamped to the task's
+    /// control limits; drawn from the library's seed): the cheapest solve is kept. A local optimiser only
+    /// improves the motion it starts from, and from rest the nearest contact may turn the object the
+    /// wrong way: a finger spinning an ellipse of semi-axes 0.9 by 0.35 falls onto its near end and
+    /// turns it back (-0.52 rad from zero controls), where striking its far half turns it forward.
+    fn explore(
+        &self,
+        dynamics: &mut SceneDynamics,
+        x1: &[f64],
+        start: ddp::Solution,
+        passes: usize,
+    ) -> Result<ddp::Solution, LibraryError> {
+        let (n, m) = (start.controls.len(), self.scene.n_controls);
+        let mut rng = ChaCha8Rng::seed_from_u64(self.settings.seed);
+        rng.set_stream(EXPLORE_STREAM);
+        let mut best = start;
+        for &amplitude in &EXPLORE_AMPLITUDES {
+            for _ in 0..EXPLORE_STARTS / EXPLORE_AMPLITUDES.len() {
+                let mut controls = vec![vec![0.0; m]; n];
+                for a in 0..m {
+                    for f in 1..=3 {
+                        let weight = amplitude
+                            * Normal::new(0.0, 1.0).map_or(0.0, |d| d.sample(&mut rng))
+                            / f as f64;
+                        let phase = rng.random_range(0.0..std::f64::consts::TAU);
+                        for (i, u) in controls.iter_mut().enumerate() {
+                            let angle =
+                                std::f64::consts::TAU * f as f64 * i as f64 / n as f64 + phase;
+                            u[a] += weight * angle.sin();
+                        }
+                    }
+                    if let Some(l) = &self.control_limits {
+                        for u in &mut controls {
+                            u[a] = u[a].clamp(l.lower[a], l.upper[a]);
+                        }
+                    }
+                }
+                let sol = self.solve(dynamics, x1, &controls, passes, 0)?;
+                tracing::debug!(amplitude, cost = sol.cost, "library first solve explored");
+                if sol.cost < best.cost {
+                    best = sol;
+                }
+            }
+        }
+        tracing::info!(cost = best.cost, "library first solve after exploring");
+        Ok(best)
+    }
+
+    /// Whether a progress task's plan `sol` advances its rewarded coordinate less than [`STALL_ADVANCE`]
+    /// the rewarded way over its whole horizon (never for a target task).
+    fn plan_stalls(&self, sol: &ddp::Solution) -> bool {
+        let (Some(forward), Some(first), Some(last)) =
+            (self.progress.forward, sol.states.first(), sol.states.last())
+        else {
+            return false;
+        };
+        let c = self.progress.coordinate;
+        forward * (last[c] - first[c]) < STALL_ADVANCE
+    }
+
     /// The progress coordinate at the start of trajectory `j`.
     fn coordinate_at(&self, built: &Built, j: usize) -> f64 {
         built.entries[j * self.settings.keep].x[self.progress.coordinate]
@@ -749,6 +818,16 @@ impl<'a> Build<'a> {
                 if !found && !first {
                     break;
                 }
+            }
+            if first && k == 0 && self.plan_stalls(&sol) {
+                sol = self.explore(dynamics, &x1, sol, passes)?;
+            } else if k > 0 && self.plan_stalls(&sol) {
+                // A progress task's receding horizon that has let go of its contact: a finger without
+                // gravity swings clear after a flick, and from there no solve feels the contact (its
+                // gradient is zero), so the chain would rest for ever. Reached for as on the first solve;
+                // kept only where a cheaper solve feels it.
+                let settings = *dynamics.model().settings();
+                (sol, _) = self.reach(&settings, &x1, sol, passes)?;
             }
             let p = self.progress;
             let values = local_values(
