@@ -100,6 +100,8 @@ fn bad_world_settings_and_messages_are_typed_errors_that_change_nothing() {
     for bad in [
         ClientMessage::Sigma { sigma: 0.0 },
         ClientMessage::Sigma { sigma: 1e6 },
+        // Within the field's range, beyond the finger's own bound (8: Scene::largest_noise_scale).
+        ClientMessage::Sigma { sigma: 9.0 },
         ClientMessage::Speed { speed: 0.0 },
         ClientMessage::Kick { std: f64::NAN },
         ClientMessage::Grab {
@@ -119,6 +121,9 @@ fn bad_world_settings_and_messages_are_typed_errors_that_change_nothing() {
             matches!(err, ViewerError::Setting { .. } | ViewerError::Message(_)),
             "{bad:?}: {err}"
         );
+        if bad == (ClientMessage::Sigma { sigma: 9.0 }) {
+            assert!(err.to_string().contains("at most 8"), "{err}");
+        }
     }
     assert_eq!(world.frame(), before);
     world

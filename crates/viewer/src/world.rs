@@ -514,6 +514,15 @@ impl World {
                         expected: "between 0.001 and 10",
                     });
                 }
+                // The scene's own bound (Scene::largest_noise_scale) may be lower than the field's.
+                let largest = self.scene.largest_noise_scale();
+                if sigma > largest {
+                    return Err(ViewerError::Message(format!(
+                        "sigma = {} is beyond this scene's noise scales: at most {}",
+                        dynamics::Scale(sigma),
+                        dynamics::Scale(largest)
+                    )));
+                }
                 self.sim = Self::simulator(&self.scene, self.world, sigma, self.settings.h)?;
                 self.sigma = sigma;
                 if self.policy == PolicyKind::Mpc {
