@@ -100,7 +100,9 @@ def optimize(
     ``"step converged"``, ``"pass limit reached"``, ``"no descent"``, ``"regularisation exceeded"``, or
     ``"no contact felt"``), ``optimiser_status`` (the optimiser's alone), ``converged`` (converged with
     the contact felt), ``contact`` (``"felt"``, ``"pulled A-B together"``, ``"continued in the noise
-    scale"`` or ``"not felt: ..."``) and ``task``. Releases the GIL."""
+    scale"`` or ``"not felt: ..."``; ``"; explored from random starts"`` appended where a progress
+    task's solve stalled and a solve from smooth random starts replaced it) and ``task``. Releases the
+    GIL."""
 
 class Library:
     """A controller library (paper section IV-C) and its global nearest-neighbour policy."""

@@ -526,6 +526,7 @@ fn optimize<'py>(
     .map_err(error)?;
     let cost = task.cost.clone();
     let scene = file.scene.clone();
+    let progress = ::task::Progress::of_task(&task).map_err(error)?;
     let (sol, felt, contact) = py.allow_threads(move || {
         shielded(|| {
             let settings = *sim.settings();
@@ -574,7 +575,18 @@ fn optimize<'py>(
                 }
             };
             let felt = search.found();
-            Ok((search.solution, felt, contact))
+            if !felt {
+                return Ok((search.solution, felt, contact));
+            }
+            // A progress task's solve that stalls is explored from smooth random starts, as
+            // `cargo xtask optimize` and a library's first solve are.
+            let explored = problem.explore(search.solution, &progress).map_err(error)?;
+            let contact = if explored.kept {
+                format!("{contact}; explored from random starts")
+            } else {
+                contact
+            };
+            Ok((explored.solution, felt, contact))
         })
     })?;
     let out = PyDict::new(py);

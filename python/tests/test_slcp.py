@@ -133,6 +133,17 @@ def test_optimize_reaches_for_a_contact_out_of_reach_and_says_so(root):
     assert alone["cost"] > sol["cost"]
 
 
+def test_optimize_explores_a_solve_that_turns_the_wrong_way(root, tmp_path):
+    # Above an ellipse of 0.9 by 0.35 the finger's solve from zero controls turns it back (-0.52 rad).
+    text = (root / "scenes" / "finger.toml").read_text()
+    scene = tmp_path / "long.toml"
+    scene.write_text(text.replace("semi_axes = [0.7, 0.5]", "semi_axes = [0.9, 0.35]", 1))
+    sol = slcp.optimize(scene)
+    assert sol["contact"] == "felt; explored from random starts", sol["contact"]
+    assert sol["states"][-1][2] > 1.0 and sol["cost"] < 0.0
+    assert slcp.optimize(root / "scenes" / "finger.toml")["contact"] == "felt"
+
+
 def test_optimize_returns_the_trajectory_its_gains_and_value_model(root):
     sol = slcp.optimize(root / "scenes" / "pushing.toml", task="push", iterations=300)
     n, m, N = 10, 2, 60

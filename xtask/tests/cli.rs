@@ -800,3 +800,37 @@ fn refusals_name_the_flags_range_and_a_time_step_that_works() {
     );
     assert!(!stderr.contains("--drag"), "{stderr}");
 }
+
+/// A progress task's solve that turns its object the wrong way is explored from random starts, and
+/// `optimize` says so: above an ellipse of 0.9 by 0.35 the finger's solve from zero controls turned it
+/// back (-0.52 rad); the finger's own solve advances and is left as it is.
+#[test]
+fn optimize_explores_a_solve_that_turns_the_wrong_way() {
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../scenes/finger.toml"
+    ))
+    .unwrap();
+    let (dir, path) = scene_file(
+        "explore",
+        "long.toml",
+        &text.replacen("semi_axes = [0.7, 0.5]", "semi_axes = [0.9, 0.35]", 1),
+    );
+    let stdout = optimize_ok(&["--quiet"], &path);
+    assert!(
+        stdout.contains("explored: the solve (cost 20.311404) advances less than 0.3")
+            && stdout.contains("the cheapest that does not stall is kept"),
+        "{stdout}"
+    );
+    let turned: f64 = stdout
+        .split("ellipse.angle 0.0000 -> ")
+        .nth(1)
+        .and_then(|rest| rest.split(';').next())
+        .and_then(|v| v.trim().parse().ok())
+        .unwrap_or_else(|| panic!("{stdout}"));
+    assert!(turned > 1.0, "{stdout}");
+    let (finger_dir, finger) = scene_file("explore-finger", "finger.toml", &text);
+    assert!(!optimize_ok(&["--quiet"], &finger).contains("explored"));
+    std::fs::remove_dir_all(&dir).ok();
+    std::fs::remove_dir_all(&finger_dir).ok();
+}

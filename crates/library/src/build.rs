@@ -142,17 +142,8 @@ impl Exploration {
 /// The second time step the policy is evaluated at and grown for, besides its own (the paper's 0.03 s).
 pub const WORLD_TIME_STEP: f64 = 0.03;
 
-/// Smooth random warm starts a progress task's stalled first solve is tried from ([`Build::explore`]).
-pub const EXPLORE_STARTS: usize = 12;
-/// Their amplitudes (the controls' units), as many starts at each.
-pub const EXPLORE_AMPLITUDES: [f64; 3] = [1.0, 3.0, 10.0];
-/// The seed the starts are drawn from: the same for every library seed and chain, so that a first solve
-/// is a function of its task and start (the paper recipe's chains, each seeded apart, are the chains
-/// built one by one).
-const EXPLORE_SEED: u64 = 28;
-
 /// A growth round's closed loop counts as stalled when the free angle advances less than this (rad) ...
-pub const STALL_ADVANCE: f64 = 0.3;
+pub use task::STALL_ADVANCE;
 /// ... over this many seconds.
 pub const STALL_WINDOW: f64 = 2.0;
 /// A progress task's growth judges stalls over the longer of [`STALL_WINDOW`] and this multiple of the
@@ -648,69 +639,36 @@ impl<'a> Build<'a> {
         forward * (self.coordinate_at(built, last) - self.coordinate_at(built, from.min(last)))
     }
 
-    /// A progress task's first solve that advances less than [`STALL_ADVANCE`] even after reaching for
-    /// its contact, solved again from [`EXPLORE_STARTS`] smooth random control sequences (each control a
-    /// sum of three sines over the horizon at amplitudes [`EXPLORE_AMPLITUDES`], clamped to the task's
-    /// control limits; drawn from [`EXPLORE_SEED`]): the cheapest solve that advances at least
-    /// [`STALL_ADVANCE`] is kept, if it costs less than the first. A local optimiser only
-    /// improves the motion it starts from, and from rest the nearest contact may turn the object the
-    /// wrong way: a finger spinning an ellipse of semi-axes 0.9 by 0.35 falls onto its near end and
-    /// turns it back (-0.52 rad from zero controls), where striking its far half turns it forward.
+    /// A progress task's first solve that still stalls after reaching for its contact, explored from
+    /// smooth random starts ([`task::ContactProblem::explore`], the same search `optimize` makes).
     fn explore(
         &self,
-        dynamics: &mut SceneDynamics,
+        settings: &StepSettings,
         x1: &[f64],
         start: ddp::Solution,
         passes: usize,
     ) -> Result<ddp::Solution, LibraryError> {
-        let (n, m) = (start.controls.len(), self.scene.n_controls);
-        let mut rng = ChaCha8Rng::seed_from_u64(EXPLORE_SEED);
-        let mut best = start;
-        for &amplitude in &EXPLORE_AMPLITUDES {
-            for _ in 0..EXPLORE_STARTS / EXPLORE_AMPLITUDES.len() {
-                let mut controls = vec![vec![0.0; m]; n];
-                for a in 0..m {
-                    for f in 1..=3 {
-                        let weight = amplitude
-                            * Normal::new(0.0, 1.0).map_or(0.0, |d| d.sample(&mut rng))
-                            / f as f64;
-                        let phase = rng.random_range(0.0..std::f64::consts::TAU);
-                        for (i, u) in controls.iter_mut().enumerate() {
-                            let angle =
-                                std::f64::consts::TAU * f as f64 * i as f64 / n as f64 + phase;
-                            u[a] += weight * angle.sin();
-                        }
-                    }
-                    if let Some(l) = &self.control_limits {
-                        for u in &mut controls {
-                            u[a] = u[a].clamp(l.lower[a], l.upper[a]);
-                        }
-                    }
-                }
-                let sol = self.solve(dynamics, x1, &controls, passes, 0)?;
-                tracing::debug!(amplitude, cost = sol.cost, "library first solve explored");
-                // Kept only where it no longer stalls: a start that ends in the same optimum (to
-                // rounding) or another stall teaches nothing new, and keeping it would make the library
-                // turn on the last bits of a cost.
-                if sol.cost < best.cost && !self.plan_stalls(&sol) {
-                    best = sol;
-                }
-            }
-        }
-        tracing::info!(cost = best.cost, "library first solve after exploring");
-        Ok(best)
+        let ddp = self.optimiser(passes, 0)?;
+        let problem = task::ContactProblem {
+            ddp: &ddp,
+            scene: self.scene,
+            settings,
+            cost: &self.cost,
+            x0: x1,
+        };
+        let explored = problem.explore(start, &self.progress)?;
+        tracing::info!(
+            tried = explored.tried,
+            kept = explored.kept,
+            cost = explored.solution.cost,
+            "library first solve explored"
+        );
+        Ok(explored.solution)
     }
 
-    /// Whether a progress task's plan `sol` advances its rewarded coordinate less than [`STALL_ADVANCE`]
-    /// the rewarded way over its whole horizon (never for a target task).
+    /// Whether a progress task's plan `sol` stalls ([`task::plan_stalls`]).
     fn plan_stalls(&self, sol: &ddp::Solution) -> bool {
-        let (Some(forward), Some(first), Some(last)) =
-            (self.progress.forward, sol.states.first(), sol.states.last())
-        else {
-            return false;
-        };
-        let c = self.progress.coordinate;
-        forward * (last[c] - first[c]) < STALL_ADVANCE
+        task::plan_stalls(&self.progress, sol)
     }
 
     /// The progress coordinate at the start of trajectory `j`.
@@ -825,7 +783,8 @@ impl<'a> Build<'a> {
                 }
             }
             if first && k == 0 && self.plan_stalls(&sol) {
-                sol = self.explore(dynamics, &x1, sol, passes)?;
+                let settings = *dynamics.model().settings();
+                sol = self.explore(&settings, &x1, sol, passes)?;
             } else if k > 0 && self.plan_stalls(&sol) {
                 // A progress task's receding horizon that has let go of its contact: a finger without
                 // gravity swings clear after a flick, and from there no solve feels the contact (its

@@ -9,11 +9,38 @@
 
 use crate::error::TaskError;
 use crate::problem::TaskCost;
+use crate::progress::Progress;
 use crate::scene_dynamics::SceneDynamics;
 use ddp::{Ddp, DdpSettings, Solution};
 use dynamics::{
     Complementarity, ConstraintRow, Constraints, Kinematics, Scene, Side, Simulator, StepSettings,
 };
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, Normal};
+
+/// A progress task's plan stalls when it advances its rewarded coordinate less than this the rewarded way
+/// over its horizon ([`plan_stalls`]); growth's closed loops use the same amount over their window.
+pub const STALL_ADVANCE: f64 = 0.3;
+/// Smooth random warm starts a stalled progress solve is tried from ([`ContactProblem::explore`]).
+pub const EXPLORE_STARTS: usize = 12;
+/// Their amplitudes (the controls' units), as many starts at each.
+pub const EXPLORE_AMPLITUDES: [f64; 3] = [1.0, 3.0, 10.0];
+/// The seed the starts are drawn from: one for every caller, so that an explored solve is a function of
+/// its task and start (a library's chains, each seeded apart, are the chains built one by one).
+const EXPLORE_SEED: u64 = 28;
+
+/// Whether a progress task's plan `sol` advances its rewarded coordinate less than [`STALL_ADVANCE`] the
+/// rewarded way over its whole horizon (never for a target task).
+pub fn plan_stalls(progress: &Progress, sol: &Solution) -> bool {
+    let (Some(forward), Some(first), Some(last)) =
+        (progress.forward, sol.states.first(), sol.states.last())
+    else {
+        return false;
+    };
+    let c = progress.coordinate;
+    forward * (last[c] - first[c]) < STALL_ADVANCE
+}
 
 /// Doublings of the noise scale [`ContactProblem::continue_in_noise`] tries at most (up to 64 times the task's).
 pub const CONTINUATION_DOUBLINGS: usize = 6;
@@ -261,6 +288,17 @@ pub const REACH_PULL_PASSES: usize = 40;
 /// the horizon, is this many times the start's cost (plus one).
 pub const REACH_PULL: f64 = 10.0;
 
+/// What [`ContactProblem::explore`] did for a solve.
+#[derive(Debug, Clone)]
+pub struct Explored {
+    /// The solve kept: the best explored, or the start.
+    pub solution: Solution,
+    /// How many starts were solved (0: the start did not stall).
+    pub tried: usize,
+    /// Whether an explored solve replaced the start.
+    pub kept: bool,
+}
+
 /// What [`ContactProblem::feel_contact`] did for a solve.
 #[derive(Debug, Clone)]
 pub struct ContactSearch {
@@ -384,6 +422,62 @@ impl ContactProblem<'_> {
     fn felt(&self, settings: StepSettings, controls: &[Vec<f64>]) -> Result<bool, TaskError> {
         let mut probe = Simulator::new(self.scene.clone(), settings)?;
         contact_felt(&mut probe, self.cost, self.x0, controls)
+    }
+
+    /// A progress task's solve `start` that stalls ([`plan_stalls`]), solved again from [`EXPLORE_STARTS`]
+    /// smooth random control sequences (each control a sum of three sines over the horizon at amplitudes
+    /// [`EXPLORE_AMPLITUDES`], clamped to `ddp`'s control limits; drawn from one fixed seed): the cheapest
+    /// solve that no longer stalls replaces it, if it costs less. A local optimiser only improves the motion
+    /// it starts from, and from rest the nearest contact may turn the object the wrong way: a finger
+    /// spinning an ellipse of semi-axes 0.9 by 0.35 falls onto its near end and turns it back (-0.52 rad
+    /// from zero controls), where striking its far half turns it forward. A start that ends in the same
+    /// optimum to rounding, or in another stall, is not taken. `start` itself when it does not stall.
+    pub fn explore(&self, start: Solution, progress: &Progress) -> Result<Explored, TaskError> {
+        if !plan_stalls(progress, &start) {
+            return Ok(Explored {
+                solution: start,
+                tried: 0,
+                kept: false,
+            });
+        }
+        let (n, m) = (start.controls.len(), self.scene.n_controls);
+        let limits = self.ddp.settings().control_limits.clone();
+        let mut rng = ChaCha8Rng::seed_from_u64(EXPLORE_SEED);
+        let (mut best, mut kept, mut tried) = (start, false, 0);
+        for &amplitude in &EXPLORE_AMPLITUDES {
+            for _ in 0..EXPLORE_STARTS / EXPLORE_AMPLITUDES.len() {
+                let mut controls = vec![vec![0.0; m]; n];
+                for a in 0..m {
+                    for f in 1..=3 {
+                        let weight = amplitude
+                            * Normal::new(0.0, 1.0).map_or(0.0, |d| d.sample(&mut rng))
+                            / f as f64;
+                        let phase = rng.random_range(0.0..std::f64::consts::TAU);
+                        for (i, u) in controls.iter_mut().enumerate() {
+                            let angle =
+                                std::f64::consts::TAU * f as f64 * i as f64 / n as f64 + phase;
+                            u[a] += weight * angle.sin();
+                        }
+                    }
+                    if let Some(l) = &limits {
+                        for u in &mut controls {
+                            u[a] = u[a].clamp(l.lower[a], l.upper[a]);
+                        }
+                    }
+                }
+                let sol = self.solve(self.ddp, *self.settings, self.cost, &controls)?;
+                tried += 1;
+                if sol.cost < best.cost && !plan_stalls(progress, &sol) {
+                    best = sol;
+                    kept = true;
+                }
+            }
+        }
+        Ok(Explored {
+            solution: best,
+            tried,
+            kept,
+        })
     }
 
     /// A solve `start` from `x0` checked for the contact its task needs ([`contact_felt`], under

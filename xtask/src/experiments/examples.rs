@@ -205,15 +205,22 @@ fn from_rest(problem: &ProblemFile, task: &Task) -> anyhow::Result<FromRest> {
     let probe = LibrarySettings::default()
         .for_task(task)
         .simulator(&problem.scene)?;
-    let sol = task::ContactProblem {
+    let contact = task::ContactProblem {
         ddp: &ddp,
         scene: &problem.scene,
         settings: probe.settings(),
         cost: &task.cost,
         x0: &task.x0,
-    }
-    .feel_contact(sol, |_, _, _| {})?
-    .solution;
+    };
+    let search = contact.feel_contact(sol, |_, _, _| {})?;
+    // And one that stalls is explored from random starts, as `optimize` explores it.
+    let sol = if search.found() {
+        contact
+            .explore(search.solution, &task::Progress::of_task(task)?)?
+            .solution
+    } else {
+        search.solution
+    };
     let seconds = start.elapsed().as_secs_f64();
     let names = problem.scene.state_names();
     let last = sol.states.last().expect("N + 1 states");

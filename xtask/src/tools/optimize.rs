@@ -330,6 +330,36 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                     sol = search.solution;
                 }
             }
+            // A progress task's solve that turns its object less than the stall amount (or the wrong
+            // way): explored from smooth random starts, as a library's first solve is.
+            let progress = task::Progress::of_task(&task)?;
+            if !args.no_continuation && !never_felt && task::plan_stalls(&progress, &sol) {
+                let problem = task::ContactProblem {
+                    ddp: &ddp,
+                    scene: &file.scene,
+                    settings: &base,
+                    cost: &task.cost,
+                    x0: &x0,
+                };
+                let before = sol.cost;
+                let explored = problem.explore(sol, &progress)?;
+                let outcome = if explored.kept {
+                    format!(
+                        "the cheapest that does not stall is kept, cost {}",
+                        Num(explored.solution.cost, 6)
+                    )
+                } else {
+                    "none that does not stall costs less; the solve is kept".to_string()
+                };
+                println!(
+                    "explored: the solve (cost {}) advances less than {} the rewarded way, so it \
+                     was solved again from {} smooth random starts: {outcome}",
+                    Num(before, 6),
+                    task::STALL_ADVANCE,
+                    explored.tried,
+                );
+                sol = explored.solution;
+            }
             if let Some(note) = &note {
                 println!("{note}");
             }
