@@ -45,8 +45,8 @@ pub enum DynamicsError {
     },
     /// A smoothed model's noise scale beyond the scene's ([`crate::Scene::largest_noise_scale`]).
     #[error(
-        "setting `sigma` = {} is out of range for this scene: at most {} ({} per second times its largest semi-axis); beyond it every constraint pushes at any distance and the smoothed step can create energy",
-        crate::Scale(*sigma), crate::Scale(*largest), crate::NOISE_SCALE_PER_SIZE
+        "setting `sigma` = {} is out of range for this scene: {}",
+        crate::Scale(*sigma), NoiseScaleBound(*largest)
     )]
     NoiseScale {
         /// The noise scale asked for.
@@ -100,4 +100,22 @@ pub enum DynamicsError {
     /// The complementarity problem could not be posed.
     #[error(transparent)]
     Ncp(#[from] ncp::NcpError),
+}
+
+/// A scene's noise-scale bound `largest` ([`crate::Scene::largest_noise_scale`]) and why, as every refusal
+/// of a noise scale beyond it words it: "at most 8 (10 per second times its largest semi-axis); beyond it
+/// ...".
+#[derive(Debug, Clone, Copy)]
+pub struct NoiseScaleBound(pub f64);
+
+impl std::fmt::Display for NoiseScaleBound {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "at most {} ({} per second times its largest semi-axis); beyond it every constraint pushes \
+             at any distance and the smoothed step can create energy",
+            crate::Scale(self.0),
+            crate::NOISE_SCALE_PER_SIZE
+        )
+    }
 }

@@ -43,7 +43,7 @@ pub use constraint::{Constraints, ContactFrame, ContactImpulse};
 pub use derivative::{
     SECOND_ORDER_MAX_BYTES, SecondOrderStep, StepDerivatives, step_residual, step_residual_at,
 };
-pub use error::{DynamicsError, SceneProblem};
+pub use error::{DynamicsError, NoiseScaleBound, SceneProblem};
 pub use jet::{Jet, Jet1};
 pub use kinematics::{ForceScratch, Kinematics, Ring, Scalar};
 pub use scene::{

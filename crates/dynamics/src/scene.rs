@@ -780,6 +780,16 @@ impl Scene {
         NOISE_SCALE_PER_SIZE * body.chain(fixed).fold(0.0, f64::max)
     }
 
+    /// `Err(DynamicsError::NoiseScale)` for a noise scale beyond [`Scene::largest_noise_scale`]: the one
+    /// check a step's model, a task file and the viewer make.
+    pub fn check_noise_scale(&self, sigma: f64) -> Result<(), DynamicsError> {
+        let largest = self.largest_noise_scale();
+        if sigma > largest {
+            return Err(DynamicsError::NoiseScale { sigma, largest });
+        }
+        Ok(())
+    }
+
     /// The time step below which every free body of the scene rests stably on its flat side on each plane
     /// it touches; `None` when no free body touches a plane that gravity presses it onto, or none could
     /// rock (a disc).

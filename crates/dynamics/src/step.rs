@@ -425,12 +425,8 @@ impl Model {
         settings.validate()?;
         if let Complementarity::Logistic { sigma } | Complementarity::Normal { sigma } =
             settings.model
-            && sigma > scene.largest_noise_scale()
         {
-            return Err(DynamicsError::NoiseScale {
-                sigma,
-                largest: scene.largest_noise_scale(),
-            });
+            scene.check_noise_scale(sigma)?;
         }
         NewtonSolver::new(settings.newton)?;
         if let Some(limit) = scene.rocking_limit().filter(|&l| settings.h > l) {

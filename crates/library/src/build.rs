@@ -649,14 +649,9 @@ impl<'a> Build<'a> {
         passes: usize,
     ) -> Result<ddp::Solution, LibraryError> {
         let ddp = self.optimiser(passes, 0)?;
-        let problem = task::ContactProblem {
-            ddp: &ddp,
-            scene: self.scene,
-            settings,
-            cost: &self.cost,
-            x0: x1,
-        };
-        let explored = problem.explore(start, &self.progress)?;
+        let explored = self
+            .contact_problem(&ddp, settings, x1)
+            .explore(start, &self.progress)?;
         tracing::info!(
             tried = explored.tried,
             kept = explored.kept,
@@ -664,6 +659,22 @@ impl<'a> Build<'a> {
             "library first solve explored"
         );
         Ok(explored.solution)
+    }
+
+    /// The task's contact searches from `x1` under `settings` with the optimiser `ddp`.
+    fn contact_problem<'p>(
+        &'p self,
+        ddp: &'p Ddp,
+        settings: &'p StepSettings,
+        x1: &'p [f64],
+    ) -> task::ContactProblem<'p> {
+        task::ContactProblem {
+            ddp,
+            scene: self.scene,
+            settings,
+            cost: &self.cost,
+            x0: x1,
+        }
     }
 
     /// Whether a progress task's plan `sol` stalls ([`task::plan_stalls`]).
@@ -782,16 +793,17 @@ impl<'a> Build<'a> {
                     break;
                 }
             }
-            if first && k == 0 && self.plan_stalls(&sol) {
+            if (k > 0 || first) && self.plan_stalls(&sol) {
                 let settings = *dynamics.model().settings();
-                sol = self.explore(&settings, &x1, sol, passes)?;
-            } else if k > 0 && self.plan_stalls(&sol) {
-                // A progress task's receding horizon that has let go of its contact: a finger without
-                // gravity swings clear after a flick, and from there no solve feels the contact (its
-                // gradient is zero), so the chain would rest for ever. Reached for as on the first solve;
-                // kept only where a cheaper solve feels it.
-                let settings = *dynamics.model().settings();
-                (sol, _) = self.reach(&settings, &x1, sol, passes)?;
+                if k == 0 {
+                    sol = self.explore(&settings, &x1, sol, passes)?;
+                } else {
+                    // A progress task's receding horizon that has let go of its contact: a finger
+                    // without gravity swings clear after a flick, and from there no solve feels the
+                    // contact (its gradient is zero), so the chain would rest for ever. Reached for as
+                    // on the first solve; kept only where a cheaper solve feels it.
+                    (sol, _) = self.reach(&settings, &x1, sol, passes)?;
+                }
             }
             let p = self.progress;
             let values = local_values(
@@ -843,22 +855,17 @@ impl<'a> Build<'a> {
         passes: usize,
     ) -> Result<(ddp::Solution, bool), LibraryError> {
         let ddp = self.optimiser(passes, 0)?;
-        let problem = task::ContactProblem {
-            ddp: &ddp,
-            scene: self.scene,
-            settings,
-            cost: &self.cost,
-            x0: x1,
-        };
-        let search = problem.feel_contact(sol, |s, stage, felt| {
-            tracing::info!(
-                sigma = s,
-                passes = stage.iterations.len(),
-                cost = stage.cost,
-                ?felt,
-                "continuation"
-            );
-        })?;
+        let search =
+            self.contact_problem(&ddp, settings, x1)
+                .feel_contact(sol, |s, stage, felt| {
+                    tracing::info!(
+                        sigma = s,
+                        passes = stage.iterations.len(),
+                        cost = stage.cost,
+                        ?felt,
+                        "continuation"
+                    );
+                })?;
         if let Some(r) = &search.reach {
             tracing::info!(pair = ?r.pair, tries = ?r.tries, "a first solve felt no contact: reaching for it");
         }

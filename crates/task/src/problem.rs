@@ -305,18 +305,17 @@ impl Task {
         }
         let sigma = |model: &str| -> Result<f64, TaskError> {
             match spec.sigma {
-                Some(s) if s.is_finite() && s > 0.0 && s <= scene.largest_noise_scale() => Ok(s),
-                Some(s) if s.is_finite() && s > 0.0 => Err(bad(
-                    "sigma",
-                    format!(
-                        "{} is beyond this scene's noise scales: at most {} ({} per second times its \
-                         largest semi-axis); beyond it every constraint pushes at any distance and the smoothed \
-                         step can create energy",
-                        Scale(s),
-                        Scale(scene.largest_noise_scale()),
-                        dynamics::NOISE_SCALE_PER_SIZE
-                    ),
-                )),
+                Some(s) if s.is_finite() && s > 0.0 => match scene.check_noise_scale(s) {
+                    Ok(()) => Ok(s),
+                    Err(_) => Err(bad(
+                        "sigma",
+                        format!(
+                            "{} is beyond this scene's noise scales: {}",
+                            Scale(s),
+                            dynamics::NoiseScaleBound(scene.largest_noise_scale())
+                        ),
+                    )),
+                },
                 Some(s) => Err(bad(
                     "sigma",
                     format!("{} must be positive and finite", Scale(s)),

@@ -17,7 +17,7 @@ use dynamics::{
 };
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use rand_distr::{Distribution, Normal};
+use rand_distr::StandardNormal;
 
 /// A progress task's plan stalls when it advances its rewarded coordinate less than this the rewarded way
 /// over its horizon ([`plan_stalls`]); growth's closed loops use the same amount over their window.
@@ -449,9 +449,8 @@ impl ContactProblem<'_> {
                 let mut controls = vec![vec![0.0; m]; n];
                 for a in 0..m {
                     for f in 1..=3 {
-                        let weight = amplitude
-                            * Normal::new(0.0, 1.0).map_or(0.0, |d| d.sample(&mut rng))
-                            / f as f64;
+                        let z: f64 = rng.sample(StandardNormal);
+                        let weight = amplitude * z / f as f64;
                         let phase = rng.random_range(0.0..std::f64::consts::TAU);
                         for (i, u) in controls.iter_mut().enumerate() {
                             let angle =
@@ -635,7 +634,8 @@ impl ContactProblem<'_> {
     /// Continuation in the noise scale from `start`, a solve under `settings` (a smoothed model) whose
     /// trajectory felt no contact: sigma doubled (at most to [`Scene::largest_noise_scale`]), each solve
     /// warm-started from the last, until a solve feels the contact and lowers the cost by a percent of its
-    /// size, then halved back to the task's, each stage reported to `stage` as it ends. `Err` for the hard model, which has no noise scale.
+    /// size, then halved back to the task's, each stage reported to `stage` as it ends. `Err` for the hard
+    /// model, which has no noise scale.
     pub fn continue_in_noise(
         &self,
         start: Solution,

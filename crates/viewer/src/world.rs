@@ -515,14 +515,9 @@ impl World {
                     });
                 }
                 // The scene's own bound (Scene::largest_noise_scale) may be lower than the field's.
-                let largest = self.scene.largest_noise_scale();
-                if sigma > largest {
-                    return Err(ViewerError::Message(format!(
-                        "sigma = {} is beyond this scene's noise scales: at most {}",
-                        dynamics::Scale(sigma),
-                        dynamics::Scale(largest)
-                    )));
-                }
+                self.scene
+                    .check_noise_scale(sigma)
+                    .map_err(|e| ViewerError::Message(e.to_string()))?;
                 self.sim = Self::simulator(&self.scene, self.world, sigma, self.settings.h)?;
                 self.sigma = sigma;
                 if self.policy == PolicyKind::Mpc {

@@ -218,6 +218,13 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                 observe,
             )?;
             let felt = task::contact_felt(&mut probe, &task.cost, &x0, &sol.controls)?;
+            let problem = task::ContactProblem {
+                ddp: &ddp,
+                scene: &file.scene,
+                settings: &base,
+                cost: &task.cost,
+                x0: &x0,
+            };
             let mut note = None;
             if !felt {
                 println!(
@@ -229,13 +236,6 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                     never_felt = true;
                     note = Some("no contact felt (--no-continuation)".to_string());
                 } else {
-                    let problem = task::ContactProblem {
-                        ddp: &ddp,
-                        scene: &file.scene,
-                        settings: &base,
-                        cost: &task.cost,
-                        x0: &x0,
-                    };
                     let search = problem.feel_contact(sol, |s, stage, felt| {
                         println!(
                             "continuation: sigma {}: {} after {} passes, cost {}{}",
@@ -334,13 +334,6 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             // way): explored from smooth random starts, as a library's first solve is.
             let progress = task::Progress::of_task(&task)?;
             if !args.no_continuation && !never_felt && task::plan_stalls(&progress, &sol) {
-                let problem = task::ContactProblem {
-                    ddp: &ddp,
-                    scene: &file.scene,
-                    settings: &base,
-                    cost: &task.cost,
-                    x0: &x0,
-                };
                 let before = sol.cost;
                 let explored = problem.explore(sol, &progress)?;
                 let outcome = if explored.kept {
