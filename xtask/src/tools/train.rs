@@ -210,28 +210,50 @@ const CHECK_SECONDS: f64 = 40.0;
 fn unkicked_verdict(library: &Library) -> anyhow::Result<String> {
     let policy = library.policy()?;
     let worlds = crate::tools::evaluate::worlds(library);
-    let mut failed = Vec::new();
-    // A world the closed loop cannot run (a time step too short for the check's seconds, a step that
-    // fails) has no verdict: said with its reason, after the library is written, not as train's failure.
-    let mut unrun = Vec::new();
+    let mut checked = Vec::new();
     for (world, model, h) in &worlds {
-        match crate::tools::evaluate::in_world(
+        let outcome = crate::tools::evaluate::in_world(
             library,
             &policy,
             (*model, *h),
             CHECK_SECONDS,
             (0.0, 0.0, 0),
-        ) {
-            Ok(e) if e.success.passed => {}
-            Ok(_) => failed.push(format!("{world} at h = {}", dynamics::Scale(*h))),
-            Err(e) => unrun.push(format!("{world} at h = {} ({e:#})", dynamics::Scale(*h))),
+        )
+        .map(|e| e.success.passed)
+        .map_err(|e| format!("{e:#}"));
+        checked.push((world.to_string(), *h, outcome));
+    }
+    let criterion = library.success().describe(&library.scene().state_names());
+    Ok(verdict_line(&checked, library.settings.h, &criterion))
+}
+
+/// [`unkicked_verdict`]'s line from each world's name, time step and outcome (whether it succeeded, or
+/// why it could not run), for a library built at time step `own` with success `criterion`.
+fn verdict_line(
+    checked: &[(String, f64, Result<bool, String>)],
+    own: f64,
+    criterion: &str,
+) -> String {
+    let mut failed = Vec::new();
+    // Whether a world failed at the library's own time step.
+    let mut failed_at_own_step = false;
+    // A world the closed loop cannot run (a time step too short for the check's seconds, a step that
+    // fails) has no verdict: said with its reason, after the library is written, not as train's failure.
+    let mut unrun = Vec::new();
+    for (world, h, outcome) in checked {
+        match outcome {
+            Ok(true) => {}
+            Ok(false) => {
+                failed_at_own_step |= *h == own;
+                failed.push(format!("{world} at h = {}", dynamics::Scale(*h)));
+            }
+            Err(e) => unrun.push(format!("{world} at h = {} ({e})", dynamics::Scale(*h))),
         }
     }
-    let succeeding = worlds.len() - failed.len() - unrun.len();
-    let criterion = library.success().describe(&library.scene().state_names());
+    let succeeding = checked.len() - failed.len() - unrun.len();
     let mut line = format!(
         "without kicks for {CHECK_SECONDS} s from the task's start, its policy succeeds on {succeeding} of {} worlds ({criterion})",
-        worlds.len()
+        checked.len()
     );
     if !failed.is_empty() {
         line.push_str(&format!("; not on {}", failed.join(", ")));
@@ -239,12 +261,18 @@ fn unkicked_verdict(library: &Library) -> anyhow::Result<String> {
     if !unrun.is_empty() {
         line.push_str(&format!("; no verdict on {}", unrun.join(", ")));
     }
+    if succeeding > 0 && !failed.is_empty() && !failed_at_own_step {
+        line.push_str(&format!(
+            ". It fails only at another time step than its own (h = {}): at another step the same controls move the bodies differently through a contact (docs/tasks.md, \"The paddles fail at 0.03 s\"), and a task written at that step is built for it",
+            dynamics::Scale(own)
+        ));
+    }
     if succeeding == 0 && !failed.is_empty() {
         line.push_str(
             ". On none: `cargo xtask optimize` on the task says whether a solve from its start feels the contact the task needs and whether that contact pays (docs/tasks.md), and `cargo xtask evaluate` gives the measures",
         );
     }
-    Ok(line)
+    line
 }
 
 /// `train`'s settings for `task` with no flag but `--seed`: the default recipe on the task's model, time
@@ -255,5 +283,65 @@ pub(crate) fn defaults_for(task: &task::Task, seed: u64) -> LibrarySettings {
     LibrarySettings {
         seed,
         ..base.fitted(trajectories)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::verdict_line;
+
+    fn world(
+        name: &str,
+        h: f64,
+        outcome: Result<bool, String>,
+    ) -> (String, f64, Result<bool, String>) {
+        (name.to_string(), h, outcome)
+    }
+
+    #[test]
+    fn a_policy_failing_only_at_another_time_step_is_told_so() {
+        let only_finer = [
+            world("logistic 0.1", 0.05, Ok(true)),
+            world("hard", 0.05, Ok(true)),
+            world("logistic 0.1", 0.03, Ok(false)),
+            world("hard", 0.03, Ok(false)),
+        ];
+        let line = verdict_line(&only_finer, 0.05, "c");
+        assert!(line.contains("succeeds on 2 of 4 worlds (c)"), "{line}");
+        assert!(
+            line.contains("not on logistic 0.1 at h = 0.03, hard at h = 0.03"),
+            "{line}"
+        );
+        assert!(
+            line.contains("fails only at another time step than its own (h = 0.05)"),
+            "{line}"
+        );
+        // A failure at its own step as well: no such hint.
+        let own_too = [
+            world("logistic 0.1", 0.05, Ok(false)),
+            world("hard", 0.05, Ok(true)),
+            world("logistic 0.1", 0.03, Ok(false)),
+        ];
+        let line = verdict_line(&own_too, 0.05, "c");
+        assert!(!line.contains("another time step"), "{line}");
+        // Every world fails: the contact hint instead.
+        let none = [world("logistic 0.1", 0.03, Ok(false))];
+        let line = verdict_line(&none, 0.05, "c");
+        assert!(
+            !line.contains("another time step") && line.contains("On none"),
+            "{line}"
+        );
+        // A world that could not run is said with its reason and is no failure.
+        let unrun = [
+            world("logistic 0.1", 0.05, Ok(true)),
+            world("hard", 0.03, Err("too short".into())),
+        ];
+        let line = verdict_line(&unrun, 0.05, "c");
+        assert!(line.contains("succeeds on 1 of 2"), "{line}");
+        assert!(
+            line.contains("no verdict on hard at h = 0.03 (too short)"),
+            "{line}"
+        );
+        assert!(!line.contains("another time step"), "{line}");
     }
 }
