@@ -429,8 +429,10 @@ impl Simulator {
 /// exceeded", or "no contact felt" where the solve never touches the contact its task needs);
 /// `optimiser_status` (why the optimiser stopped, whatever the contact); `converged` (the first two,
 /// with the contact felt); `contact` (how the contact was felt: "felt" by the first solve, "pulled
-/// A-B together", "continued in the noise scale", or "not felt" with the reason); `task` (its name). The
-/// GIL is released while it runs.
+/// A-B together", "continued in the noise scale", or "not felt" with the reason); `regularisation` (the
+/// returned solve's: "state", `Q_uu + mu f_u^T f_u`, or "control", `Q_uu + mu I` where, with
+/// `continuation`, a solve that stopped without converging was continued under it and came out cheaper,
+/// as `cargo xtask optimize` does); `task` (its name). The GIL is released while it runs.
 ///
 /// `continuation` (default True): where the first solve never touches the contact the task's cost needs
 /// (its gradient is zero out of reach), reach for it as `cargo xtask optimize` does: pull each needed pair
@@ -527,7 +529,7 @@ fn optimize<'py>(
     let cost = task.cost.clone();
     let scene = file.scene.clone();
     let progress = ::task::Progress::of_task(&task).map_err(error)?;
-    let (sol, felt, contact) = py.allow_threads(move || {
+    let (sol, felt, contact, regularisation) = py.allow_threads(move || {
         shielded(|| {
             let settings = *sim.settings();
             let mut probe = RsSimulator::new(scene.clone(), settings).map_err(error)?;
@@ -541,7 +543,7 @@ fn optimize<'py>(
                     true => "felt".to_string(),
                     false => "not felt (continuation=False)".to_string(),
                 };
-                return Ok((sol, felt, contact));
+                return Ok((sol, felt, contact, "state"));
             }
             let problem = ::task::ContactProblem {
                 ddp: &ddp,
@@ -576,7 +578,7 @@ fn optimize<'py>(
             };
             let felt = search.found();
             if !felt {
-                return Ok((search.solution, felt, contact));
+                return Ok((search.solution, felt, contact, "state"));
             }
             // A progress task's solve that stalls is explored from smooth random starts, as
             // `cargo xtask optimize` and a library's first solve are.
@@ -586,7 +588,13 @@ fn optimize<'py>(
             } else {
                 contact
             };
-            Ok((explored.solution, felt, contact))
+            // One that stopped without converging is continued under the control regularisation, as
+            // `cargo xtask optimize` and a library's first solve are.
+            let other = problem
+                .other_regularisation(explored.solution)
+                .map_err(error)?;
+            let regularisation = if other.kept { "control" } else { "state" };
+            Ok((other.solution, felt, contact, regularisation))
         })
     })?;
     let out = PyDict::new(py);
@@ -631,6 +639,7 @@ fn optimize<'py>(
     out.set_item("optimiser_status", sol.status.to_string())?;
     out.set_item("converged", felt && sol.status.converged())?;
     out.set_item("contact", contact)?;
+    out.set_item("regularisation", regularisation)?;
     out.set_item("task", task.name)?;
     Ok(out)
 }

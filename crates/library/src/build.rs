@@ -661,6 +661,32 @@ impl<'a> Build<'a> {
         Ok(explored.solution)
     }
 
+    /// The build's first solve `start`, where it stopped without converging, continued under the other
+    /// regularisation and kept where cheaper ([`task::ContactProblem::other_regularisation`], as
+    /// `optimize` does).
+    fn other_regularisation(
+        &self,
+        settings: &StepSettings,
+        x1: &[f64],
+        start: ddp::Solution,
+        passes: usize,
+    ) -> Result<ddp::Solution, LibraryError> {
+        let ddp = self.optimiser(passes, 0)?;
+        let other = self
+            .contact_problem(&ddp, settings, x1)
+            .other_regularisation(start)?;
+        if !other.tried {
+            return Ok(other.solution);
+        }
+        tracing::info!(
+            regularisation = ?other.regularisation,
+            cost = other.cost,
+            kept = other.kept,
+            "library first solve under the other regularisation"
+        );
+        Ok(other.solution)
+    }
+
     /// The task's contact searches from `x1` under `settings` with the optimiser `ddp`.
     fn contact_problem<'p>(
         &'p self,
@@ -804,6 +830,12 @@ impl<'a> Build<'a> {
                     // on the first solve; kept only where a cheaper solve feels it.
                     (sol, _) = self.reach(&settings, &x1, sol, passes)?;
                 }
+            }
+            // The build's first solve, where it stopped without converging, is continued under the
+            // other regularisation (task::ContactProblem::other_regularisation).
+            if first && k == 0 {
+                let settings = *dynamics.model().settings();
+                sol = self.other_regularisation(&settings, &x1, sol, passes)?;
             }
             let p = self.progress;
             let values = local_values(

@@ -221,6 +221,9 @@ fn from_rest(problem: &ProblemFile, task: &Task) -> anyhow::Result<FromRest> {
     } else {
         search.solution
     };
+    // One that stopped without converging is continued under the other regularisation, as `optimize`
+    // and `train` do.
+    let sol = contact.other_regularisation(sol)?.solution;
     let seconds = start.elapsed().as_secs_f64();
     let names = problem.scene.state_names();
     let last = sol.states.last().expect("N + 1 states");

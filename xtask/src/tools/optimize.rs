@@ -217,7 +217,6 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                 &vec![vec![0.0; m]; horizon],
                 observe,
             )?;
-            let felt = task::contact_felt(&mut probe, &task.cost, &x0, &sol.controls)?;
             let problem = task::ContactProblem {
                 ddp: &ddp,
                 scene: &file.scene,
@@ -225,6 +224,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                 cost: &task.cost,
                 x0: &x0,
             };
+            let felt = task::contact_felt(&mut probe, &task.cost, &x0, &sol.controls)?;
             let mut note = None;
             if !felt {
                 println!(
@@ -353,6 +353,31 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                 );
                 sol = explored.solution;
             }
+            // A solve that stopped without converging is continued under the other regularisation
+            // (as a library's first solve is), and kept where it costs less.
+            let other = problem.other_regularisation(sol)?;
+            if other.tried {
+                println!(
+                    "continued under the {} regularisation ({}), the solve stopping unconverged: \
+                     cost {} after {} passes, {}",
+                    match other.regularisation {
+                        ddp::Regularisation::State => "state",
+                        ddp::Regularisation::Control => "control",
+                    },
+                    match other.regularisation {
+                        ddp::Regularisation::State => "Q_uu + mu f_u^T f_u",
+                        ddp::Regularisation::Control => "Q_uu + mu I",
+                    },
+                    Num(other.cost, 6),
+                    other.passes,
+                    if other.kept {
+                        "cheaper: kept"
+                    } else {
+                        "no cheaper: the solve above is kept"
+                    }
+                );
+            }
+            sol = other.solution;
             if let Some(note) = &note {
                 println!("{note}");
             }
