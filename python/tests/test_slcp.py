@@ -144,28 +144,10 @@ def test_optimize_explores_a_solve_that_turns_the_wrong_way(root, tmp_path):
     assert slcp.optimize(root / "scenes" / "finger.toml")["contact"] == "felt"
 
 
-TURN_TO_ONE = """[task.turn]
-h = 0.05
-horizon = 90
-model = "logistic"
-sigma = 0.1
-x0 = { "link1.angle" = -0.7853981633974483, "link2.angle" = -0.5235987755982989, "link3.angle" = -0.5235987755982989 }
-control_weight = 0.05
-periods = { "ellipse.angle" = 3.141592653589793 }
-running = [{ coordinate = "ellipse.angle", quadratic = 20.0, target = 1.0 }]
-final = [
-    { coordinate = "ellipse.angle", quadratic = 20.0, target = 1.0 },
-    { coordinate = "ellipse.angle", velocity = true, quadratic = 5.0 },
-]
-"""
-
-
-def test_optimize_continues_a_crawling_solve_under_the_other_regularisation(root, tmp_path):
+def test_optimize_continues_a_crawling_solve_under_the_other_regularisation(root):
     # The three-link finger turning its ellipse to 1.0 crawls for 300 passes under the state
     # regularisation (cost 340.7); continued under the control one it converges at 175.2.
-    text = (root / "scenes" / "three_link_finger.toml").read_text()
-    scene = tmp_path / "turn.toml"
-    scene.write_text(text[: text.index("[task.spin]")] + TURN_TO_ONE)
+    scene = root / "tests" / "data" / "three_link_turn.toml"
     sol = slcp.optimize(scene)
     assert sol["regularisation"] == "control", sol["regularisation"]
     assert sol["cost"] < 250.0 and sol["converged"], (sol["cost"], sol["status"])

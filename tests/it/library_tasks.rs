@@ -1560,31 +1560,6 @@ fn a_first_solve_that_turns_the_wrong_way_is_explored() {
     );
 }
 
-/// The three-link finger's scene with its `spin` task replaced by turning the ellipse to 1.0 rad and
-/// holding it there (the two fingers' `turn` terms): a target task whose solve from rest crawls under the
-/// state regularisation.
-fn three_link_turn() -> ProblemFile {
-    let text = include_str!("../../scenes/three_link_finger.toml");
-    let at = text
-        .find("[task.spin]")
-        .expect("the three-link finger's task");
-    let turn = r#"[task.turn]
-h = 0.05
-horizon = 90
-model = "logistic"
-sigma = 0.1
-x0 = { "link1.angle" = -0.7853981633974483, "link2.angle" = -0.5235987755982989, "link3.angle" = -0.5235987755982989 }
-control_weight = 0.05
-periods = { "ellipse.angle" = 3.141592653589793 }
-running = [{ coordinate = "ellipse.angle", quadratic = 20.0, target = 1.0 }]
-final = [
-    { coordinate = "ellipse.angle", quadratic = 20.0, target = 1.0 },
-    { coordinate = "ellipse.angle", velocity = true, quadratic = 5.0 },
-]
-"#;
-    ProblemFile::from_toml_str(&format!("{}{turn}", &text[..at])).unwrap()
-}
-
 /// Issue 28: a library's first solve that stops without converging is continued under the other
 /// regularisation. Turning the ellipse to a target, the three-link finger's first knots make `Q_uu`
 /// indefinite under the state regularisation pass after pass: 300 passes crawl to cost 340.7, where the
@@ -1592,7 +1567,7 @@ final = [
 /// first solve converges and is left as it is (its default library is the same byte for byte).
 #[test]
 fn a_first_solve_that_crawls_is_continued_under_the_other_regularisation() {
-    let file = three_link_turn();
+    let file = ProblemFile::from_toml_str(include_str!("../data/three_link_turn.toml")).unwrap();
     let task = file.task(None).unwrap();
     let settings = trunk_only(&task, 6);
     let lib = library::Library::build(&file, None, &settings, |_, _| {}).unwrap();

@@ -836,37 +836,16 @@ fn optimize_explores_a_solve_that_turns_the_wrong_way() {
 }
 
 /// A solve that stops without converging is continued under the other regularisation, and `optimize`
-/// says so: the three-link finger turning its ellipse to 1.0 crawls for 300 passes under the state
-/// regularisation (cost 340.7) and the control regularisation continues it to a converged 175.2; the
-/// finger's solve converges and is left as it is.
+/// says so: the three-link finger turning its ellipse to 1.0 (tests/data/three_link_turn.toml) crawls for
+/// 300 passes under the state regularisation (cost 340.7) and the control regularisation continues it to
+/// a converged 175.2; the finger's solve converges and is left as it is.
 #[test]
 fn optimize_continues_a_crawling_solve_under_the_other_regularisation() {
-    let text = std::fs::read_to_string(concat!(
+    let path = std::path::Path::new(concat!(
         env!("CARGO_MANIFEST_DIR"),
-        "/../scenes/three_link_finger.toml"
-    ))
-    .unwrap();
-    let at = text.find("[task.spin]").unwrap();
-    let turn = r#"[task.turn]
-h = 0.05
-horizon = 90
-model = "logistic"
-sigma = 0.1
-x0 = { "link1.angle" = -0.7853981633974483, "link2.angle" = -0.5235987755982989, "link3.angle" = -0.5235987755982989 }
-control_weight = 0.05
-periods = { "ellipse.angle" = 3.141592653589793 }
-running = [{ coordinate = "ellipse.angle", quadratic = 20.0, target = 1.0 }]
-final = [
-    { coordinate = "ellipse.angle", quadratic = 20.0, target = 1.0 },
-    { coordinate = "ellipse.angle", velocity = true, quadratic = 5.0 },
-]
-"#;
-    let (dir, path) = scene_file(
-        "regularisation",
-        "turn.toml",
-        &format!("{}{turn}", &text[..at]),
-    );
-    let stdout = optimize_ok(&["--quiet"], &path);
+        "/../tests/data/three_link_turn.toml"
+    ));
+    let stdout = optimize_ok(&["--quiet"], path);
     assert!(
         stdout.contains("continued under the control regularisation (Q_uu + mu I)")
             && stdout.contains("cheaper: kept"),
@@ -887,6 +866,5 @@ final = [
     .unwrap();
     let (finger_dir, finger) = scene_file("regularisation-finger", "finger.toml", &finger);
     assert!(!optimize_ok(&["--quiet"], &finger).contains("continued under"));
-    std::fs::remove_dir_all(&dir).ok();
     std::fs::remove_dir_all(&finger_dir).ok();
 }
