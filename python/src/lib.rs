@@ -431,8 +431,9 @@ impl Simulator {
 /// with the contact felt); `contact` (how the contact was felt: "felt" by the first solve, "pulled
 /// A-B together", "continued in the noise scale", or "not felt" with the reason); `regularisation` (the
 /// returned solve's: "state", `Q_uu + mu f_u^T f_u`, or "control", `Q_uu + mu I` where, with
-/// `continuation`, a solve that stopped without converging was continued under it and came out cheaper,
-/// as `cargo xtask optimize` does); `task` (its name). The GIL is released while it runs.
+/// `continuation` and the full method, a solve that stopped without converging was continued under it
+/// and came out cheaper, as `cargo xtask optimize` does); `task` (its name). The GIL is released while it
+/// runs.
 ///
 /// `continuation` (default True): where the first solve never touches the contact the task's cost needs
 /// (its gradient is zero out of reach), reach for it as `cargo xtask optimize` does: pull each needed pair
@@ -588,11 +589,15 @@ fn optimize<'py>(
             } else {
                 contact
             };
-            // One that stopped without converging is continued under the control regularisation, as
-            // `cargo xtask optimize` and a library's first solve are.
-            let other = problem
-                .other_regularisation(explored.solution)
-                .map_err(error)?;
+            // A full-DDP solve that stopped without converging is continued under the control
+            // regularisation, as `cargo xtask optimize` and a library's first solve are.
+            let other = if ddp.settings().method == Method::Full {
+                problem
+                    .other_regularisation(explored.solution)
+                    .map_err(error)?
+            } else {
+                ::task::OtherRegularisation::untried(explored.solution)
+            };
             let regularisation = if other.kept { "control" } else { "state" };
             Ok((other.solution, felt, contact, regularisation))
         })

@@ -339,6 +339,20 @@ pub struct ContactSearch {
     pub out_of_reach: Option<OutOfReach>,
 }
 
+impl OtherRegularisation {
+    /// `start` as it is, not continued.
+    pub fn untried(start: Solution) -> Self {
+        OtherRegularisation {
+            cost: start.cost,
+            solution: start,
+            regularisation: ddp::Regularisation::State,
+            kept: false,
+            tried: false,
+            passes: 0,
+        }
+    }
+}
+
 impl ContactSearch {
     /// Whether the solution feels the contact: the start did, or a pull or the continuation replaced it.
     pub fn found(&self) -> bool {

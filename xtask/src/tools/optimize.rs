@@ -69,9 +69,11 @@ pub struct Args {
     /// Backward pass.
     #[arg(long, value_enum, default_value = "full")]
     method: MethodArg,
-    /// Regularisation.
-    #[arg(long, value_enum, default_value = "state")]
-    regularisation: RegArg,
+    /// Regularisation [default: state; with full DDP, a task's solve that stops without converging is then
+    /// continued under the control one, and kept where cheaper: docs/tasks.md, "A first solve that crawls"].
+    /// Given, the solve keeps to it.
+    #[arg(long, value_enum)]
+    regularisation: Option<RegArg>,
     /// Start each line search near the last accepted step size.
     #[arg(long)]
     adaptive_line_search: bool,
@@ -139,7 +141,7 @@ fn settings(args: &Args, m: usize, task: Option<&task::Task>) -> DdpSettings {
             MethodArg::Full => Method::Full,
             MethodArg::Ilqr => Method::GaussNewton,
         },
-        regularisation: match args.regularisation {
+        regularisation: match args.regularisation.unwrap_or(RegArg::State) {
             RegArg::State => Regularisation::State,
             RegArg::Control => Regularisation::Control,
         },
@@ -353,9 +355,14 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                 );
                 sol = explored.solution;
             }
-            // A solve that stopped without converging is continued under the other regularisation
-            // (as a library's first solve is), and kept where it costs less.
-            let other = problem.other_regularisation(sol)?;
+            // A full-DDP solve under the default regularisation that stopped without converging is
+            // continued under the other one (as a library's first solve is), and kept where it costs
+            // less; a method or regularisation asked for is kept to.
+            let other = if args.regularisation.is_none() && args.method == MethodArg::Full {
+                problem.other_regularisation(sol)?
+            } else {
+                task::OtherRegularisation::untried(sol)
+            };
             if other.tried {
                 println!(
                     "continued under the {} regularisation ({}), the solve stopping unconverged: \
