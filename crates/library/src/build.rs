@@ -639,9 +639,11 @@ impl<'a> Build<'a> {
         forward * (self.coordinate_at(built, last) - self.coordinate_at(built, from.min(last)))
     }
 
-    /// A progress task's first solve that still stalls after reaching for its contact, explored from
-    /// smooth random starts ([`task::ContactProblem::explore`], the same search `optimize` makes).
-    fn explore(
+    /// The build's first solve `start`, after its contact search, finished as `optimize` finishes its
+    /// solve, on one optimiser: explored from smooth random starts where a progress task's plan still
+    /// stalls ([`task::ContactProblem::explore`]), then continued under the other regularisation where it
+    /// stopped without converging ([`task::ContactProblem::other_regularisation`]).
+    fn finish_first_solve(
         &self,
         settings: &StepSettings,
         x1: &[f64],
@@ -649,41 +651,25 @@ impl<'a> Build<'a> {
         passes: usize,
     ) -> Result<ddp::Solution, LibraryError> {
         let ddp = self.optimiser(passes, 0)?;
-        let explored = self
-            .contact_problem(&ddp, settings, x1)
-            .explore(start, &self.progress)?;
-        tracing::info!(
-            tried = explored.tried,
-            kept = explored.kept,
-            cost = explored.solution.cost,
-            "library first solve explored"
-        );
-        Ok(explored.solution)
-    }
-
-    /// The build's first solve `start`, where it stopped without converging, continued under the other
-    /// regularisation and kept where cheaper ([`task::ContactProblem::other_regularisation`], as
-    /// `optimize` does).
-    fn other_regularisation(
-        &self,
-        settings: &StepSettings,
-        x1: &[f64],
-        start: ddp::Solution,
-        passes: usize,
-    ) -> Result<ddp::Solution, LibraryError> {
-        let ddp = self.optimiser(passes, 0)?;
-        let other = self
-            .contact_problem(&ddp, settings, x1)
-            .other_regularisation(start)?;
-        if !other.tried {
-            return Ok(other.solution);
+        let problem = self.contact_problem(&ddp, settings, x1);
+        let explored = problem.explore(start, &self.progress)?;
+        if explored.tried > 0 {
+            tracing::info!(
+                tried = explored.tried,
+                kept = explored.kept,
+                cost = explored.solution.cost,
+                "library first solve explored"
+            );
         }
-        tracing::info!(
-            regularisation = ?other.regularisation,
-            cost = other.cost,
-            kept = other.kept,
-            "library first solve under the other regularisation"
-        );
+        let other = problem.other_regularisation(explored.solution)?;
+        if other.tried {
+            tracing::info!(
+                regularisation = ?other.regularisation,
+                cost = other.cost,
+                kept = other.kept,
+                "library first solve under the other regularisation"
+            );
+        }
         Ok(other.solution)
     }
 
@@ -819,23 +805,16 @@ impl<'a> Build<'a> {
                     break;
                 }
             }
-            if (k > 0 || first) && self.plan_stalls(&sol) {
-                let settings = *dynamics.model().settings();
-                if k == 0 {
-                    sol = self.explore(&settings, &x1, sol, passes)?;
-                } else {
-                    // A progress task's receding horizon that has let go of its contact: a finger
-                    // without gravity swings clear after a flick, and from there no solve feels the
-                    // contact (its gradient is zero), so the chain would rest for ever. Reached for as
-                    // on the first solve; kept only where a cheaper solve feels it.
-                    (sol, _) = self.reach(&settings, &x1, sol, passes)?;
-                }
-            }
-            // The build's first solve, where it stopped without converging, is continued under the
-            // other regularisation (task::ContactProblem::other_regularisation).
             if first && k == 0 {
                 let settings = *dynamics.model().settings();
-                sol = self.other_regularisation(&settings, &x1, sol, passes)?;
+                sol = self.finish_first_solve(&settings, &x1, sol, passes)?;
+            } else if k > 0 && self.plan_stalls(&sol) {
+                // A progress task's receding horizon that has let go of its contact: a finger without
+                // gravity swings clear after a flick, and from there no solve feels the contact (its
+                // gradient is zero), so the chain would rest for ever. Reached for as on the first solve;
+                // kept only where a cheaper solve feels it.
+                let settings = *dynamics.model().settings();
+                (sol, _) = self.reach(&settings, &x1, sol, passes)?;
             }
             let p = self.progress;
             let values = local_values(

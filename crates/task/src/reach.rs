@@ -309,7 +309,7 @@ pub const REGULARISATION_MARGIN: f64 = 1e-6;
 pub struct OtherRegularisation {
     /// The solve kept: the other regularisation's, or the start.
     pub solution: Solution,
-    /// The regularisation the other solve ran under.
+    /// The regularisation the other solve ran under (`State` when it was not tried).
     pub regularisation: ddp::Regularisation,
     /// The other solve's cost (the start's when it was not tried).
     pub cost: f64,
@@ -529,14 +529,7 @@ impl ContactProblem<'_> {
             ddp::Regularisation::Control => ddp::Regularisation::State,
         };
         if start.status.converged() {
-            return Ok(OtherRegularisation {
-                cost: start.cost,
-                solution: start,
-                regularisation,
-                kept: false,
-                tried: false,
-                passes: 0,
-            });
+            return Ok(OtherRegularisation::untried(start));
         }
         let other = Ddp::new(DdpSettings {
             regularisation,

@@ -364,17 +364,13 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                 task::OtherRegularisation::untried(sol)
             };
             if other.tried {
+                let (name, form) = match other.regularisation {
+                    ddp::Regularisation::State => ("state", "Q_uu + mu f_u^T f_u"),
+                    ddp::Regularisation::Control => ("control", "Q_uu + mu I"),
+                };
                 println!(
-                    "continued under the {} regularisation ({}), the solve stopping unconverged: \
-                     cost {} after {} passes, {}",
-                    match other.regularisation {
-                        ddp::Regularisation::State => "state",
-                        ddp::Regularisation::Control => "control",
-                    },
-                    match other.regularisation {
-                        ddp::Regularisation::State => "Q_uu + mu f_u^T f_u",
-                        ddp::Regularisation::Control => "Q_uu + mu I",
-                    },
+                    "continued under the {name} regularisation ({form}), the solve stopping \
+                     unconverged: cost {} after {} passes, {}",
                     Num(other.cost, 6),
                     other.passes,
                     if other.kept {
