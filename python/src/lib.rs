@@ -533,19 +533,9 @@ fn optimize<'py>(
     let (sol, felt, contact, regularisation) = py.allow_threads(move || {
         shielded(|| {
             let settings = *sim.settings();
-            let mut probe = RsSimulator::new(scene.clone(), settings).map_err(error)?;
             let sol = ddp
                 .solve(&SceneDynamics::new(sim), &cost, &x0, &us)
                 .map_err(error)?;
-            if !continuation {
-                let felt =
-                    ::task::contact_felt(&mut probe, &cost, &x0, &sol.controls).map_err(error)?;
-                let contact = match felt {
-                    true => "felt".to_string(),
-                    false => "not felt (continuation=False)".to_string(),
-                };
-                return Ok((sol, felt, contact, "state"));
-            }
             let problem = ::task::ContactProblem {
                 ddp: &ddp,
                 scene: &scene,
@@ -553,53 +543,53 @@ fn optimize<'py>(
                 cost: &cost,
                 x0: &x0,
             };
-            let search = problem.feel_contact(sol, |_, _, _| {}).map_err(error)?;
+            // The contact searched for, a progress task's stalled plan explored, a full-DDP solve
+            // that stopped without converging continued under the other regularisation: as
+            // `cargo xtask optimize` and a library's first solve finish theirs.
+            let stages = ::task::Stages {
+                search: continuation,
+                explore: continuation,
+                other_regularisation: continuation && ddp.settings().method == Method::Full,
+            };
+            let finished = problem
+                .finish(sol, &progress, stages, |_, _, _| {})
+                .map_err(error)?;
             let name = |pair: usize| {
                 scene
                     .pair_name(pair)
                     .unwrap_or_else(|| format!("contact pair {pair}"))
             };
-            let contact = match search.outcome() {
-                ::task::ContactOutcome::Felt => "felt".to_string(),
-                ::task::ContactOutcome::Pulled(p) => format!("pulled {} together", name(p)),
-                ::task::ContactOutcome::Continued(_) => "continued in the noise scale".to_string(),
-                ::task::ContactOutcome::OutOfReach(o) => format!(
+            let contact = match finished.search.as_ref().map(|s| s.outcome()) {
+                None if finished.felt => "felt".to_string(),
+                None => "not felt (continuation=False)".to_string(),
+                Some(::task::ContactOutcome::Felt) => "felt".to_string(),
+                Some(::task::ContactOutcome::Pulled(p)) => format!("pulled {} together", name(p)),
+                Some(::task::ContactOutcome::Continued(_)) => {
+                    "continued in the noise scale".to_string()
+                }
+                Some(::task::ContactOutcome::OutOfReach(o)) => format!(
                     "not felt: {} stays apart by more than twice the driven body's reach",
                     name(o.pair)
                 ),
-                ::task::ContactOutcome::TouchedNotKept(_) => {
+                Some(::task::ContactOutcome::TouchedNotKept(_)) => {
                     "not felt: a pull touched, but no solve through the contact costs less"
                         .to_string()
                 }
-                ::task::ContactOutcome::Lost(_)
-                | ::task::ContactOutcome::NeverFelt
-                | ::task::ContactOutcome::NoContinuation => {
-                    "not felt: no pull or continuation found it".to_string()
-                }
+                Some(
+                    ::task::ContactOutcome::Lost(_)
+                    | ::task::ContactOutcome::NeverFelt
+                    | ::task::ContactOutcome::NoContinuation,
+                ) => "not felt: no pull or continuation found it".to_string(),
             };
-            let felt = search.found();
-            if !felt {
-                return Ok((search.solution, felt, contact, "state"));
-            }
-            // A progress task's solve that stalls is explored from smooth random starts, as
-            // `cargo xtask optimize` and a library's first solve are.
-            let explored = problem.explore(search.solution, &progress).map_err(error)?;
-            let contact = if explored.kept {
-                format!("{contact}; explored from random starts")
-            } else {
-                contact
+            let contact = match &finished.explored {
+                Some(e) if e.kept => format!("{contact}; explored from random starts"),
+                _ => contact,
             };
-            // A full-DDP solve that stopped without converging is continued under the control
-            // regularisation, as `cargo xtask optimize` and a library's first solve are.
-            let other = if ddp.settings().method == Method::Full {
-                problem
-                    .other_regularisation(explored.solution)
-                    .map_err(error)?
-            } else {
-                ::task::OtherRegularisation::untried(explored.solution)
+            let regularisation = match finished.other.as_ref().filter(|o| o.kept) {
+                Some(o) if o.regularisation == ::ddp::Regularisation::Control => "control",
+                _ => "state",
             };
-            let regularisation = if other.kept { "control" } else { "state" };
-            Ok((other.solution, felt, contact, regularisation))
+            Ok((finished.solution, finished.felt, contact, regularisation))
         })
     })?;
     let out = PyDict::new(py);

@@ -1579,3 +1579,64 @@ fn a_first_solve_that_crawls_is_continued_under_the_other_regularisation() {
         first.converged
     );
 }
+
+/// `ContactProblem::finish`, the one way every caller finishes a solve from the start, runs the stages
+/// asked for and no others, each record keeping the solution it handed on: on the three-link finger's
+/// turn, whose solve from rest crawls to the pass limit, nothing at all leaves the solve as it is, and
+/// every stage continues it under the control regularisation (its contact felt, nothing to explore for a
+/// target task).
+#[test]
+fn finishing_a_solve_runs_the_stages_asked_for_and_no_others() {
+    let file = ProblemFile::from_toml_str(include_str!("../data/three_link_turn.toml")).unwrap();
+    let task = file.task(None).unwrap();
+    let settings = trunk_only(&task, 1);
+    let sim = settings.simulator(&file.scene).unwrap();
+    let step = *sim.settings();
+    let ddp = ddp::Ddp::new(ddp::DdpSettings {
+        max_iterations: settings.first_passes,
+        tol_cost: settings.tolerance,
+        ..ddp::DdpSettings::default()
+    })
+    .unwrap();
+    let zero = vec![vec![0.0; file.scene.n_controls]; task.horizon];
+    let start = ddp
+        .solve(&task::SceneDynamics::new(sim), &task.cost, &task.x0, &zero)
+        .unwrap();
+    assert!(!start.status.converged(), "{:?}", start.status);
+    let problem = task::ContactProblem {
+        ddp: &ddp,
+        scene: &file.scene,
+        settings: &step,
+        cost: &task.cost,
+        x0: &task.x0,
+    };
+    let progress = task::Progress::of_task(&task).unwrap();
+    let none = problem
+        .finish(start.clone(), &progress, task::Stages::NONE, |_, _, _| {})
+        .unwrap();
+    assert!(none.search.is_none() && none.explored.is_none() && none.other.is_none());
+    assert_eq!(none.solution.controls, start.controls);
+    assert!(none.felt);
+    let mut stages = 0;
+    let all = problem
+        .finish(start.clone(), &progress, task::Stages::ALL, |_, _, _| {
+            stages += 1
+        })
+        .unwrap();
+    assert_eq!(
+        stages, 0,
+        "the start feels its contact: no continuation in the noise scale"
+    );
+    let search = all.search.as_ref().expect("the search was asked for");
+    assert!(search.felt && search.solution.controls == start.controls);
+    let explored = all
+        .explored
+        .as_ref()
+        .expect("the exploration was asked for");
+    assert_eq!(explored.tried, 0, "a target task's plan never stalls");
+    let other = all.other.as_ref().expect("the continuation was asked for");
+    assert!(other.tried && other.kept, "{other:?}");
+    assert_eq!(other.regularisation, ddp::Regularisation::Control);
+    assert_eq!(all.solution.controls, other.solution.controls);
+    assert!(all.solution.cost < start.cost && all.felt);
+}

@@ -639,10 +639,10 @@ impl<'a> Build<'a> {
         forward * (self.coordinate_at(built, last) - self.coordinate_at(built, from.min(last)))
     }
 
-    /// The build's first solve `start`, after its contact search, finished as `optimize` finishes its
-    /// solve, on one optimiser: explored from smooth random starts where a progress task's plan still
-    /// stalls ([`task::ContactProblem::explore`]), then continued under the other regularisation where it
-    /// stopped without converging ([`task::ContactProblem::other_regularisation`]).
+    /// The build's first solve `start`, finished as `optimize` finishes its solve
+    /// ([`task::ContactProblem::finish`], on one optimiser): its contact searched for unless it already
+    /// ends within a target task's tolerance (it then needs none), a progress task's stalled plan explored
+    /// from smooth random starts, an unconverged solve continued under the other regularisation.
     fn finish_first_solve(
         &self,
         settings: &StepSettings,
@@ -651,26 +651,36 @@ impl<'a> Build<'a> {
         passes: usize,
     ) -> Result<ddp::Solution, LibraryError> {
         let ddp = self.optimiser(passes, 0)?;
-        let problem = self.contact_problem(&ddp, settings, x1);
-        let explored = problem.explore(start, &self.progress)?;
-        if explored.tried > 0 {
+        let stages = task::Stages {
+            search: !self.settles(&start),
+            ..task::Stages::ALL
+        };
+        let finished = self.contact_problem(&ddp, settings, x1).finish(
+            start,
+            &self.progress,
+            stages,
+            log_continuation,
+        )?;
+        if let Some(r) = finished.search.as_ref().and_then(|s| s.reach.as_ref()) {
+            tracing::info!(pair = ?r.pair, tries = ?r.tries, "a first solve felt no contact: reaching for it");
+        }
+        if let Some(e) = finished.explored.as_ref().filter(|e| e.tried > 0) {
             tracing::info!(
-                tried = explored.tried,
-                kept = explored.kept,
-                cost = explored.solution.cost,
+                tried = e.tried,
+                kept = e.kept,
+                cost = e.solution.cost,
                 "library first solve explored"
             );
         }
-        let other = problem.other_regularisation(explored.solution)?;
-        if other.tried {
+        if let Some(o) = finished.other.as_ref().filter(|o| o.tried) {
             tracing::info!(
-                regularisation = ?other.regularisation,
-                cost = other.cost,
-                kept = other.kept,
+                regularisation = ?o.regularisation,
+                cost = o.cost,
+                kept = o.kept,
                 "library first solve under the other regularisation"
             );
         }
-        Ok(other.solution)
+        Ok(finished.solution)
     }
 
     /// The task's contact searches from `x1` under `settings` with the optimiser `ddp`.
@@ -796,18 +806,17 @@ impl<'a> Build<'a> {
             // state the policy left off target, perhaps with the contact out of reach), unless it ends
             // within the task's tolerance: then it needs no contact, and teaches the policy to let be
             // (issue 28: 6 of pushing's 207 fruitless searches in one build).
-            if k == 0 && (first || self.progress.forward.is_none()) && !self.settles(&sol) {
+            if first && k == 0 {
+                let settings = *dynamics.model().settings();
+                sol = self.finish_first_solve(&settings, &x1, sol, passes)?;
+            } else if k == 0 && self.progress.forward.is_none() && !self.settles(&sol) {
                 let settings = *dynamics.model().settings();
                 let found;
                 (sol, found) = self.reach(&settings, &x1, sol, passes)?;
                 // A branch that never touches teaches the policy nothing: it already does nothing there.
-                if !found && !first {
+                if !found {
                     break;
                 }
-            }
-            if first && k == 0 {
-                let settings = *dynamics.model().settings();
-                sol = self.finish_first_solve(&settings, &x1, sol, passes)?;
             } else if k > 0 && self.plan_stalls(&sol) {
                 // A progress task's receding horizon that has let go of its contact: a finger without
                 // gravity swings clear after a flick, and from there no solve feels the contact (its
@@ -866,17 +875,9 @@ impl<'a> Build<'a> {
         passes: usize,
     ) -> Result<(ddp::Solution, bool), LibraryError> {
         let ddp = self.optimiser(passes, 0)?;
-        let search =
-            self.contact_problem(&ddp, settings, x1)
-                .feel_contact(sol, |s, stage, felt| {
-                    tracing::info!(
-                        sigma = s,
-                        passes = stage.iterations.len(),
-                        cost = stage.cost,
-                        ?felt,
-                        "continuation"
-                    );
-                })?;
+        let search = self
+            .contact_problem(&ddp, settings, x1)
+            .feel_contact(sol, log_continuation)?;
         if let Some(r) = &search.reach {
             tracing::info!(pair = ?r.pair, tries = ?r.tries, "a first solve felt no contact: reaching for it");
         }
@@ -1488,6 +1489,17 @@ fn grow(
         x = step.x_next;
     }
     Ok(grown)
+}
+
+/// A stage of a continuation in the noise scale, logged at info level.
+fn log_continuation(sigma: f64, stage: &ddp::Solution, felt: Option<bool>) {
+    tracing::info!(
+        sigma,
+        passes = stage.iterations.len(),
+        cost = stage.cost,
+        ?felt,
+        "continuation"
+    );
 }
 
 #[cfg(test)]

@@ -321,6 +321,50 @@ pub struct OtherRegularisation {
     pub passes: usize,
 }
 
+/// The stages [`ContactProblem::finish`] runs on a solve from the start, in this order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Stages {
+    /// Search for the contact the task needs where the solve feels none ([`ContactProblem::feel_contact`]).
+    pub search: bool,
+    /// Solve a progress task's stalled plan again from smooth random starts ([`ContactProblem::explore`]).
+    pub explore: bool,
+    /// Continue a solve that stopped without converging under the other regularisation
+    /// ([`ContactProblem::other_regularisation`]).
+    pub other_regularisation: bool,
+}
+
+impl Stages {
+    /// Every stage: what `optimize`, `train`'s first solve, Python's `optimize` and the examples' solve
+    /// from rest run unless told otherwise.
+    pub const ALL: Stages = Stages {
+        search: true,
+        explore: true,
+        other_regularisation: true,
+    };
+    /// None: the solve is only checked for its contact.
+    pub const NONE: Stages = Stages {
+        search: false,
+        explore: false,
+        other_regularisation: false,
+    };
+}
+
+/// What [`ContactProblem::finish`] did to a solve from the start: each stage's record (`None` where the
+/// stage was not asked for; each keeps the solution it handed on), and the solution at the end.
+#[derive(Debug, Clone)]
+pub struct Finished {
+    /// The solution after every stage asked for.
+    pub solution: Solution,
+    /// Whether `solution` feels the contact the task needs ([`contact_felt`]).
+    pub felt: bool,
+    /// The contact search.
+    pub search: Option<ContactSearch>,
+    /// The exploration from random starts.
+    pub explored: Option<Explored>,
+    /// The continuation under the other regularisation.
+    pub other: Option<OtherRegularisation>,
+}
+
 /// What [`ContactProblem::feel_contact`] did for a solve.
 #[derive(Debug, Clone)]
 pub struct ContactSearch {
@@ -547,6 +591,54 @@ impl ContactProblem<'_> {
             kept,
             tried: true,
             passes,
+        })
+    }
+
+    /// A solve from the start `start` finished as every caller finishes one, the `stages` asked for in
+    /// order: the contact search ([`ContactProblem::feel_contact`], each continuation stage reported to
+    /// `stage`), the exploration of a progress task's stalled plan ([`ContactProblem::explore`], whether or
+    /// not the search found its contact: a random swing may touch where the search did not), and the
+    /// continuation of an unconverged solve under the other regularisation
+    /// ([`ContactProblem::other_regularisation`]). `optimize`, Python's `optimize`, the examples' solve
+    /// from rest and a library's first solve all go through it, so that they cannot drift apart.
+    pub fn finish(
+        &self,
+        start: Solution,
+        progress: &Progress,
+        stages: Stages,
+        stage: impl FnMut(f64, &Solution, Option<bool>),
+    ) -> Result<Finished, TaskError> {
+        let (mut solution, mut felt, mut search) = (start, false, None);
+        if stages.search {
+            let found = self.feel_contact(solution, stage)?;
+            (solution, felt) = (found.solution.clone(), found.found());
+            search = Some(found);
+        }
+        let mut explored = None;
+        if stages.explore {
+            let e = self.explore(solution, progress)?;
+            solution = e.solution.clone();
+            explored = Some(e);
+        }
+        let mut other = None;
+        if stages.other_regularisation {
+            let o = self.other_regularisation(solution)?;
+            solution = o.solution.clone();
+            other = Some(o);
+        }
+        // A kept exploration or continuation is a new solve: check it again (so is a search's, but the
+        // search checked its own).
+        let replaced =
+            explored.as_ref().is_some_and(|e| e.kept) || other.as_ref().is_some_and(|o| o.kept);
+        if !stages.search || replaced {
+            felt = self.felt(*self.settings, &solution.controls)?;
+        }
+        Ok(Finished {
+            solution,
+            felt,
+            search,
+            explored,
+            other,
         })
     }
 

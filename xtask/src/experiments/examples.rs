@@ -201,7 +201,6 @@ fn from_rest(problem: &ProblemFile, task: &Task) -> anyhow::Result<FromRest> {
         &task.x0,
         &vec![vec![0.0; m]; task.horizon],
     )?;
-    // A solve that feels no contact reaches for it, as `optimize` and `train` do.
     let probe = LibrarySettings::default()
         .for_task(task)
         .simulator(&problem.scene)?;
@@ -212,18 +211,17 @@ fn from_rest(problem: &ProblemFile, task: &Task) -> anyhow::Result<FromRest> {
         cost: &task.cost,
         x0: &task.x0,
     };
-    let search = contact.feel_contact(sol, |_, _, _| {})?;
-    // And one that stalls is explored from random starts, as `optimize` explores it.
-    let sol = if search.found() {
-        contact
-            .explore(search.solution, &task::Progress::of_task(task)?)?
-            .solution
-    } else {
-        search.solution
-    };
-    // One that stopped without converging is continued under the other regularisation, as `optimize`
-    // and `train` do.
-    let sol = contact.other_regularisation(sol)?.solution;
+    // A solve that feels no contact reaches for it, one that stalls is explored from random starts, one
+    // that stopped without converging is continued under the other regularisation: as `optimize` and
+    // `train` finish theirs.
+    let sol = contact
+        .finish(
+            sol,
+            &task::Progress::of_task(task)?,
+            task::Stages::ALL,
+            |_, _, _| {},
+        )?
+        .solution;
     let seconds = start.elapsed().as_secs_f64();
     let names = problem.scene.state_names();
     let last = sol.states.last().expect("N + 1 states");

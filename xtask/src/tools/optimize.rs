@@ -212,7 +212,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             let ddp = Ddp::new(settings(args, m, Some(&task)))?;
             let base = *sim.settings();
             let mut probe = dynamics::Simulator::new(file.scene.clone(), base)?;
-            let mut sol = ddp.solve_observed(
+            let sol = ddp.solve_observed(
                 &SceneDynamics::new(sim),
                 &task.cost,
                 &x0,
@@ -227,117 +227,120 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                 x0: &x0,
             };
             let felt = task::contact_felt(&mut probe, &task.cost, &x0, &sol.controls)?;
-            let mut note = None;
             if !felt {
                 println!(
                     "no contact felt: the solve on the task's model ({}) never touches (the contact's \
                      gradient is zero out of reach)",
                     base.model
                 );
-                if args.no_continuation {
-                    never_felt = true;
-                    note = Some("no contact felt (--no-continuation)".to_string());
-                } else {
-                    let search = problem.feel_contact(sol, |s, stage, felt| {
-                        println!(
-                            "continuation: sigma {}: {} after {} passes, cost {}{}",
-                            Num(s, 4),
-                            stage.status,
-                            stage.iterations.len(),
-                            Num(stage.cost, 6),
-                            match felt {
-                                Some(true) => ", contact felt",
-                                Some(false) => ", contact not felt",
-                                None => "",
-                            }
-                        );
-                    })?;
-                    let reach = search.reach.as_ref();
-                    for (pair, pulled, cost, felt) in reach.map_or(&[][..], |r| &r.tries[..]) {
-                        let name = pair_name(&file.scene, *pair);
-                        match cost {
-                            Some(cost) => println!(
-                                "reach: {name} pulled together (cost {}), then the task's own solve: \
-                                 cost {}, contact {}",
-                                Num(*pulled, 6),
-                                Num(*cost, 6),
-                                if *felt {
-                                    "felt"
-                                } else {
-                                    "not felt, or no cheaper"
-                                }
-                            ),
-                            None => println!(
-                                "reach: {name} pulled (cost {}), but not into contact: no task solve \
-                                 from there",
-                                Num(*pulled, 6)
-                            ),
-                        }
-                    }
-                    // The task's noise scale (a continuation ran only for a smoothed model).
-                    let sigma = task::noise_scale(base.model).unwrap_or(0.0);
-                    let pairs = |ps: &[usize]| {
-                        ps.iter()
-                            .map(|&p| pair_name(&file.scene, p))
-                            .collect::<Vec<_>>()
-                            .join(", ")
-                    };
-                    note = Some(match search.outcome() {
-                        task::ContactOutcome::Felt => "contact felt".to_string(),
-                        task::ContactOutcome::OutOfReach(o) => format!(
-                            "no contact felt, and none in reach: {} stays apart over the horizon by \
-                             more than twice the driven body's reach (by {} at its nearest), so no \
-                             pull or continuation was tried; the solve is kept",
-                            pair_name(&file.scene, o.pair),
-                            Num(o.clearance, 3)
-                        ),
-                        task::ContactOutcome::Pulled(p) => format!(
-                            "reached the contact by pulling {} together, then solved the task's own cost",
-                            pair_name(&file.scene, p)
-                        ),
-                        task::ContactOutcome::TouchedNotKept(touched) => format!(
-                            "no contact kept: the controls can reach it (pulling {} together touched), \
-                             but the task's own solve from there let go again or cost more than the \
-                             solve that never touches (cost {}), which is kept: no solve found through \
-                             the contact pays by the task's cost from this start",
-                            pairs(&touched),
-                            Num(search.solution.cost, 6)
-                        ),
-                        task::ContactOutcome::Continued(top) => format!(
-                            "continued in the noise scale: contact felt at sigma {}, solved back \
-                             down to {}",
-                            Num(top, 4),
-                            Num(sigma, 4)
-                        ),
-                        task::ContactOutcome::Lost(top) => format!(
-                            "no contact felt: found at sigma {}, and lost again (or no cheaper \
-                             than the solve at {}) on the way back down; that solve is kept",
-                            Num(top, 4),
-                            Num(sigma, 4)
-                        ),
-                        task::ContactOutcome::NeverFelt => format!(
-                            "no contact felt even at sigma {} ({}x the task's): nothing the controls \
-                             do reaches a contact within the horizon; the solve at the task's is kept",
-                            Num(sigma * (1 << task::CONTINUATION_DOUBLINGS) as f64, 4),
-                            1 << task::CONTINUATION_DOUBLINGS
-                        ),
-                        task::ContactOutcome::NoContinuation => {
-                            "no contact felt: no pull found a cheaper solve that feels it, and the \
-                             hard model has no action at a distance to continue from (--model \
-                             logistic can feel it)"
-                                .to_string()
-                        }
-                    });
-                    never_felt = !search.found();
-                    sol = search.solution;
-                }
             }
-            // A progress task's solve that turns its object less than the stall amount (or the wrong
-            // way): explored from smooth random starts, as a library's first solve is.
+            // The contact searched for, a progress task's stalled plan explored, and a full-DDP solve
+            // under the default regularisation that stopped without converging continued under the other
+            // one, as a library's first solve is finished; a method or regularisation asked for is kept to.
+            let stages = task::Stages {
+                search: !args.no_continuation,
+                explore: !args.no_continuation,
+                other_regularisation: args.regularisation.is_none()
+                    && args.method == MethodArg::Full,
+            };
             let progress = task::Progress::of_task(&task)?;
-            if !args.no_continuation && !never_felt && task::plan_stalls(&progress, &sol) {
-                let before = sol.cost;
-                let explored = problem.explore(sol, &progress)?;
+            let before = sol.cost;
+            let finished = problem.finish(sol, &progress, stages, |s, stage, felt| {
+                println!(
+                    "continuation: sigma {}: {} after {} passes, cost {}{}",
+                    Num(s, 4),
+                    stage.status,
+                    stage.iterations.len(),
+                    Num(stage.cost, 6),
+                    match felt {
+                        Some(true) => ", contact felt",
+                        Some(false) => ", contact not felt",
+                        None => "",
+                    }
+                );
+            })?;
+            let mut note = None;
+            if let Some(search) = finished.search.as_ref().filter(|_| !felt) {
+                let reach = search.reach.as_ref();
+                for (pair, pulled, cost, felt) in reach.map_or(&[][..], |r| &r.tries[..]) {
+                    let name = pair_name(&file.scene, *pair);
+                    match cost {
+                        Some(cost) => println!(
+                            "reach: {name} pulled together (cost {}), then the task's own solve: \
+                             cost {}, contact {}",
+                            Num(*pulled, 6),
+                            Num(*cost, 6),
+                            if *felt {
+                                "felt"
+                            } else {
+                                "not felt, or no cheaper"
+                            }
+                        ),
+                        None => println!(
+                            "reach: {name} pulled (cost {}), but not into contact: no task solve \
+                             from there",
+                            Num(*pulled, 6)
+                        ),
+                    }
+                }
+                // The task's noise scale (a continuation ran only for a smoothed model).
+                let sigma = task::noise_scale(base.model).unwrap_or(0.0);
+                let pairs = |ps: &[usize]| {
+                    ps.iter()
+                        .map(|&p| pair_name(&file.scene, p))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                };
+                note = Some(match search.outcome() {
+                    task::ContactOutcome::Felt => "contact felt".to_string(),
+                    task::ContactOutcome::OutOfReach(o) => format!(
+                        "no contact felt, and none in reach: {} stays apart over the horizon by \
+                         more than twice the driven body's reach (by {} at its nearest), so no \
+                         pull or continuation was tried; the solve is kept",
+                        pair_name(&file.scene, o.pair),
+                        Num(o.clearance, 3)
+                    ),
+                    task::ContactOutcome::Pulled(p) => format!(
+                        "reached the contact by pulling {} together, then solved the task's own cost",
+                        pair_name(&file.scene, p)
+                    ),
+                    task::ContactOutcome::TouchedNotKept(touched) => format!(
+                        "no contact kept: the controls can reach it (pulling {} together touched), \
+                         but the task's own solve from there let go again or cost more than the \
+                         solve that never touches (cost {}), which is kept: no solve found through \
+                         the contact pays by the task's cost from this start",
+                        pairs(&touched),
+                        Num(search.solution.cost, 6)
+                    ),
+                    task::ContactOutcome::Continued(top) => format!(
+                        "continued in the noise scale: contact felt at sigma {}, solved back \
+                         down to {}",
+                        Num(top, 4),
+                        Num(sigma, 4)
+                    ),
+                    task::ContactOutcome::Lost(top) => format!(
+                        "no contact felt: found at sigma {}, and lost again (or no cheaper \
+                         than the solve at {}) on the way back down; that solve is kept",
+                        Num(top, 4),
+                        Num(sigma, 4)
+                    ),
+                    task::ContactOutcome::NeverFelt => format!(
+                        "no contact felt even at sigma {} ({}x the task's): nothing the controls \
+                         do reaches a contact within the horizon; the solve at the task's is kept",
+                        Num(sigma * (1 << task::CONTINUATION_DOUBLINGS) as f64, 4),
+                        1 << task::CONTINUATION_DOUBLINGS
+                    ),
+                    task::ContactOutcome::NoContinuation => {
+                        "no contact felt: no pull found a cheaper solve that feels it, and the \
+                         hard model has no action at a distance to continue from (--model \
+                         logistic can feel it)"
+                            .to_string()
+                    }
+                });
+            } else if !felt {
+                note = Some("no contact felt (--no-continuation)".to_string());
+            }
+            if let Some(explored) = finished.explored.as_ref().filter(|e| e.tried > 0) {
                 let outcome = if explored.kept {
                     format!(
                         "the cheapest that does not stall is kept, cost {}",
@@ -346,6 +349,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                 } else {
                     "none that does not stall costs less; the solve is kept".to_string()
                 };
+                let before = finished.search.as_ref().map_or(before, |s| s.solution.cost);
                 println!(
                     "explored: the solve (cost {}) advances less than {} the rewarded way, so it \
                      was solved again from {} smooth random starts: {outcome}",
@@ -353,17 +357,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                     task::STALL_ADVANCE,
                     explored.tried,
                 );
-                sol = explored.solution;
             }
-            // A full-DDP solve under the default regularisation that stopped without converging is
-            // continued under the other one (as a library's first solve is), and kept where it costs
-            // less; a method or regularisation asked for is kept to.
-            let other = if args.regularisation.is_none() && args.method == MethodArg::Full {
-                problem.other_regularisation(sol)?
-            } else {
-                task::OtherRegularisation::untried(sol)
-            };
-            if other.tried {
+            if let Some(other) = finished.other.as_ref().filter(|o| o.tried) {
                 let (name, form) = match other.regularisation {
                     ddp::Regularisation::State => ("state", "Q_uu + mu f_u^T f_u"),
                     ddp::Regularisation::Control => ("control", "Q_uu + mu I"),
@@ -380,7 +375,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                     }
                 );
             }
-            sol = other.solution;
+            never_felt = !finished.felt;
+            let sol = finished.solution;
             if let Some(note) = &note {
                 println!("{note}");
             }
