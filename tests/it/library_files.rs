@@ -80,12 +80,15 @@ fn the_policy_returns_each_controllers_own_law_and_respects_the_ellipses_symmetr
         let j = policy.control(&e.x, &mut u).unwrap();
         assert_eq!(lib.entries[j].x, e.x, "entry {i}");
         assert!((u[0] - e.u[0]).abs() < 1e-12 && (u[1] - e.u[1]).abs() < 1e-12);
-        // Nearby: the linear law u + K dx.
+        // Nearby: the linear law u + K dx, saturated near the range the stored controls span.
         let dx = [1e-4, -2e-4, 3e-4, 1e-3, -1e-3, 2e-3];
         let x: Vec<f64> = e.x.iter().zip(&dx).map(|(a, b)| a + b).collect();
         assert_eq!(policy.control(&x, &mut u).unwrap(), j);
         for (a, ua) in u.iter().enumerate() {
-            let expected = e.u[a] + (0..6).map(|b| e.gain[a * 6 + b] * dx[b]).sum::<f64>();
+            let (lo, hi) = policy.envelope()[a];
+            let margin = library::SATURATION_MARGIN * (hi - lo);
+            let expected = (e.u[a] + (0..6).map(|b| e.gain[a * 6 + b] * dx[b]).sum::<f64>())
+                .clamp(lo - margin, hi + margin);
             assert!((ua - expected).abs() < 1e-12);
         }
         // The ellipse turned by pi is the same ellipse: same controller, same control.
@@ -578,10 +581,11 @@ fn a_policy_at_a_time_step_prefers_the_controllers_optimised_at_it() {
 }
 
 #[test]
-fn a_law_asking_beyond_the_stored_controls_pays_for_the_excess() {
+fn a_law_asking_beyond_the_stored_controls_pays_for_the_excess_and_is_saturated() {
     // Two controllers predicting nearly the same cost at the query; the better-predicted one's gain
     // asks there for a control of 1e4, a thousand times the stored range. Charged at the control
     // weight for the excess it loses; uncharged (weight 0) it wins, and within the range nothing moves.
+    // Whichever wins, the control applied is saturated near the stored range: no trajectory asked more.
     let mut steep = entry(vec![0.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
     steep.value.cost_to_go = -1.0;
     steep.gain = vec![0.0; 12];
@@ -599,7 +603,17 @@ fn a_law_asking_beyond_the_stored_controls_pays_for_the_excess() {
     let x = [1.0, 0.0, 0.0, 0.0, 0.0, 0.0];
     let mut u = [0.0; 2];
     assert_eq!(policy.control(&x, &mut u).unwrap(), 0);
-    assert_eq!(u[0], 1e4);
+    // Saturated at the range widened by its width on either side (`SATURATION_MARGIN`): 0.5 + 0.5.
+    assert_eq!(library::SATURATION_MARGIN, 1.0);
+    assert_eq!(u, [1.0, 0.0]);
+    // Within the range the law is applied as it is.
+    assert_eq!(
+        policy
+            .control(&[2e-5, 0.0, 0.0, 0.0, 0.0, 0.0], &mut u)
+            .unwrap(),
+        0
+    );
+    assert_eq!(u[0], 1e4 * 2e-5);
     let charged = policy.clone().with_control_weight(0.05).unwrap();
     assert_eq!(charged.control(&x, &mut u).unwrap(), 1);
     // At the steep one's own state its law asks for its stored control: no charge, it wins.

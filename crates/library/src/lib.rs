@@ -23,7 +23,7 @@ pub use evaluate::{
     TaskMeasures, Verdict, evaluate, evaluate_in,
 };
 pub use file::{Library, MAGIC, VERSION, write_atomically};
-pub use policy::Policy;
+pub use policy::{Policy, SATURATION_MARGIN};
 /// The control problem the library is built for (tasks, their cost, the optimiser's dynamics): the
 /// `task` crate, re-exported so that a library user reaches it through this one.
 pub use task;

@@ -16,6 +16,12 @@ use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use std::f64::consts::PI;
 use std::num::NonZero;
 
+/// How far past the range the stored controls span ([`Policy::envelope`]) a law's control may go, as a
+/// fraction of that range on either side, before [`Policy::control`] saturates it: a law near the
+/// range's edge is applied as it is, one asking ten times the stored torques (a finger flipping a block,
+/// docs/tasks.md) is not.
+pub const SATURATION_MARGIN: f64 = 1.0;
+
 /// The shifts, in whole periods, each stored state is kept at.
 const SHIFTS: [f64; 3] = [-1.0, 0.0, 1.0];
 
@@ -572,7 +578,10 @@ impl Policy {
     }
 
     /// The policy's control at `x` (eq. 20, or the value-ranked choice of [`Policy::select`]) written
-    /// into `u`; returns the controller used.
+    /// into `u`, saturated near [`Policy::envelope`] (widened by [`SATURATION_MARGIN`] times its width on
+    /// either side: no stored trajectory asked for more, and far beyond it a linear law only
+    /// extrapolates, as a finger flipping a block did that asked for ten times its stored torques and
+    /// flung the block) and then to the control limits; returns the controller used.
     pub fn control(&self, x: &[f64], u: &mut [f64]) -> Result<usize, LibraryError> {
         let ((i, _), d) = self.choose(x)?;
         if u.len() != self.m {
@@ -582,7 +591,9 @@ impl Policy {
             });
         }
         for (a, u) in u.iter_mut().enumerate() {
-            *u = self.law(i, a, &d);
+            let (lo, hi) = self.envelope[a];
+            let margin = SATURATION_MARGIN * (hi - lo);
+            *u = self.law(i, a, &d).clamp(lo - margin, hi + margin);
             if let Some(l) = &self.limits {
                 *u = u.clamp(l.lower[a], l.upper[a]);
             }
