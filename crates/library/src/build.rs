@@ -661,8 +661,8 @@ impl<'a> Build<'a> {
             stages,
             log_continuation,
         )?;
-        if let Some(r) = finished.search.as_ref().and_then(|s| s.reach.as_ref()) {
-            tracing::info!(pair = ?r.pair, tries = ?r.tries, "a first solve felt no contact: reaching for it");
+        if let Some(search) = &finished.search {
+            log_reach(search);
         }
         if let Some(e) = finished.explored.as_ref().filter(|e| e.tried > 0) {
             tracing::info!(
@@ -878,9 +878,7 @@ impl<'a> Build<'a> {
         let search = self
             .contact_problem(&ddp, settings, x1)
             .feel_contact(sol, log_continuation)?;
-        if let Some(r) = &search.reach {
-            tracing::info!(pair = ?r.pair, tries = ?r.tries, "a first solve felt no contact: reaching for it");
-        }
+        log_reach(&search);
         let found = search.found();
         Ok((search.solution, found))
     }
@@ -1489,6 +1487,13 @@ fn grow(
         x = step.x_next;
     }
     Ok(grown)
+}
+
+/// A contact search's pulls, where it made any, logged at info level.
+fn log_reach(search: &task::ContactSearch) {
+    if let Some(r) = &search.reach {
+        tracing::info!(pair = ?r.pair, tries = ?r.tries, "a first solve felt no contact: reaching for it");
+    }
 }
 
 /// A stage of a continuation in the noise scale, logged at info level.
