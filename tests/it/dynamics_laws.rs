@@ -684,3 +684,110 @@ proptest! {
         }
     }
 }
+
+/// Every scene of the repository with the coordinates a half turn maps onto themselves
+/// ([`Scene::half_turn_coordinates`]).
+fn scenes_with_half_turns() -> Vec<(&'static str, Scene)> {
+    [
+        ("finger", include_str!("../../scenes/finger.toml")),
+        ("slider_push", include_str!("../../scenes/slider_push.toml")),
+        ("roll_block", include_str!("../../scenes/roll_block.toml")),
+        ("two_fingers", include_str!("../../scenes/two_fingers.toml")),
+        ("paddle", include_str!("../data/paddle.toml")),
+    ]
+    .into_iter()
+    .map(|(name, text)| (name, task::ProblemFile::from_toml_str(text).unwrap().scene))
+    .collect()
+}
+
+#[test]
+fn a_half_turn_is_a_symmetry_only_of_a_centred_unlimited_childless_angle() {
+    let names = |scene: &Scene| -> Vec<String> {
+        let all = scene.coordinate_names();
+        scene
+            .half_turn_coordinates()
+            .into_iter()
+            .map(|c| all[c].clone())
+            .collect()
+    };
+    let expected = [
+        ("finger", "ellipse.angle"),
+        ("slider_push", "block.angle"),
+        ("roll_block", "block.angle"),
+        ("two_fingers", "ellipse.angle"),
+        ("paddle", "wheel.angle"),
+    ];
+    for ((name, scene), (same, coordinate)) in scenes_with_half_turns().iter().zip(expected) {
+        assert_eq!(*name, same);
+        // The links turn about a hinge at one end, the slider slides, the limited joints are limited.
+        assert_eq!(names(scene), vec![coordinate.to_string()], "{name}");
+    }
+    // The same ellipse off its hinge, limited, or carrying a body, is no longer a symmetry.
+    let base = include_str!("../../scenes/finger.toml");
+    let ellipse = "anchor = [0.0, -3.0]\ncentre = [0.0, 0.0]\njoint = { damping = 0.7 }";
+    assert!(base.contains(ellipse));
+    for (change, why) in [
+        (
+            "anchor = [0.0, -3.0]\ncentre = [0.1, 0.0]\njoint = { damping = 0.7 }",
+            "off centre",
+        ),
+        (
+            "anchor = [0.0, -3.0]\ncentre = [0.0, 0.0]\njoint = { damping = 0.7, limits = [-10.0, 10.0] }",
+            "limited",
+        ),
+        (
+            "anchor = [0.0, -3.0]\ncentre = [0.0, 0.0]\njoint = { damping = 0.7 }\n\n[[body]]\nname = \"tab\"\nsemi_axes = [0.2, 0.1]\nparent = \"ellipse\"\nanchor = [0.7, 0.0]\ncentre = [0.0, 0.0]\njoint = { type = \"weld\" }",
+            "carrying a body",
+        ),
+    ] {
+        // The scene alone: the task declares the ellipse's angle periodic, which limits contradict.
+        let text = base.replace(ellipse, change);
+        let text = &text[..text.find("\n[task.").unwrap()];
+        let scene = task::ProblemFile::from_toml_str(text).unwrap().scene;
+        assert!(
+            names(&scene).is_empty(),
+            "an ellipse {why}: {:?}",
+            names(&scene)
+        );
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(48))]
+    /// What makes a half turn a symmetry: the step from a state and from the same state with the angle
+    /// moved by pi land on the same state, moved by pi, on the smoothed and on the hard model.
+    #[test]
+    fn a_half_turn_of_a_symmetric_angle_commutes_with_the_step(
+        seed in proptest::collection::vec(-1.0f64..1.0, 16),
+        which in 0usize..5,
+        hard in proptest::bool::ANY,
+        turns in -2i32..3,
+    ) {
+        let (name, scene) = scenes_with_half_turns().swap_remove(which);
+        let (n, m) = (scene.n_dof(), scene.n_controls);
+        let model = if hard { Complementarity::Hard } else { Complementarity::Logistic { sigma: 0.05 } };
+        let mut sim = Simulator::new(scene.clone(), StepSettings { model, ..StepSettings::default() }).unwrap();
+        // A state near the task's start: small angles and offsets, any velocities; a block resting on
+        // the ground is lifted to its half height.
+        let file_x0 = vec![0.0; 2 * n];
+        let mut x: Vec<f64> = file_x0.iter().zip(seed.iter().cycle()).map(|(a, s)| a + 0.3 * s).collect();
+        for (i, v) in x[n..].iter_mut().enumerate() {
+            *v = 2.0 * seed[(i + 5) % seed.len()];
+        }
+        let names = scene.coordinate_names();
+        if let Some(y) = names.iter().position(|c| c == "block.y") {
+            x[y] = 0.25 + 0.1 * seed[3].abs();
+        }
+        let u: Vec<f64> = (0..m).map(|a| seed[(a + 11) % seed.len()]).collect();
+        for c in scene.half_turn_coordinates() {
+            let Some(a) = physical_step(&mut sim, &x, &u) else { continue };
+            let mut turned = x.clone();
+            turned[c] += f64::from(turns) * std::f64::consts::PI;
+            let Some(b) = physical_step(&mut sim, &turned, &u) else { continue };
+            for (i, (p, q)) in a.x_next.iter().zip(&b.x_next).enumerate() {
+                let q = if i == c { q - f64::from(turns) * std::f64::consts::PI } else { *q };
+                prop_assert!((p - q).abs() <= 1e-12 * (1.0 + p.abs()), "{name}: entry {i}: {p} against {q}");
+            }
+        }
+    }
+}

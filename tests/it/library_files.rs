@@ -653,3 +653,95 @@ fn saving_never_touches_another_file_and_a_bad_destination_is_found_before_a_bui
     assert!(Library::check_destination(&dir.join("missing/x.lib")).is_err());
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A controller of slider_push's state (pusher.position, block.x, block.y, block.angle and their
+/// velocities) whose law and value model weigh every entry.
+fn pusher_entry(x: Vec<f64>) -> library::Entry {
+    library::Entry {
+        u: vec![x[0] - 2.0 * x[1]],
+        gain: (0..8).map(|i| 0.3 * i as f64 - 1.0).collect(),
+        passes: 1,
+        converged: true,
+        cost: 0.0,
+        value: library::LocalValue {
+            cost_to_go: x[1] * x[1],
+            gradient: (0..8).map(|i| 0.1 * i as f64).collect(),
+            hessian: (0..64)
+                .map(|k| if k % 9 == 0 { 1.0 } else { 0.0 })
+                .collect(),
+            per_period: 0.0,
+        },
+        x,
+        reach: None,
+        time_step: 0.05,
+    }
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(64))]
+    /// A policy that compares an entry modulo a half turn (a task's `Task::half_turns`) answers a state
+    /// and the same state with that angle moved by any whole number of half turns alike, and a library
+    /// whose stored angles were moved so is the same policy.
+    #[test]
+    fn a_policy_modulo_a_half_turn_answers_a_turned_state_alike(
+        states in proptest::collection::vec(proptest::collection::vec(-1.0f64..1.0, 8), 12..48),
+        stored_turns in proptest::collection::vec(-3i32..4, 48),
+        query in proptest::collection::vec(-1.5f64..1.5, 8),
+        turns in -3i32..4,
+        neighbours in 1usize..4,
+    ) {
+        use std::f64::consts::PI;
+        let progress = task::Progress { coordinate: 1, period: None, forward: None };
+        let build = |entries: &[library::Entry]| {
+            library::Policy::for_task(entries, 8, 1, &progress, &[3])
+                .unwrap()
+                .with_neighbours(neighbours)
+                .unwrap()
+        };
+        let entries: Vec<_> = states.iter().cloned().map(pusher_entry).collect();
+        let turned_entries: Vec<_> = states
+            .iter()
+            .zip(&stored_turns)
+            .map(|(x, &k)| {
+                let mut e = pusher_entry(x.clone());
+                e.x[3] += f64::from(k) * PI;
+                e
+            })
+            .collect();
+        let (policy, turned_policy) = (build(&entries), build(&turned_entries));
+        let mut turned_query = query.clone();
+        turned_query[3] += f64::from(turns) * PI;
+        let (mut u, mut v, mut w) = ([0.0], [0.0], [0.0]);
+        let i = policy.control(&query, &mut u).unwrap();
+        proptest::prop_assert_eq!(policy.control(&turned_query, &mut v).unwrap(), i);
+        proptest::prop_assert_eq!(turned_policy.control(&query, &mut w).unwrap(), i);
+        for other in [v[0], w[0]] {
+            proptest::prop_assert!((u[0] - other).abs() <= 1e-9 * (1.0 + u[0].abs()), "{} against {}", u[0], other);
+        }
+        // Built without half-turn entries, a policy compares every entry as it is.
+        let plain = library::Policy::for_task(&turned_entries, 8, 1, &progress, &[]).unwrap();
+        proptest::prop_assert_eq!(plain.half_turns(), Vec::<usize>::new());
+        proptest::prop_assert_eq!(policy.half_turns(), vec![3]);
+    }
+}
+
+#[test]
+fn a_half_turn_entry_out_of_range_or_periodic_is_refused() {
+    let entries: Vec<_> = (0..4)
+        .map(|i| pusher_entry(vec![0.1 * i as f64; 8]))
+        .collect();
+    let plain = task::Progress {
+        coordinate: 1,
+        period: None,
+        forward: None,
+    };
+    let periodic = task::Progress {
+        coordinate: 3,
+        period: Some(std::f64::consts::PI),
+        forward: None,
+    };
+    for (progress, half_turns) in [(plain, vec![8]), (periodic, vec![3])] {
+        let err = library::Policy::for_task(&entries, 8, 1, &progress, &half_turns).unwrap_err();
+        assert!(err.to_string().contains("half-turn state entry"), "{err}");
+    }
+}

@@ -1640,3 +1640,42 @@ fn finishing_a_solve_runs_the_stages_asked_for_and_no_others() {
     assert_eq!(all.solution.controls, other.solution.controls);
     assert!(all.solution.cost < start.cost && all.felt);
 }
+
+#[test]
+fn a_task_compares_states_modulo_a_half_turn_only_where_it_does_not_see_the_angle() {
+    let half_turns = |text: &str, task: &str| -> Vec<String> {
+        let file = task::ProblemFile::from_toml_str(text).unwrap();
+        let names = file.scene.coordinate_names();
+        let t = file.task(Some(task)).unwrap();
+        t.half_turns(&file.scene)
+            .into_iter()
+            .map(|c| names[c].clone())
+            .collect()
+    };
+    // The slider's block: free, centred, not in the cost: a block turned over is the same block.
+    let slider = include_str!("../../scenes/slider_push.toml");
+    assert_eq!(half_turns(slider, "push"), ["block.angle"]);
+    // The finger's ellipse is the task's own periodic coordinate (the policy's period already), the
+    // rolled block's angle is its target, the two fingers' ellipse angle is theirs.
+    for (text, task) in [
+        (include_str!("../../scenes/finger.toml"), "spin"),
+        (include_str!("../../scenes/roll_block.toml"), "roll"),
+        (include_str!("../../scenes/two_fingers.toml"), "turn"),
+        (include_str!("../../scenes/pushing.toml"), "push"),
+    ] {
+        assert!(half_turns(text, task).is_empty(), "{task}");
+    }
+    // A term on the angle's velocity, or a target on the angle modulo a half turn, sees no half turn; a
+    // target on the angle itself does.
+    let with_final = |term: &str| {
+        slider.replace(
+            "{ coordinate = \"block.x\", velocity = true, quadratic = 5.0 },",
+            &format!("{{ coordinate = \"block.x\", velocity = true, quadratic = 5.0 }}, {term},"),
+        )
+    };
+    let spin_damped =
+        with_final("{ coordinate = \"block.angle\", velocity = true, quadratic = 1.0 }");
+    assert_eq!(half_turns(&spin_damped, "push"), ["block.angle"]);
+    let upright = with_final("{ coordinate = \"block.angle\", quadratic = 1.0, target = 0.0 }");
+    assert!(half_turns(&upright, "push").is_empty());
+}

@@ -897,6 +897,23 @@ impl Scene {
         turns
     }
 
+    /// The angle coordinates a half turn of which maps the scene onto itself: the angle of a body (a
+    /// hinge's, or a free joint's third coordinate) whose ellipse is centred on the joint's origin, with no
+    /// limits and no body attached to it. An ellipse of uniform density is the same shape, mass and
+    /// inertia turned by pi about its centre, and its weight acts there, so the state with such an angle
+    /// moved by pi (every other entry the same) is the same physical state and steps the same way: a block
+    /// a kick turned over is the block it was.
+    pub fn half_turn_coordinates(&self) -> Vec<usize> {
+        (self.coordinates.iter().enumerate())
+            .filter(|(_, c)| c.kind == CoordinateKind::Angle && c.limits.is_none())
+            .filter(|(_, c)| {
+                let b = &self.bodies[c.body];
+                b.centre == [0.0, 0.0] && !self.bodies.iter().any(|o| o.parent == Some(c.body))
+            })
+            .map(|(i, _)| i)
+            .collect()
+    }
+
     /// The body whose joint carries `body`: `body` itself, or for a body welded to its parent the parent's
     /// carrier (a weld has no coordinate of its own).
     pub fn carrier(&self, body: usize) -> usize {

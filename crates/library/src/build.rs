@@ -568,6 +568,8 @@ struct Build<'a> {
     settings: &'a LibrarySettings,
     cost: TaskCost,
     progress: Progress,
+    /// The state entries its policy compares modulo pi ([`Task::half_turns`]).
+    half_turns: Vec<usize>,
     success: task::Success,
     control_limits: Option<ddp::ControlLimits>,
     kick: Normal<f64>,
@@ -605,6 +607,7 @@ impl<'a> Build<'a> {
             settings,
             cost,
             progress,
+            half_turns: task.half_turns(scene),
             success,
             control_limits,
             kick: Normal::new(0.0, settings.kick_variance.sqrt())
@@ -624,6 +627,7 @@ impl<'a> Build<'a> {
             settings,
             cost: scaled_running(&self.cost, settings.h / self.settings.h),
             progress: self.progress,
+            half_turns: self.half_turns.clone(),
             success: self.success.clone(),
             control_limits: self.control_limits.clone(),
             kick: self.kick,
@@ -1244,11 +1248,12 @@ fn world_of(task: &Build, round: usize) -> Result<(f64, Simulator), LibraryError
 /// ([`crate::Library::policy`]) as it would be saved now.
 fn policy_at(task: &Build, built: &Built, h: f64) -> Result<Policy, LibraryError> {
     let s = task.settings;
-    Policy::for_progress(
+    Policy::for_task(
         &built.entries,
         task.scene.n_state(),
         task.scene.n_controls,
         &task.progress,
+        &task.half_turns,
     )?
     .with_neighbours(s.neighbours)?
     .with_limits(task.control_limits.clone())?

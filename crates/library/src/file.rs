@@ -202,11 +202,18 @@ impl Library {
     /// step ([`Policy::with_time_step`]: another world's step is the caller's to set).
     pub fn policy(&self) -> Result<Policy, LibraryError> {
         let s = &self.scene;
-        Policy::for_progress(&self.entries, s.n_state(), s.n_controls, &self.progress()?)?
-            .with_neighbours(self.settings.neighbours)?
-            .with_limits(self.task().control_limits.clone())?
-            .with_control_weight(self.cost().control_weight)?
-            .with_time_step(self.settings.h)
+        let half_turns = self.task().half_turns(s);
+        Policy::for_task(
+            &self.entries,
+            s.n_state(),
+            s.n_controls,
+            &self.progress()?,
+            &half_turns,
+        )?
+        .with_neighbours(self.settings.neighbours)?
+        .with_limits(self.task().control_limits.clone())?
+        .with_control_weight(self.cost().control_weight)?
+        .with_time_step(self.settings.h)
     }
 
     /// What counts as success for its task ([`task::Success`]).

@@ -1,6 +1,8 @@
 //! The global policy of paper eq. (20): the stored controller whose state is nearest, under the Euclidean
 //! norm scaled by the covariance of the stored states, with the free angle (theta3) compared modulo its
-//! period (pi: the ellipse is symmetric), then that controller's linear law.
+//! period (pi: the ellipse is symmetric), then that controller's linear law. A task's half-turn entries
+//! ([`Policy::for_task`]: angles of bodies a half turn maps onto themselves, which the task does not see)
+//! are compared modulo pi as well.
 //!
 //! The distance: with `L` the Cholesky factor of the stored states' covariance and `p = L^-1 pi e_free`,
 //! states are whitened (`y = L^-1 x`) and their free angle reduced to `[0, pi)` (`y - k p`, `k` whole
@@ -103,6 +105,9 @@ pub struct Policy {
     free: usize,
     /// The free entry's period (0: no periodic entry; states compare as they are).
     period: f64,
+    /// The entries compared modulo pi ([`Policy::for_task`]), each with the centre its stored angles
+    /// were taken to within a quarter turn of.
+    half_turns: Vec<(usize, f64)>,
     /// The shifts, in whole periods, each stored state is kept at: [`SHIFTS`], or `[0]` without a
     /// period.
     shifts: &'static [f64],
@@ -164,10 +169,43 @@ impl Policy {
         m: usize,
         progress: &task::Progress,
     ) -> Result<Self, LibraryError> {
-        match progress.period {
-            Some(p) => Policy::with_period(entries, n_state, m, progress.coordinate, p),
-            None => Policy::build(entries, n_state, m, 0, None),
+        Policy::for_task(entries, n_state, m, progress, &[])
+    }
+
+    /// [`Policy::for_progress`], comparing states modulo pi as well in each of the state entries
+    /// `half_turns` (a task's [`task::Task::half_turns`]: angles of bodies a half turn maps onto
+    /// themselves, which the task does not see). The pusher's fork kicked its block over (block angle
+    /// -pi, the block where it was) on 6 of the 80 kicked runs of one library, and the policy, finding no
+    /// stored state near an upturned block, left it there. `Err` for an entry out of the state's range or
+    /// the periodic entry itself.
+    pub fn for_task(
+        entries: &[Entry],
+        n_state: usize,
+        m: usize,
+        progress: &task::Progress,
+        half_turns: &[usize],
+    ) -> Result<Self, LibraryError> {
+        if let Some(&c) = half_turns
+            .iter()
+            .find(|&&c| c >= n_state || (progress.period.is_some() && c == progress.coordinate))
+        {
+            return Err(LibraryError::Invalid(format!(
+                "half-turn state entry {c} of a state of {n_state} (periodic entry {:?})",
+                progress.period.map(|_| progress.coordinate)
+            )));
         }
+        let (free, period) = match progress.period {
+            Some(p) if !(p.is_finite() && p > 0.0) => {
+                return Err(LibraryError::Setting {
+                    name: "period",
+                    value: p,
+                    expected: "finite and positive",
+                });
+            }
+            Some(p) => (progress.coordinate, Some(p)),
+            None => (0, None),
+        };
+        Policy::build(entries, n_state, m, free, period, half_turns)
     }
 
     /// [`Policy::new`] with the periodic state entry `free` of period `period` (a task's, see
@@ -186,7 +224,7 @@ impl Policy {
                 expected: "finite and positive",
             });
         }
-        Policy::build(entries, n_state, m, free, Some(period))
+        Policy::build(entries, n_state, m, free, Some(period), &[])
     }
 
     /// [`Policy::with_period`], or without a periodic entry for `None`.
@@ -196,6 +234,7 @@ impl Policy {
         m: usize,
         free: usize,
         period: Option<f64>,
+        half_turns: &[usize],
     ) -> Result<Self, LibraryError> {
         if free >= n_state {
             return Err(LibraryError::Invalid(format!(
@@ -232,10 +271,29 @@ impl Policy {
         }
         let n = n_state;
         let count = entries.len() as f64;
+        // Each half-turn entry's angles doubled have a circular mean; every stored angle is taken to
+        // within a quarter turn of it (the same state), so that states a half turn apart lie together.
+        let half_turns: Vec<(usize, f64)> = half_turns
+            .iter()
+            .map(|&c| {
+                let (s, c2) = entries.iter().fold((0.0, 0.0), |(s, c2), e| {
+                    (s + (2.0 * e.x[c]).sin(), c2 + (2.0 * e.x[c]).cos())
+                });
+                (c, 0.5 * s.atan2(c2))
+            })
+            .collect();
+        let canonical = |x: &[f64]| -> Vec<f64> {
+            let mut y = x.to_vec();
+            for &(c, centre) in &half_turns {
+                y[c] = centre + wrap(y[c] - centre, PI);
+            }
+            y
+        };
+        let states: Vec<Vec<f64>> = entries.iter().map(|e| canonical(&e.x)).collect();
         // The free angle's circular mean (period pi: angles doubled), then every state's free angle
         // unwrapped next to it.
-        let (s, c) = entries.iter().fold((0.0, 0.0), |(s, c), e| {
-            let a = 2.0 * PI * e.x[free] / period.unwrap_or(1.0);
+        let (s, c) = states.iter().fold((0.0, 0.0), |(s, c), x| {
+            let a = 2.0 * PI * x[free] / period.unwrap_or(1.0);
             (s + a.sin(), c + a.cos())
         });
         let unwrapped = |x: &[f64]| -> Vec<f64> {
@@ -247,18 +305,14 @@ impl Policy {
             y
         };
         let mut mean = vec![0.0; n];
-        for e in entries {
-            for (m, v) in mean.iter_mut().zip(unwrapped(&e.x)) {
+        for x in &states {
+            for (m, v) in mean.iter_mut().zip(unwrapped(x)) {
                 *m += v / count;
             }
         }
         let mut cov = vec![0.0; n * n];
-        for e in entries {
-            let d: Vec<f64> = unwrapped(&e.x)
-                .iter()
-                .zip(&mean)
-                .map(|(a, b)| a - b)
-                .collect();
+        for x in &states {
+            let d: Vec<f64> = unwrapped(x).iter().zip(&mean).map(|(a, b)| a - b).collect();
             for i in 0..n {
                 for j in 0..n {
                     cov[i * n + j] += d[i] * d[j] / count;
@@ -282,7 +336,6 @@ impl Policy {
         let mut unit = vec![0.0; n];
         unit[free] = period;
         let period_shift = forward(&chol, n, &unit);
-        let states: Vec<Vec<f64>> = entries.iter().map(|e| e.x.clone()).collect();
         let turns: Vec<f64> = states
             .iter()
             .map(|x| whole_periods(x[free], period))
@@ -293,6 +346,7 @@ impl Policy {
             m,
             free,
             period,
+            half_turns,
             shifts,
             turns,
             index: Index::new(points, n),
@@ -436,7 +490,8 @@ impl Policy {
         self.states.is_empty()
     }
 
-    /// The stored states.
+    /// The stored states (each half-turn entry taken to within a quarter turn of its centre, the same
+    /// states).
     pub fn states(&self) -> &[Vec<f64>] {
         &self.states
     }
@@ -466,7 +521,7 @@ impl Policy {
     pub fn nearest_n(&self, x: &[f64], count: usize) -> Result<Vec<(usize, f64)>, LibraryError> {
         crate::check("x", x, self.n)?;
         let k = whole_periods(x[self.free], self.period);
-        let mut y = forward(&self.chol, self.n, x);
+        let mut y = forward(&self.chol, self.n, &self.canonical(x));
         for (y, p) in y.iter_mut().zip(&self.period_shift) {
             *y -= k * p;
         }
@@ -526,12 +581,34 @@ impl Policy {
             .fold(self.controls[i][a], |s, (k, d)| s + k * d)
     }
 
-    /// `x - x_i` with the free angle taken `turns` whole periods back, into `d`.
+    /// `x - x_i` with the free angle taken `turns` whole periods back and each half-turn entry's
+    /// difference within a quarter turn, into `d`.
     fn offset(&self, x: &[f64], i: usize, turns: f64, d: &mut [f64]) {
         for ((d, a), b) in d.iter_mut().zip(x).zip(&self.states[i]) {
             *d = a - b;
         }
         d[self.free] -= turns * self.period;
+        for &(c, _) in &self.half_turns {
+            d[c] = wrap(d[c], PI);
+        }
+    }
+
+    /// `x` with each half-turn entry within a quarter turn of its stored angles' centre (the same
+    /// state; `x` itself without half-turn entries).
+    fn canonical<'x>(&self, x: &'x [f64]) -> std::borrow::Cow<'x, [f64]> {
+        if self.half_turns.is_empty() {
+            return std::borrow::Cow::Borrowed(x);
+        }
+        let mut y = x.to_vec();
+        for &(c, centre) in &self.half_turns {
+            y[c] = centre + wrap(y[c] - centre, PI);
+        }
+        std::borrow::Cow::Owned(y)
+    }
+
+    /// The state entries compared modulo pi ([`Policy::for_task`]).
+    pub fn half_turns(&self) -> Vec<usize> {
+        self.half_turns.iter().map(|&(c, _)| c).collect()
     }
 
     /// The stored controller the policy uses at `x` and the whole periods between them: the nearest

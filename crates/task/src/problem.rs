@@ -468,6 +468,36 @@ impl Task {
 }
 
 impl Task {
+    /// The coordinates of `scene` whose half turn changes nothing this task sees: the scene's
+    /// [`Scene::half_turn_coordinates`] that the task neither declares periodic (its policy's own
+    /// periodic coordinate) nor weighs, rewards or judges, unless only modulo a period a half turn is a
+    /// whole number of (a term on the angle's velocity is no obstacle: a half turn leaves it). A state
+    /// and the same state with such an angle moved by pi have the same future and the same cost, so a
+    /// library's policy compares states modulo pi in them ([`Task::half_turns`] is what it is given).
+    pub fn half_turns(&self, scene: &Scene) -> Vec<usize> {
+        let n = scene.n_dof();
+        let invariant = |period: Option<f64>| {
+            period.is_some_and(|p| {
+                let k = std::f64::consts::PI / p;
+                p > 0.0 && (k - k.round()).abs() <= 1e-9 * k.max(1.0)
+            })
+        };
+        let seen = |c: usize| {
+            let terms = self.cost.running.iter().chain(&self.cost.final_terms);
+            let weighed = terms
+                .filter(|t| t.index == c)
+                .any(|t| t.linear != 0.0 || !invariant(t.period));
+            let judged = self.success.rates.iter().any(|r| r.0 == c)
+                || (self.success.targets.iter()).any(|t| t.0 == c && !invariant(t.2));
+            weighed || judged || self.periods.get(c).is_some_and(|p| p.is_some())
+        };
+        scene
+            .half_turn_coordinates()
+            .into_iter()
+            .filter(|&c| c < n && !seen(c))
+            .collect()
+    }
+
     /// `Err` unless the task's sizes (its state and, when it has them, its control limits) are `scene`'s:
     /// a task is checked against its own scene file, and this is for a task used with another scene.
     pub fn check_scene(&self, scene: &Scene) -> Result<(), TaskError> {
