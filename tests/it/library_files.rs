@@ -679,21 +679,25 @@ fn pusher_entry(x: Vec<f64>) -> library::Entry {
 
 proptest::proptest! {
     #![proptest_config(proptest::prelude::ProptestConfig::with_cases(64))]
-    /// A policy that compares an entry modulo a half turn (a task's `Task::half_turns`) answers a state
-    /// and the same state with that angle moved by any whole number of half turns alike, and a library
-    /// whose stored angles were moved so is the same policy.
+    /// A policy that compares an entry modulo a turn (a task's `Task::turn_symmetries`) answers a state
+    /// and the same state with that angle turned by it alike (any whole number of half turns; any angle
+    /// for a disc's), and a library whose stored angles were turned so is the same policy.
     #[test]
-    fn a_policy_modulo_a_half_turn_answers_a_turned_state_alike(
+    fn a_policy_modulo_a_turn_answers_a_turned_state_alike(
         states in proptest::collection::vec(proptest::collection::vec(-1.0f64..1.0, 8), 12..48),
         stored_turns in proptest::collection::vec(-3i32..4, 48),
         query in proptest::collection::vec(-1.5f64..1.5, 8),
         turns in -3i32..4,
         neighbours in 1usize..4,
+        round in proptest::bool::ANY,
+        fraction in 0.0f64..1.0,
     ) {
         use std::f64::consts::PI;
         let progress = task::Progress { coordinate: 1, period: None, forward: None };
+        // A disc's angle turns by any amount, an ellipse's by whole half turns.
+        let (symmetry, step) = if round { (0.0, PI * fraction) } else { (PI, PI) };
         let build = |entries: &[library::Entry]| {
-            library::Policy::for_task(entries, 8, 1, &progress, &[3])
+            library::Policy::for_task(entries, 8, 1, &progress, &[(3, symmetry)])
                 .unwrap()
                 .with_neighbours(neighbours)
                 .unwrap()
@@ -704,13 +708,13 @@ proptest::proptest! {
             .zip(&stored_turns)
             .map(|(x, &k)| {
                 let mut e = pusher_entry(x.clone());
-                e.x[3] += f64::from(k) * PI;
+                e.x[3] += f64::from(k) * step;
                 e
             })
             .collect();
         let (policy, turned_policy) = (build(&entries), build(&turned_entries));
         let mut turned_query = query.clone();
-        turned_query[3] += f64::from(turns) * PI;
+        turned_query[3] += f64::from(turns) * step;
         let (mut u, mut v, mut w) = ([0.0], [0.0], [0.0]);
         let i = policy.control(&query, &mut u).unwrap();
         proptest::prop_assert_eq!(policy.control(&turned_query, &mut v).unwrap(), i);
@@ -720,13 +724,13 @@ proptest::proptest! {
         }
         // Built without half-turn entries, a policy compares every entry as it is.
         let plain = library::Policy::for_task(&turned_entries, 8, 1, &progress, &[]).unwrap();
-        proptest::prop_assert_eq!(plain.half_turns(), Vec::<usize>::new());
-        proptest::prop_assert_eq!(policy.half_turns(), vec![3]);
+        proptest::prop_assert_eq!(plain.turn_symmetries(), Vec::<(usize, f64)>::new());
+        proptest::prop_assert_eq!(policy.turn_symmetries(), vec![(3, symmetry)]);
     }
 }
 
 #[test]
-fn a_half_turn_entry_out_of_range_or_periodic_is_refused() {
+fn a_turn_symmetry_out_of_range_periodic_or_of_another_turn_is_refused() {
     let entries: Vec<_> = (0..4)
         .map(|i| pusher_entry(vec![0.1 * i as f64; 8]))
         .collect();
@@ -740,8 +744,14 @@ fn a_half_turn_entry_out_of_range_or_periodic_is_refused() {
         period: Some(std::f64::consts::PI),
         forward: None,
     };
-    for (progress, half_turns) in [(plain, vec![8]), (periodic, vec![3])] {
-        let err = library::Policy::for_task(&entries, 8, 1, &progress, &half_turns).unwrap_err();
-        assert!(err.to_string().contains("half-turn state entry"), "{err}");
+    let pi = std::f64::consts::PI;
+    for (progress, turns) in [
+        (plain, vec![(8, pi)]),
+        (periodic, vec![(3, pi)]),
+        (plain, vec![(3, 1.0)]),
+        (plain, vec![(3, f64::NAN)]),
+    ] {
+        let err = library::Policy::for_task(&entries, 8, 1, &progress, &turns).unwrap_err();
+        assert!(err.to_string().contains("turn symmetry"), "{err}");
     }
 }

@@ -1642,19 +1642,21 @@ fn finishing_a_solve_runs_the_stages_asked_for_and_no_others() {
 }
 
 #[test]
-fn a_task_compares_states_modulo_a_half_turn_only_where_it_does_not_see_the_angle() {
-    let half_turns = |text: &str, task: &str| -> Vec<String> {
+fn a_task_compares_states_modulo_a_turn_only_where_it_does_not_see_the_angle() {
+    use std::f64::consts::PI;
+    let turns = |text: &str, task: &str| -> Vec<(String, f64)> {
         let file = task::ProblemFile::from_toml_str(text).unwrap();
         let names = file.scene.coordinate_names();
         let t = file.task(Some(task)).unwrap();
-        t.half_turns(&file.scene)
+        t.turn_symmetries(&file.scene)
             .into_iter()
-            .map(|c| names[c].clone())
+            .map(|(c, turn)| (names[c].clone(), turn))
             .collect()
     };
+    let block = |turn: f64| vec![("block.angle".to_string(), turn)];
     // The slider's block: free, centred, not in the cost: a block turned over is the same block.
     let slider = include_str!("../../scenes/slider_push.toml");
-    assert_eq!(half_turns(slider, "push"), ["block.angle"]);
+    assert_eq!(turns(slider, "push"), block(PI));
     // The finger's ellipse is the task's own periodic coordinate (the policy's period already), the
     // rolled block's angle is its target, the two fingers' ellipse angle is theirs.
     for (text, task) in [
@@ -1663,19 +1665,24 @@ fn a_task_compares_states_modulo_a_half_turn_only_where_it_does_not_see_the_angl
         (include_str!("../../scenes/two_fingers.toml"), "turn"),
         (include_str!("../../scenes/pushing.toml"), "push"),
     ] {
-        assert!(half_turns(text, task).is_empty(), "{task}");
+        assert!(turns(text, task).is_empty(), "{task}");
     }
-    // A term on the angle's velocity, or a target on the angle modulo a half turn, sees no half turn; a
-    // target on the angle itself does.
-    let with_final = |term: &str| {
-        slider.replace(
+    // A term on the angle's velocity leaves the symmetry; a target on the angle itself does not.
+    let with_final = |text: &str, term: &str| {
+        text.replace(
             "{ coordinate = \"block.x\", velocity = true, quadratic = 5.0 },",
             &format!("{{ coordinate = \"block.x\", velocity = true, quadratic = 5.0 }}, {term},"),
         )
     };
-    let spin_damped =
-        with_final("{ coordinate = \"block.angle\", velocity = true, quadratic = 1.0 }");
-    assert_eq!(half_turns(&spin_damped, "push"), ["block.angle"]);
-    let upright = with_final("{ coordinate = \"block.angle\", quadratic = 1.0, target = 0.0 }");
-    assert!(half_turns(&upright, "push").is_empty());
+    let spin_damped = "{ coordinate = \"block.angle\", velocity = true, quadratic = 1.0 }";
+    let upright = "{ coordinate = \"block.angle\", quadratic = 1.0, target = 0.0 }";
+    assert_eq!(turns(&with_final(slider, spin_damped), "push"), block(PI));
+    assert!(turns(&with_final(slider, upright), "push").is_empty());
+    // A round block (a puck) is the same turned by any angle: its angle does not count at all.
+    let ellipse = "semi_axes = [0.4, 0.25]\nparent = \"world\"";
+    assert!(slider.contains(ellipse), "the slider's block");
+    let puck = slider.replace(ellipse, "semi_axes = [0.25, 0.25]\nparent = \"world\"");
+    assert_eq!(turns(&puck, "push"), block(0.0));
+    assert_eq!(turns(&with_final(&puck, spin_damped), "push"), block(0.0));
+    assert!(turns(&with_final(&puck, upright), "push").is_empty());
 }

@@ -914,6 +914,18 @@ impl Scene {
             .collect()
     }
 
+    /// Those of the [`Scene::half_turn_coordinates`] whose body is round (equal semi-axes): any turn of
+    /// them maps the scene onto itself, and the angle itself does not matter (a disc's orientation).
+    pub fn round_coordinates(&self) -> Vec<usize> {
+        self.half_turn_coordinates()
+            .into_iter()
+            .filter(|&c| {
+                let shape = &self.bodies[self.coordinates[c].body].shape;
+                shape.a() == shape.b()
+            })
+            .collect()
+    }
+
     /// The body whose joint carries `body`: `body` itself, or for a body welded to its parent the parent's
     /// carrier (a weld has no coordinate of its own).
     pub fn carrier(&self, body: usize) -> usize {

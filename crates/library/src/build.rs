@@ -568,8 +568,8 @@ struct Build<'a> {
     settings: &'a LibrarySettings,
     cost: TaskCost,
     progress: Progress,
-    /// The state entries its policy compares modulo pi ([`Task::half_turns`]).
-    half_turns: Vec<usize>,
+    /// The state entries its policy compares modulo a turn ([`Task::turn_symmetries`]).
+    turns: Vec<(usize, f64)>,
     success: task::Success,
     control_limits: Option<ddp::ControlLimits>,
     kick: Normal<f64>,
@@ -607,7 +607,7 @@ impl<'a> Build<'a> {
             settings,
             cost,
             progress,
-            half_turns: task.half_turns(scene),
+            turns: task.turn_symmetries(scene),
             success,
             control_limits,
             kick: Normal::new(0.0, settings.kick_variance.sqrt())
@@ -627,7 +627,7 @@ impl<'a> Build<'a> {
             settings,
             cost: scaled_running(&self.cost, settings.h / self.settings.h),
             progress: self.progress,
-            half_turns: self.half_turns.clone(),
+            turns: self.turns.clone(),
             success: self.success.clone(),
             control_limits: self.control_limits.clone(),
             kick: self.kick,
@@ -1253,7 +1253,7 @@ fn policy_at(task: &Build, built: &Built, h: f64) -> Result<Policy, LibraryError
         task.scene.n_state(),
         task.scene.n_controls,
         &task.progress,
-        &task.half_turns,
+        &task.turns,
     )?
     .with_neighbours(s.neighbours)?
     .with_limits(task.control_limits.clone())?

@@ -202,13 +202,13 @@ impl Library {
     /// step ([`Policy::with_time_step`]: another world's step is the caller's to set).
     pub fn policy(&self) -> Result<Policy, LibraryError> {
         let s = &self.scene;
-        let half_turns = self.task().half_turns(s);
+        let turns = self.task().turn_symmetries(s);
         Policy::for_task(
             &self.entries,
             s.n_state(),
             s.n_controls,
             &self.progress()?,
-            &half_turns,
+            &turns,
         )?
         .with_neighbours(self.settings.neighbours)?
         .with_limits(self.task().control_limits.clone())?

@@ -1,8 +1,8 @@
 //! The global policy of paper eq. (20): the stored controller whose state is nearest, under the Euclidean
 //! norm scaled by the covariance of the stored states, with the free angle (theta3) compared modulo its
-//! period (pi: the ellipse is symmetric), then that controller's linear law. A task's half-turn entries
-//! ([`Policy::for_task`]: angles of bodies a half turn maps onto themselves, which the task does not see)
-//! are compared modulo pi as well.
+//! period (pi: the ellipse is symmetric), then that controller's linear law. A task's turn symmetries
+//! ([`Policy::for_task`]: angles of bodies a half turn, or any turn, maps onto themselves, which the task
+//! does not see) are compared modulo that turn as well.
 //!
 //! The distance: with `L` the Cholesky factor of the stored states' covariance and `p = L^-1 pi e_free`,
 //! states are whitened (`y = L^-1 x`) and their free angle reduced to `[0, pi)` (`y - k p`, `k` whole
@@ -105,9 +105,8 @@ pub struct Policy {
     free: usize,
     /// The free entry's period (0: no periodic entry; states compare as they are).
     period: f64,
-    /// The entries compared modulo pi ([`Policy::for_task`]), each with the centre its stored angles
-    /// were taken to within a quarter turn of.
-    half_turns: Vec<(usize, f64)>,
+    /// The entries compared modulo a turn ([`Policy::for_task`]).
+    symmetric: Vec<Symmetric>,
     /// The shifts, in whole periods, each stored state is kept at: [`SHIFTS`], or `[0]` without a
     /// period.
     shifts: &'static [f64],
@@ -137,6 +136,27 @@ pub struct Policy {
     time_steps: Vec<f64>,
     /// The time step the policy runs at, whose controllers it prefers ([`Policy::with_time_step`]).
     time_step: Option<f64>,
+}
+
+/// A state entry compared modulo a turn ([`Policy::for_task`]).
+#[derive(Debug, Clone, Copy)]
+struct Symmetric {
+    entry: usize,
+    /// The turn: pi, or 0 for any.
+    turn: f64,
+    /// The angle the stored states' are taken to within half a turn of (0 for any turn).
+    centre: f64,
+}
+
+impl Symmetric {
+    /// The angle `a` as the stored states have it: within half its turn of the centre, or the centre.
+    fn canonical(&self, a: f64) -> f64 {
+        if self.turn > 0.0 {
+            self.centre + wrap(a - self.centre, self.turn)
+        } else {
+            self.centre
+        }
+    }
 }
 
 /// Whole periods `p` in `x` (rounded down; 0 without a period, `p = 0`).
@@ -172,25 +192,27 @@ impl Policy {
         Policy::for_task(entries, n_state, m, progress, &[])
     }
 
-    /// [`Policy::for_progress`], comparing states modulo pi as well in each of the state entries
-    /// `half_turns` (a task's [`task::Task::half_turns`]: angles of bodies a half turn maps onto
-    /// themselves, which the task does not see). The pusher's fork kicked its block over (block angle
+    /// [`Policy::for_progress`], comparing states modulo a turn as well in each of the state entries of
+    /// `turns` (a task's [`task::Task::turn_symmetries`]: `(entry, pi)` for the angle of a body a half
+    /// turn maps onto itself, `(entry, 0)` for one any turn does, a disc's, whose angle then does not
+    /// count at all; angles the task does not see). The pusher's fork kicked its block over (block angle
     /// -pi, the block where it was) on 6 of the 80 kicked runs of one library, and the policy, finding no
-    /// stored state near an upturned block, left it there. `Err` for an entry out of the state's range or
-    /// the periodic entry itself.
+    /// stored state near an upturned block, left it there. `Err` for an entry out of the state's range,
+    /// the periodic entry itself, or a turn other than pi and 0.
     pub fn for_task(
         entries: &[Entry],
         n_state: usize,
         m: usize,
         progress: &task::Progress,
-        half_turns: &[usize],
+        turns: &[(usize, f64)],
     ) -> Result<Self, LibraryError> {
-        if let Some(&c) = half_turns
-            .iter()
-            .find(|&&c| c >= n_state || (progress.period.is_some() && c == progress.coordinate))
-        {
+        if let Some(&(c, turn)) = turns.iter().find(|&&(c, turn)| {
+            c >= n_state
+                || (progress.period.is_some() && c == progress.coordinate)
+                || !(turn == PI || turn == 0.0)
+        }) {
             return Err(LibraryError::Invalid(format!(
-                "half-turn state entry {c} of a state of {n_state} (periodic entry {:?})",
+                "turn symmetry ({c}, {turn}) of a state of {n_state} (periodic entry {:?}; a turn is pi or 0, any)",
                 progress.period.map(|_| progress.coordinate)
             )));
         }
@@ -205,7 +227,7 @@ impl Policy {
             Some(p) => (progress.coordinate, Some(p)),
             None => (0, None),
         };
-        Policy::build(entries, n_state, m, free, period, half_turns)
+        Policy::build(entries, n_state, m, free, period, turns)
     }
 
     /// [`Policy::new`] with the periodic state entry `free` of period `period` (a task's, see
@@ -234,7 +256,7 @@ impl Policy {
         m: usize,
         free: usize,
         period: Option<f64>,
-        half_turns: &[usize],
+        turns: &[(usize, f64)],
     ) -> Result<Self, LibraryError> {
         if free >= n_state {
             return Err(LibraryError::Invalid(format!(
@@ -272,20 +294,26 @@ impl Policy {
         let n = n_state;
         let count = entries.len() as f64;
         // Each half-turn entry's angles doubled have a circular mean; every stored angle is taken to
-        // within a quarter turn of it (the same state), so that states a half turn apart lie together.
-        let half_turns: Vec<(usize, f64)> = half_turns
+        // within a quarter turn of it (the same state), so that states a half turn apart lie together. An
+        // entry any turn maps onto itself is taken to 0.
+        let symmetric: Vec<Symmetric> = turns
             .iter()
-            .map(|&c| {
+            .map(|&(c, turn)| {
                 let (s, c2) = entries.iter().fold((0.0, 0.0), |(s, c2), e| {
                     (s + (2.0 * e.x[c]).sin(), c2 + (2.0 * e.x[c]).cos())
                 });
-                (c, 0.5 * s.atan2(c2))
+                let centre = if turn > 0.0 { 0.5 * s.atan2(c2) } else { 0.0 };
+                Symmetric {
+                    entry: c,
+                    turn,
+                    centre,
+                }
             })
             .collect();
         let canonical = |x: &[f64]| -> Vec<f64> {
             let mut y = x.to_vec();
-            for &(c, centre) in &half_turns {
-                y[c] = centre + wrap(y[c] - centre, PI);
+            for t in &symmetric {
+                y[t.entry] = t.canonical(y[t.entry]);
             }
             y
         };
@@ -346,7 +374,7 @@ impl Policy {
             m,
             free,
             period,
-            half_turns,
+            symmetric,
             shifts,
             turns,
             index: Index::new(points, n),
@@ -490,8 +518,7 @@ impl Policy {
         self.states.is_empty()
     }
 
-    /// The stored states (each half-turn entry taken to within a quarter turn of its centre, the same
-    /// states).
+    /// The stored states (each symmetric entry taken as [`Policy::for_task`] says, the same states).
     pub fn states(&self) -> &[Vec<f64>] {
         &self.states
     }
@@ -581,34 +608,39 @@ impl Policy {
             .fold(self.controls[i][a], |s, (k, d)| s + k * d)
     }
 
-    /// `x - x_i` with the free angle taken `turns` whole periods back and each half-turn entry's
-    /// difference within a quarter turn, into `d`.
+    /// `x - x_i` with the free angle taken `turns` whole periods back and each symmetric entry's
+    /// difference within a quarter turn (a half turn's) or zero (any turn's), into `d`.
     fn offset(&self, x: &[f64], i: usize, turns: f64, d: &mut [f64]) {
         for ((d, a), b) in d.iter_mut().zip(x).zip(&self.states[i]) {
             *d = a - b;
         }
         d[self.free] -= turns * self.period;
-        for &(c, _) in &self.half_turns {
-            d[c] = wrap(d[c], PI);
+        for t in &self.symmetric {
+            d[t.entry] = if t.turn > 0.0 {
+                wrap(d[t.entry], t.turn)
+            } else {
+                0.0
+            };
         }
     }
 
-    /// `x` with each half-turn entry within a quarter turn of its stored angles' centre (the same
-    /// state; `x` itself without half-turn entries).
+    /// `x` with each symmetric entry taken as the stored states' are (the same state; `x` itself
+    /// without symmetric entries).
     fn canonical<'x>(&self, x: &'x [f64]) -> std::borrow::Cow<'x, [f64]> {
-        if self.half_turns.is_empty() {
+        if self.symmetric.is_empty() {
             return std::borrow::Cow::Borrowed(x);
         }
         let mut y = x.to_vec();
-        for &(c, centre) in &self.half_turns {
-            y[c] = centre + wrap(y[c] - centre, PI);
+        for t in &self.symmetric {
+            y[t.entry] = t.canonical(y[t.entry]);
         }
         std::borrow::Cow::Owned(y)
     }
 
-    /// The state entries compared modulo pi ([`Policy::for_task`]).
-    pub fn half_turns(&self) -> Vec<usize> {
-        self.half_turns.iter().map(|&(c, _)| c).collect()
+    /// The state entries compared modulo a turn and each one's turn (pi, or 0 for any;
+    /// [`Policy::for_task`]).
+    pub fn turn_symmetries(&self) -> Vec<(usize, f64)> {
+        self.symmetric.iter().map(|t| (t.entry, t.turn)).collect()
     }
 
     /// The stored controller the policy uses at `x` and the whole periods between them: the nearest

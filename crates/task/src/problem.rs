@@ -468,33 +468,39 @@ impl Task {
 }
 
 impl Task {
-    /// The coordinates of `scene` whose half turn changes nothing this task sees: the scene's
-    /// [`Scene::half_turn_coordinates`] that the task neither declares periodic (its policy's own
-    /// periodic coordinate) nor weighs, rewards or judges, unless only modulo a period a half turn is a
-    /// whole number of (a term on the angle's velocity is no obstacle: a half turn leaves it). A state
-    /// and the same state with such an angle moved by pi have the same future and the same cost, so a
-    /// library's policy compares states modulo pi in them ([`Task::half_turns`] is what it is given).
-    pub fn half_turns(&self, scene: &Scene) -> Vec<usize> {
+    /// The coordinates of `scene` a turn of which changes nothing this task sees, each with the turn:
+    /// `(coordinate, PI)` for the scene's [`Scene::half_turn_coordinates`] (an ellipse turned by pi), `(coordinate,
+    /// 0.0)` for its [`Scene::round_coordinates`] (a disc turned by any angle), where the task neither
+    /// declares the angle periodic (its policy's own periodic coordinate) nor weighs, rewards or judges
+    /// it, unless, for a half turn, only modulo a period a half turn is a whole number of (a term on the
+    /// angle's velocity is no obstacle: a turn leaves it). A state and the same state so turned have the
+    /// same future and the same cost, so a library's policy compares states modulo the turn
+    /// (`library::Policy::for_task`).
+    pub fn turn_symmetries(&self, scene: &Scene) -> Vec<(usize, f64)> {
+        use std::f64::consts::PI;
         let n = scene.n_dof();
-        let invariant = |period: Option<f64>| {
-            period.is_some_and(|p| {
-                let k = std::f64::consts::PI / p;
-                p > 0.0 && (k - k.round()).abs() <= 1e-9 * k.max(1.0)
-            })
+        let round = scene.round_coordinates();
+        let invariant = |c: usize, period: Option<f64>| {
+            !round.contains(&c)
+                && period.is_some_and(|p| {
+                    let k = PI / p;
+                    p > 0.0 && (k - k.round()).abs() <= 1e-9 * k.max(1.0)
+                })
         };
         let seen = |c: usize| {
             let terms = self.cost.running.iter().chain(&self.cost.final_terms);
             let weighed = terms
                 .filter(|t| t.index == c)
-                .any(|t| t.linear != 0.0 || !invariant(t.period));
+                .any(|t| t.linear != 0.0 || !invariant(c, t.period));
             let judged = self.success.rates.iter().any(|r| r.0 == c)
-                || (self.success.targets.iter()).any(|t| t.0 == c && !invariant(t.2));
+                || (self.success.targets.iter()).any(|t| t.0 == c && !invariant(c, t.2));
             weighed || judged || self.periods.get(c).is_some_and(|p| p.is_some())
         };
         scene
             .half_turn_coordinates()
             .into_iter()
             .filter(|&c| c < n && !seen(c))
+            .map(|c| (c, if round.contains(&c) { 0.0 } else { PI }))
             .collect()
     }
 
