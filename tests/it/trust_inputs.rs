@@ -315,3 +315,171 @@ fn an_oversized_scene_text_is_refused_before_parsing() {
     };
     assert!(message.contains("MAX_SCENE_TEXT"), "{message}");
 }
+
+/// The repository's scene files, for mutation.
+const SCENE_FILES: [&str; 7] = [
+    include_str!("../../scenes/finger.toml"),
+    include_str!("../../scenes/mirrored_finger.toml"),
+    include_str!("../../scenes/pushing.toml"),
+    include_str!("../../scenes/roll_block.toml"),
+    include_str!("../../scenes/slider_push.toml"),
+    include_str!("../../scenes/two_fingers.toml"),
+    include_str!("../data/paddle.toml"),
+];
+
+/// What a user may write where a file has a number: zero, signs, the extremes, the non-finite, another
+/// type.
+const REPLACEMENTS: [&str; 18] = [
+    "0.0",
+    "-0.0",
+    "-1.0",
+    "1e-12",
+    "1e12",
+    "1e300",
+    "-1e300",
+    "nan",
+    "inf",
+    "-inf",
+    "3.5",
+    "1000000000",
+    "0",
+    "-5",
+    "\"x\"",
+    "[]",
+    "[1.0]",
+    "true",
+];
+
+/// `text` with its `picks`-th numbers (counted over the lines that are not comments) replaced by the
+/// chosen replacements.
+fn mutated(text: &str, picks: &[(usize, usize)]) -> String {
+    let number = |c: char| c.is_ascii_digit();
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    for &(pick, replacement) in picks {
+        // Every maximal run of digits, dots, exponents and signs on a line that is not a comment.
+        let mut spans = Vec::new();
+        for (l, line) in lines.iter().enumerate() {
+            if line.trim_start().starts_with('#') {
+                continue;
+            }
+            let bytes = line.as_bytes();
+            let mut i = 0;
+            while i < bytes.len() {
+                let starts = number(bytes[i] as char)
+                    && (i == 0 || !(bytes[i - 1] as char).is_ascii_alphanumeric());
+                if starts {
+                    let mut j = i;
+                    while j < bytes.len()
+                        && (number(bytes[j] as char) || b".eE-+".contains(&bytes[j]))
+                    {
+                        j += 1;
+                    }
+                    let i0 = if i > 0 && bytes[i - 1] == b'-' {
+                        i - 1
+                    } else {
+                        i
+                    };
+                    spans.push((l, i0, j));
+                    i = j;
+                } else {
+                    i += 1;
+                }
+            }
+        }
+        if spans.is_empty() {
+            break;
+        }
+        let (l, a, b) = spans[pick % spans.len()];
+        let line = &lines[l];
+        lines[l] = format!(
+            "{}{}{}",
+            &line[..a],
+            REPLACEMENTS[replacement % REPLACEMENTS.len()],
+            &line[b..]
+        );
+    }
+    lines.join("\n")
+}
+
+/// Everything a scene file reaches without a library: its tasks, their start's check, twenty steps of
+/// the simulator on the task's model from its start, and a three-pass solve. Errors are the file's
+/// answer; only a panic or a non-finite success fails.
+fn run_file(text: &str) -> Result<(), String> {
+    let Ok(file) = task::ProblemFile::from_toml_str(text) else {
+        return Ok(());
+    };
+    for name in file.tasks.keys() {
+        let Ok(t) = file.task(Some(name)) else {
+            continue;
+        };
+        let settings = dynamics::StepSettings {
+            model: t.model.complementarity(),
+            h: t.h,
+            ..dynamics::StepSettings::default()
+        };
+        let Ok(mut sim) = dynamics::Simulator::new(file.scene.clone(), settings) else {
+            continue;
+        };
+        let mut x = t.x0.clone();
+        let u = vec![0.1; file.scene.n_controls];
+        for _ in 0..20 {
+            match sim.step(&x, &u) {
+                Ok(step) if step.x_next.iter().all(|v| v.is_finite()) => x = step.x_next,
+                Ok(step) => {
+                    return Err(format!("task {name}: a non-finite step {:?}", step.x_next));
+                }
+                Err(_) => break,
+            }
+        }
+        let Ok(sim) = dynamics::Simulator::new(file.scene.clone(), settings) else {
+            continue;
+        };
+        let ddp = ddp::Ddp::new(ddp::DdpSettings {
+            max_iterations: 3,
+            control_limits: t.control_limits.clone(),
+            ..ddp::DdpSettings::default()
+        });
+        let Ok(ddp) = ddp else { continue };
+        let horizon = t.horizon.min(30);
+        let zero = vec![vec![0.0; file.scene.n_controls]; horizon];
+        if let Ok(sol) = ddp.solve(&task::SceneDynamics::new(sim), &t.cost, &t.x0, &zero)
+            && !sol.cost.is_finite()
+        {
+            return Err(format!("task {name}: a solve returned cost {}", sol.cost));
+        }
+    }
+    Ok(())
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(256))]
+    /// Issue 28: nothing a user can write in a scene or task file panics. Any one or two numbers of the
+    /// repository's scene files replaced by zero, a sign, an extreme, a non-finite value or another type
+    /// give a typed error, or a scene whose steps and solve are finite.
+    #[test]
+    fn no_number_written_in_a_scene_file_panics(
+        which in 0usize..SCENE_FILES.len(),
+        picks in proptest::collection::vec((0usize..10_000, 0usize..REPLACEMENTS.len()), 1..3),
+    ) {
+        let text = mutated(SCENE_FILES[which], &picks);
+        let outcome = std::panic::catch_unwind(|| run_file(&text));
+        match outcome {
+            Ok(Ok(())) => {}
+            Ok(Err(problem)) => proptest::prop_assert!(false, "{problem}\n{text}"),
+            Err(_) => proptest::prop_assert!(false, "a panic on\n{text}"),
+        }
+    }
+}
+
+#[test]
+fn the_mutation_replaces_numbers_and_leaves_comments() {
+    let text = "# 1.0 in a comment\nh = 0.05\nx0 = { \"a.angle\" = -0.5 }";
+    assert_eq!(
+        mutated(text, &[(0, 7)]),
+        "# 1.0 in a comment\nh = nan\nx0 = { \"a.angle\" = -0.5 }"
+    );
+    assert_eq!(
+        mutated(text, &[(1, 2)]),
+        "# 1.0 in a comment\nh = 0.05\nx0 = { \"a.angle\" = -1.0 }"
+    );
+}
