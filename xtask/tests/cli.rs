@@ -868,3 +868,35 @@ fn optimize_continues_a_crawling_solve_under_the_other_regularisation() {
     assert!(!optimize_ok(&["--quiet"], &finger).contains("continued under"));
     std::fs::remove_dir_all(&finger_dir).ok();
 }
+
+/// Issue 28: `train` says which angles its policy compares modulo a turn (the slider's block, a half
+/// turn), and says nothing of the kind where there are none (the finger's ellipse is its task's own
+/// periodic coordinate).
+#[test]
+fn train_names_the_angles_its_policy_compares_modulo_a_turn() {
+    let dir = std::env::temp_dir().join(format!("xtask-turns-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let slider = concat!(env!("CARGO_MANIFEST_DIR"), "/../scenes/slider_push.toml");
+    let line = "its policy compares block.angle modulo a half turn";
+    for (args, expected) in [
+        (vec!["--scene", slider, "--task", "push"], true),
+        (vec![], false),
+    ] {
+        let out = xtask()
+            .arg("train")
+            .args(&args)
+            .args(["--trajectories", "6", "--growth", "0", "--out"])
+            .arg(dir.join("turns.lib"))
+            .output()
+            .unwrap();
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert_eq!(stdout.contains(line), expected, "{stdout}");
+        assert_eq!(stdout.contains("its policy compares"), expected, "{stdout}");
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -195,10 +195,34 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             settings.horizon, library.settings.horizon
         );
     }
+    if let Some(line) = turns_line(&library) {
+        println!("{line}");
+    }
     library.save(&args.out)?;
     println!("wrote {}", args.out.display());
     println!("{}", unkicked_verdict(&library)?);
     Ok(())
+}
+
+/// The angles the library's policy compares modulo a turn, in a line, where there are any
+/// ([`task::Task::turn_symmetries`]).
+fn turns_line(library: &Library) -> Option<String> {
+    let names = library.scene().coordinate_names();
+    let turns: Vec<String> = library
+        .task()
+        .turn_symmetries(library.scene())
+        .into_iter()
+        .map(|(c, turn)| match turn > 0.0 {
+            true => format!("{} modulo a half turn", names[c]),
+            false => format!("{} not at all (a disc)", names[c]),
+        })
+        .collect();
+    (!turns.is_empty()).then(|| {
+        format!(
+            "its policy compares {}: the task does not see that angle and the body is the same so turned (docs/tasks.md, \"Half turns\")",
+            turns.join(", ")
+        )
+    })
 }
 
 /// Simulated seconds of the check `train` reports: `evaluate`'s unkicked run of `examples` (and the
