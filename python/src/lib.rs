@@ -784,6 +784,20 @@ impl Library {
         self.lib.task().name.clone()
     }
 
+    /// The angles its policy compares modulo a turn, `{name: turn}` (pi for a half turn, 0.0 for a disc's
+    /// angle, which does not count at all): those of bodies a turn maps onto themselves that its task
+    /// does not see (docs/tasks.md, "Half turns"); empty where there are none.
+    #[getter]
+    fn turns(&self) -> std::collections::BTreeMap<String, f64> {
+        let names = self.lib.scene().coordinate_names();
+        self.lib
+            .task()
+            .turn_symmetries(self.lib.scene())
+            .into_iter()
+            .map(|(c, turn)| (names[c].clone(), turn))
+            .collect()
+    }
+
     /// The settings it was built with, as a dict.
     #[getter]
     fn settings<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {

@@ -232,6 +232,21 @@ def test_a_target_task_library_with_the_defaults_and_a_small_budget(root):
     # Issue 28: the defaults stopped a target task on growth = 12 and a small budget on trunk = 100.
     lib = slcp.Library.train(root / "scenes" / "two_fingers.toml", task="turn", trajectories=6)
     assert lib.task == "turn"
+    # The ellipse's angle is the task's target: its policy compares no angle modulo a turn.
+    assert lib.turns == {}
+
+
+def test_a_library_names_the_angles_its_policy_compares_modulo_a_turn(root, tmp_path):
+    # Issue 28: the slider's block is the same turned over, and its task does not look at its angle.
+    lib = slcp.Library.train(root / "scenes" / "slider_push.toml", trajectories=6, growth=0)
+    assert lib.turns == {"block.angle": math.pi}
+    x = np.array(lib.x0)
+    turned = x.copy()
+    turned[3] += math.pi  # block.angle: pusher.position, block.x, block.y, block.angle, then velocities
+    assert np.allclose(lib.policy(x), lib.policy(turned), rtol=1e-9, atol=1e-12)
+    path = tmp_path / "slider.lib"
+    lib.save(path)
+    assert slcp.Library.load(path).turns == {"block.angle": math.pi}
 
 
 def test_long_work_releases_the_gil():
