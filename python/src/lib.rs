@@ -791,8 +791,7 @@ impl Library {
     fn turns(&self) -> std::collections::BTreeMap<String, f64> {
         let names = self.lib.scene().coordinate_names();
         self.lib
-            .task()
-            .turn_symmetries(self.lib.scene())
+            .turn_symmetries()
             .into_iter()
             .map(|(c, turn)| (names[c].clone(), turn))
             .collect()

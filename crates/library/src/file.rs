@@ -192,6 +192,12 @@ impl Library {
         &self.task.0.cost
     }
 
+    /// The angles its policy compares modulo a turn, each with the turn (its task's
+    /// [`task::Task::turn_symmetries`] in its scene).
+    pub fn turn_symmetries(&self) -> Vec<(usize, f64)> {
+        self.task().turn_symmetries(&self.scene)
+    }
+
     /// The periodic coordinate its policy compares states modulo, and the direction its task rewards.
     pub fn progress(&self) -> Result<Progress, LibraryError> {
         Ok(Progress::of_task(self.task())?)
@@ -202,13 +208,12 @@ impl Library {
     /// step ([`Policy::with_time_step`]: another world's step is the caller's to set).
     pub fn policy(&self) -> Result<Policy, LibraryError> {
         let s = &self.scene;
-        let turns = self.task().turn_symmetries(s);
         Policy::for_task(
             &self.entries,
             s.n_state(),
             s.n_controls,
             &self.progress()?,
-            &turns,
+            &self.turn_symmetries(),
         )?
         .with_neighbours(self.settings.neighbours)?
         .with_limits(self.task().control_limits.clone())?

@@ -151,12 +151,36 @@ struct Symmetric {
 impl Symmetric {
     /// The angle `a` as the stored states have it: within half its turn of the centre, or the centre.
     fn canonical(&self, a: f64) -> f64 {
+        self.centre + self.offset(a - self.centre)
+    }
+
+    /// A difference `d` of the angle as the same state sees it: within half its turn, or zero.
+    fn offset(&self, d: f64) -> f64 {
         if self.turn > 0.0 {
-            self.centre + wrap(a - self.centre, self.turn)
+            wrap(d, self.turn)
         } else {
-            self.centre
+            0.0
         }
     }
+}
+
+/// `x` with each of `symmetric`'s entries taken as the stored states have it.
+fn canonicalise(symmetric: &[Symmetric], x: &mut [f64]) {
+    for t in symmetric {
+        x[t.entry] = t.canonical(x[t.entry]);
+    }
+}
+
+/// `Err` unless a period is finite and positive.
+fn check_period(period: f64) -> Result<(), LibraryError> {
+    if period.is_finite() && period > 0.0 {
+        return Ok(());
+    }
+    Err(LibraryError::Setting {
+        name: "period",
+        value: period,
+        expected: "finite and positive",
+    })
 }
 
 /// Whole periods `p` in `x` (rounded down; 0 without a period, `p = 0`).
@@ -217,14 +241,10 @@ impl Policy {
             )));
         }
         let (free, period) = match progress.period {
-            Some(p) if !(p.is_finite() && p > 0.0) => {
-                return Err(LibraryError::Setting {
-                    name: "period",
-                    value: p,
-                    expected: "finite and positive",
-                });
+            Some(p) => {
+                check_period(p)?;
+                (progress.coordinate, Some(p))
             }
-            Some(p) => (progress.coordinate, Some(p)),
             None => (0, None),
         };
         Policy::build(entries, n_state, m, free, period, turns)
@@ -239,13 +259,7 @@ impl Policy {
         free: usize,
         period: f64,
     ) -> Result<Self, LibraryError> {
-        if !(period.is_finite() && period > 0.0) {
-            return Err(LibraryError::Setting {
-                name: "period",
-                value: period,
-                expected: "finite and positive",
-            });
-        }
+        check_period(period)?;
         Policy::build(entries, n_state, m, free, Some(period), &[])
     }
 
@@ -310,14 +324,14 @@ impl Policy {
                 }
             })
             .collect();
-        let canonical = |x: &[f64]| -> Vec<f64> {
-            let mut y = x.to_vec();
-            for t in &symmetric {
-                y[t.entry] = t.canonical(y[t.entry]);
-            }
-            y
-        };
-        let states: Vec<Vec<f64>> = entries.iter().map(|e| canonical(&e.x)).collect();
+        let states: Vec<Vec<f64>> = entries
+            .iter()
+            .map(|e| {
+                let mut x = e.x.clone();
+                canonicalise(&symmetric, &mut x);
+                x
+            })
+            .collect();
         // The free angle's circular mean (period pi: angles doubled), then every state's free angle
         // unwrapped next to it.
         let (s, c) = states.iter().fold((0.0, 0.0), |(s, c), x| {
@@ -616,11 +630,7 @@ impl Policy {
         }
         d[self.free] -= turns * self.period;
         for t in &self.symmetric {
-            d[t.entry] = if t.turn > 0.0 {
-                wrap(d[t.entry], t.turn)
-            } else {
-                0.0
-            };
+            d[t.entry] = t.offset(d[t.entry]);
         }
     }
 
@@ -631,9 +641,7 @@ impl Policy {
             return std::borrow::Cow::Borrowed(x);
         }
         let mut y = x.to_vec();
-        for t in &self.symmetric {
-            y[t.entry] = t.canonical(y[t.entry]);
-        }
+        canonicalise(&self.symmetric, &mut y);
         std::borrow::Cow::Owned(y)
     }
 

@@ -478,7 +478,6 @@ impl Task {
     /// (`library::Policy::for_task`).
     pub fn turn_symmetries(&self, scene: &Scene) -> Vec<(usize, f64)> {
         use std::f64::consts::PI;
-        let n = scene.n_dof();
         let round = scene.round_coordinates();
         let invariant = |c: usize, period: Option<f64>| {
             !round.contains(&c)
@@ -499,7 +498,7 @@ impl Task {
         scene
             .half_turn_coordinates()
             .into_iter()
-            .filter(|&c| c < n && !seen(c))
+            .filter(|&c| !seen(c))
             .map(|c| (c, if round.contains(&c) { 0.0 } else { PI }))
             .collect()
     }

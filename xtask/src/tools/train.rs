@@ -209,8 +209,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
 fn turns_line(library: &Library) -> Option<String> {
     let names = library.scene().coordinate_names();
     let turns: Vec<String> = library
-        .task()
-        .turn_symmetries(library.scene())
+        .turn_symmetries()
         .into_iter()
         .map(|(c, turn)| match turn > 0.0 {
             true => format!("{} modulo a half turn", names[c]),
