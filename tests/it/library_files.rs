@@ -405,6 +405,63 @@ proptest::proptest! {
     }
 }
 
+/// A stored controller of a state of `x.len()` entries with one control.
+fn sized_entry(x: Vec<f64>) -> library::Entry {
+    let n = x.len();
+    library::Entry {
+        u: vec![x[0]],
+        gain: vec![0.1; n],
+        x,
+        passes: 1,
+        converged: true,
+        cost: 0.0,
+        value: library::LocalValue {
+            cost_to_go: 0.0,
+            gradient: vec![0.0; n],
+            hessian: vec![0.0; n * n],
+            per_period: 0.0,
+        },
+        reach: None,
+        time_step: 0.05,
+    }
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(48))]
+    #[test]
+    fn the_index_ranks_the_nearest_states_as_a_scan_does_at_every_state_size(
+        half in 1usize..8,
+        states in proptest::collection::vec(proptest::collection::vec(-3.0f64..3.0, 14), 1..80),
+        queries in proptest::collection::vec(proptest::collection::vec(-4.0f64..4.0, 14), 8),
+        count in 1usize..12,
+    ) {
+        // States of 2 to 14 entries: a kd-tree up to 12, a scan beyond (pushing and two fingers have
+        // 10); the free angle at entry 1, periodic.
+        let n = 2 * half;
+        let entries: Vec<library::Entry> =
+            states.iter().map(|x| sized_entry(x[..n].to_vec())).collect();
+        let index = library::Policy::new(&entries, n, 1, 1).unwrap();
+        let scan = index.clone().scanning();
+        for q in &queries {
+            let x = &q[..n];
+            let (a, b) = (index.nearest_n(x, count).unwrap(), scan.nearest_n(x, count).unwrap());
+            proptest::prop_assert_eq!(a.len(), count.min(3 * entries.len()));
+            proptest::prop_assert_eq!(a.len(), b.len());
+            // The same distances in the same order (equal distances may list their states either way).
+            let mut last = 0.0;
+            for (&(i, ti), &(j, tj)) in a.iter().zip(&b) {
+                let (da, db) = (
+                    index.distance(x, i, ti).unwrap(),
+                    scan.distance(x, j, tj).unwrap(),
+                );
+                proptest::prop_assert!((da - db).abs() <= 1e-9 * (1.0 + db), "{da} vs {db}");
+                proptest::prop_assert!(db >= last - 1e-9 * (1.0 + db), "not nearest first");
+                last = db;
+            }
+        }
+    }
+}
+
 proptest::proptest! {
     #![proptest_config(proptest::prelude::ProptestConfig::with_cases(64))]
     #[test]

@@ -17,6 +17,7 @@ use crate::error::LibraryError;
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use std::f64::consts::PI;
 use std::num::NonZero;
+use std::sync::OnceLock;
 
 /// How far past the range the stored controls span ([`Policy::envelope`]) a law's control may go, as a
 /// fraction of that range on either side, before [`Policy::control`] saturates it: a law near the
@@ -35,6 +36,8 @@ enum Index {
     K4(ImmutableKdTree<f64, 4>),
     K6(ImmutableKdTree<f64, 6>),
     K8(ImmutableKdTree<f64, 8>),
+    K10(ImmutableKdTree<f64, 10>),
+    K12(ImmutableKdTree<f64, 12>),
     /// Row-major `3 count x n`.
     Scan(Vec<f64>),
 }
@@ -66,6 +69,8 @@ impl Index {
             4 => Index::K4(tree(&points)),
             6 => Index::K6(tree(&points)),
             8 => Index::K8(tree(&points)),
+            10 => Index::K10(tree(&points)),
+            12 => Index::K12(tree(&points)),
             _ => Index::Scan(points),
         }
     }
@@ -77,21 +82,25 @@ impl Index {
             Index::K4(t) => query(t, y, count),
             Index::K6(t) => query(t, y, count),
             Index::K8(t) => query(t, y, count),
+            Index::K10(t) => query(t, y, count),
+            Index::K12(t) => query(t, y, count),
             Index::Scan(points) => {
                 let n = y.len();
-                let mut d: Vec<(f64, usize)> = points
-                    .chunks_exact(n)
-                    .map(|w| y.iter().zip(w).map(|(a, b)| (a - b) * (a - b)).sum())
-                    .zip(0..)
-                    .collect();
-                let count = count.min(d.len());
-                if count < d.len() {
-                    d.select_nth_unstable_by(count - 1, |a, b| a.0.total_cmp(&b.0));
-                    d.truncate(count);
+                // The `count` smallest (distance, item) pairs so far, in order: nearest first, equal
+                // distances by item, as a scan in order finds them. No vector of every distance.
+                let count = count.min(points.len() / n.max(1));
+                let mut best: Vec<(f64, usize)> = Vec::with_capacity(count + 1);
+                for (item, w) in points.chunks_exact(n).enumerate() {
+                    let d: f64 = y.iter().zip(w).map(|(a, b)| (a - b) * (a - b)).sum();
+                    let worse = |b: &(f64, usize)| b.0.total_cmp(&d).then(b.1.cmp(&item)).is_gt();
+                    if best.len() == count && best.last().is_none_or(|b| !worse(b)) {
+                        continue;
+                    }
+                    let at = best.partition_point(|b| !worse(b));
+                    best.insert(at, (d, item));
+                    best.truncate(count);
                 }
-                // Nearest first; equal distances by item, as a scan in order would find them.
-                d.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-                d.into_iter().map(|(_, item)| item).collect()
+                best.into_iter().map(|(_, item)| item).collect()
             }
         }
     }
@@ -120,7 +129,11 @@ pub struct Policy {
     states: Vec<Vec<f64>>,
     controls: Vec<Vec<f64>>,
     gains: Vec<Vec<f64>>,
+    /// The stored value models, as stored ...
     values: Vec<LocalValue>,
+    /// ... and convexified ([`LocalValue::convexified`], an eigendecomposition each), when first
+    /// ranked: a closed loop ranks a few of a library's thousands.
+    convex: Vec<OnceLock<LocalValue>>,
     /// Stored controllers compared by their value models (1: the nearest alone, eq. 20).
     neighbours: usize,
     /// Bounds the controls are saturated to (the task's control limits), if any.
@@ -397,7 +410,8 @@ impl Policy {
             states,
             controls: entries.iter().map(|e| e.u.clone()).collect(),
             gains: entries.iter().map(|e| e.gain.clone()).collect(),
-            values: entries.iter().map(|e| e.value.convexified()).collect(),
+            values: entries.iter().map(|e| e.value.clone()).collect(),
+            convex: entries.iter().map(|_| OnceLock::new()).collect(),
             neighbours: 1,
             limits: None,
             reach: entries
@@ -675,7 +689,10 @@ impl Policy {
             let mut best_within = (f64::INFINITY, None);
             for &(i, turns) in &candidates {
                 self.offset(x, i, turns, &mut d);
-                let v = self.values[i].predict(&d, turns) + self.extrapolation_charge(i, &d);
+                let v = self.convex[i]
+                    .get_or_init(|| self.values[i].convexified())
+                    .predict(&d, turns)
+                    + self.extrapolation_charge(i, &d);
                 if v < best.0 {
                     best = (v, (i, turns));
                 }
