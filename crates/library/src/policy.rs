@@ -89,11 +89,18 @@ impl Index {
                 // The `count` smallest (distance, item) pairs so far, in order: nearest first, equal
                 // distances by item, as a scan in order finds them. No vector of every distance.
                 let count = count.min(points.len() / n.max(1));
+                if count == 0 {
+                    return Vec::new();
+                }
                 let mut best: Vec<(f64, usize)> = Vec::with_capacity(count + 1);
                 for (item, w) in points.chunks_exact(n).enumerate() {
                     let d: f64 = y.iter().zip(w).map(|(a, b)| (a - b) * (a - b)).sum();
+                    // Farther than the farthest kept, the common case, in one comparison.
+                    if best.len() == count && d > best[count - 1].0 {
+                        continue;
+                    }
                     let worse = |b: &(f64, usize)| b.0.total_cmp(&d).then(b.1.cmp(&item)).is_gt();
-                    if best.len() == count && best.last().is_none_or(|b| !worse(b)) {
+                    if best.len() == count && !worse(&best[count - 1]) {
                         continue;
                     }
                     let at = best.partition_point(|b| !worse(b));
