@@ -701,13 +701,11 @@ fn scenes_with_half_turns() -> Vec<(&'static str, Scene)> {
     .collect()
 }
 
-/// scenes/slider_push.toml with a round block (a puck of radius 0.25).
+/// The slider with a round block ([`crate::support::puck_text`]).
 fn puck() -> Scene {
-    let slider = include_str!("../../scenes/slider_push.toml");
-    let ellipse = "semi_axes = [0.4, 0.25]\nparent = \"world\"";
-    assert!(slider.contains(ellipse), "the slider's block");
-    let text = slider.replace(ellipse, "semi_axes = [0.25, 0.25]\nparent = \"world\"");
-    task::ProblemFile::from_toml_str(&text).unwrap().scene
+    task::ProblemFile::from_toml_str(&crate::support::puck_text())
+        .unwrap()
+        .scene
 }
 
 #[test]
@@ -789,8 +787,7 @@ proptest! {
         let mut sim = Simulator::new(scene.clone(), StepSettings { model, ..StepSettings::default() }).unwrap();
         // A state near the task's start: small angles and offsets, any velocities; a block resting on
         // the ground is lifted to its half height.
-        let file_x0 = vec![0.0; 2 * n];
-        let mut x: Vec<f64> = file_x0.iter().zip(seed.iter().cycle()).map(|(a, s)| a + 0.3 * s).collect();
+        let mut x: Vec<f64> = seed.iter().cycle().take(2 * n).map(|s| 0.3 * s).collect();
         for (i, v) in x[n..].iter_mut().enumerate() {
             *v = 2.0 * seed[(i + 5) % seed.len()];
         }

@@ -342,22 +342,16 @@ fn branched_libraries_start_on_the_trunk_and_do_not_depend_on_the_threads() {
 }
 
 fn entry(x: Vec<f64>) -> library::Entry {
-    let angle = x[2];
     library::Entry {
         u: vec![x[0], -x[1]],
         gain: (0..12).map(|i| 0.1 * i as f64).collect(),
-        x,
-        passes: 1,
-        converged: true,
-        cost: 0.0,
         value: library::LocalValue {
-            cost_to_go: -angle,
+            cost_to_go: -x[2],
             gradient: vec![0.0, 0.0, -1.0, 0.0, 0.0, 0.0],
             hessian: vec![0.0; 36],
             per_period: -std::f64::consts::PI,
         },
-        reach: None,
-        time_step: 0.05,
+        ..sized_entry(x)
     }
 }
 
@@ -405,7 +399,8 @@ proptest::proptest! {
     }
 }
 
-/// A stored controller of a state of `x.len()` entries with one control.
+/// A stored controller of a state of `x.len()` entries with one control, no cost and small gains (the
+/// tests' other controllers change what they need).
 fn sized_entry(x: Vec<f64>) -> library::Entry {
     let n = x.len();
     library::Entry {
@@ -717,9 +712,6 @@ fn pusher_entry(x: Vec<f64>) -> library::Entry {
     library::Entry {
         u: vec![x[0] - 2.0 * x[1]],
         gain: (0..8).map(|i| 0.3 * i as f64 - 1.0).collect(),
-        passes: 1,
-        converged: true,
-        cost: 0.0,
         value: library::LocalValue {
             cost_to_go: x[1] * x[1],
             gradient: (0..8).map(|i| 0.1 * i as f64).collect(),
@@ -728,9 +720,7 @@ fn pusher_entry(x: Vec<f64>) -> library::Entry {
                 .collect(),
             per_period: 0.0,
         },
-        x,
-        reach: None,
-        time_step: 0.05,
+        ..sized_entry(x)
     }
 }
 

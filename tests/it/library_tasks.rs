@@ -1679,9 +1679,7 @@ fn a_task_compares_states_modulo_a_turn_only_where_it_does_not_see_the_angle() {
     assert_eq!(turns(&with_final(slider, spin_damped), "push"), block(PI));
     assert!(turns(&with_final(slider, upright), "push").is_empty());
     // A round block (a puck) is the same turned by any angle: its angle does not count at all.
-    let ellipse = "semi_axes = [0.4, 0.25]\nparent = \"world\"";
-    assert!(slider.contains(ellipse), "the slider's block");
-    let puck = slider.replace(ellipse, "semi_axes = [0.25, 0.25]\nparent = \"world\"");
+    let puck = crate::support::puck_text();
     assert_eq!(turns(&puck, "push"), block(0.0));
     assert_eq!(turns(&with_final(&puck, spin_damped), "push"), block(0.0));
     assert!(turns(&with_final(&puck, upright), "push").is_empty());

@@ -76,3 +76,11 @@ pub fn energy(scene: &dynamics::Scene, x: &[f64]) -> f64 {
         .sum();
     kinetic + potential
 }
+
+/// scenes/slider_push.toml with a round block (a puck of radius 0.25): a body any turn maps onto itself.
+pub fn puck_text() -> String {
+    let slider = include_str!("../../scenes/slider_push.toml");
+    let ellipse = "semi_axes = [0.4, 0.25]\nparent = \"world\"";
+    assert!(slider.contains(ellipse), "the slider's block");
+    slider.replace(ellipse, "semi_axes = [0.25, 0.25]\nparent = \"world\"")
+}

@@ -86,8 +86,9 @@ impl Index {
             Index::K12(t) => query(t, y, count),
             Index::Scan(points) => {
                 let n = y.len();
-                // The `count` smallest (distance, item) pairs so far, in order: nearest first, equal
-                // distances by item, as a scan in order finds them. No vector of every distance.
+                // The `count` smallest (distance, item) pairs so far, nearest first. Items come in
+                // order, so a new one goes after the equal distances kept: equal distances by item, as a
+                // scan in order finds them. No vector of every distance.
                 let count = count.min(points.len() / n.max(1));
                 if count == 0 {
                     return Vec::new();
@@ -95,15 +96,11 @@ impl Index {
                 let mut best: Vec<(f64, usize)> = Vec::with_capacity(count + 1);
                 for (item, w) in points.chunks_exact(n).enumerate() {
                     let d: f64 = y.iter().zip(w).map(|(a, b)| (a - b) * (a - b)).sum();
-                    // Farther than the farthest kept, the common case, in one comparison.
-                    if best.len() == count && d > best[count - 1].0 {
+                    // No nearer than the farthest kept, the common case, in one comparison.
+                    if best.len() == count && best[count - 1].0.total_cmp(&d).is_le() {
                         continue;
                     }
-                    let worse = |b: &(f64, usize)| b.0.total_cmp(&d).then(b.1.cmp(&item)).is_gt();
-                    if best.len() == count && !worse(&best[count - 1]) {
-                        continue;
-                    }
-                    let at = best.partition_point(|b| !worse(b));
+                    let at = best.partition_point(|b| b.0.total_cmp(&d).is_le());
                     best.insert(at, (d, item));
                     best.truncate(count);
                 }

@@ -211,9 +211,13 @@ fn turns_line(library: &Library) -> Option<String> {
     let turns: Vec<String> = library
         .turn_symmetries()
         .into_iter()
-        .map(|(c, turn)| match turn > 0.0 {
-            true => format!("{} modulo a half turn", names[c]),
-            false => format!("{} not at all (a disc)", names[c]),
+        .map(|(c, turn)| {
+            let how = if turn > 0.0 {
+                "modulo a half turn"
+            } else {
+                "not at all (a disc)"
+            };
+            format!("{} {how}", names[c])
         })
         .collect();
     (!turns.is_empty()).then(|| {
