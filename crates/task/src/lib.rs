@@ -24,8 +24,9 @@ pub use progress::Progress;
 pub use reach::{
     CONTINUATION_DOUBLINGS, ContactOutcome, ContactProblem, ContactSearch, Continuation,
     EXPLORE_AMPLITUDES, EXPLORE_STARTS, Explored, Finished, OUT_OF_REACH_SLACK,
-    OtherRegularisation, OutOfReach, REACH_PULL, REACH_PULL_PASSES, REGULARISATION_MARGIN, Reach,
-    ReachCost, STALL_ADVANCE, Stages, contact_felt, needed_pairs, noise_scale, plan_stalls,
+    OtherRegularisation, OutOfReach, Pull, REACH_PULL, REACH_PULL_PASSES, REACH_PULL_TOLERANCE,
+    REGULARISATION_MARGIN, Reach, ReachCost, STALL_ADVANCE, Stages, contact_felt, needed_pairs,
+    noise_scale, plan_stalls,
 };
 pub use scene_dynamics::{SceneDynamics, StepError};
 

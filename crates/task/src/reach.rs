@@ -253,9 +253,23 @@ pub struct Reach {
     pub solution: Solution,
     /// The pair whose pull led to the kept solution, if one did.
     pub pair: Option<usize>,
-    /// Each pair tried: `(pair, cost of the pulled solve, cost of the task's solve after it, felt)`; no
-    /// task solve where the pulled one felt no contact.
-    pub tries: Vec<(usize, f64, Option<f64>, bool)>,
+    /// Each pair tried, in order.
+    pub tries: Vec<Pull>,
+}
+
+/// One pair's pull in [`ContactProblem::reach_for_contact`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Pull {
+    /// The contact pair pulled together.
+    pub pair: usize,
+    /// The pulled solve's cost (the task's plus the pull).
+    pub cost: f64,
+    /// The pulled solve's passes (at most [`REACH_PULL_PASSES`]).
+    pub passes: usize,
+    /// The cost of the task's own solve from the pulled one; none where the pulled solve felt no contact.
+    pub task_cost: Option<f64>,
+    /// Whether that task solve feels the contact and costs a percent less than the start.
+    pub felt: bool,
 }
 
 /// A contact too far to reach from a start ([`ContactProblem::out_of_reach`]): over the start's rollout,
@@ -283,6 +297,19 @@ pub const OUT_OF_REACH_SLACK: f64 = 1.0;
 
 /// Passes at most of [`ContactProblem::reach_for_contact`]'s pulled solve: it only has to bring the pair together.
 pub const REACH_PULL_PASSES: usize = 40;
+
+/// The pulled solve's stopping tolerance on the relative cost change (`DdpSettings::tol_cost`, or the
+/// optimiser's own where that is looser). The pull is a scaffold for the task's solve, a sum of squared
+/// distances, and is solved by Gauss-Newton: full DDP's second-order terms, weighted by the pull's large
+/// value gradient, are indefinite, and in pushing.toml's seed-4 build 70 of its 136 pulls ran out their
+/// 40 passes under regularisation 1e4 to 1e7, crawling (2 felt contact; 14.6 s of a 55.6 s build).
+/// Gauss-Newton's regularisation falls to zero in two passes, and its pulls bring the pair together
+/// where full DDP's did not (the door of `optimize_tells_a_contact_that_does_not_pay_from_one_out_of_reach`:
+/// a pulled cost of 48 against 270), but take the whole budget at the library's tolerance 1e-5 (36 s of
+/// pulls in that build); at 1e-3 they take 17 passes on average (13.7 s), 6 of 145 feeling contact
+/// (issue 28). Full DDP at 1e-3 stops after one crawling pass (a spurious convergence), so both go
+/// together.
+pub const REACH_PULL_TOLERANCE: f64 = 1e-3;
 
 /// How strongly [`ContactProblem::reach_for_contact`] pulls, relative to the task: the pull at the start, summed over
 /// the horizon, is this many times the start's cost (plus one).
@@ -420,8 +447,8 @@ impl ContactSearch {
         }
         let touched: Vec<usize> = tries
             .iter()
-            .filter(|t| t.2.is_some())
-            .map(|t| t.0)
+            .filter(|t| t.task_cost.is_some())
+            .map(|t| t.pair)
             .collect();
         if !touched.is_empty() {
             return ContactOutcome::TouchedNotKept(touched);
@@ -743,7 +770,8 @@ impl ContactProblem<'_> {
 
     /// A solve from `x0` (the start `start`, which felt no contact) that reaches the contact its task needs:
     /// for each needed pair apart at `x0` ([`needed_pairs`]), nearest first, a solve of the task's cost plus
-    /// a pull of the pair together ([`ReachCost`], at most [`REACH_PULL_PASSES`] passes), warm-started from
+    /// a pull of the pair together ([`ReachCost`], by Gauss-Newton, at most [`REACH_PULL_PASSES`] passes,
+    /// stopping at [`REACH_PULL_TOLERANCE`]), warm-started from
     /// `start`, then, if the pulled solve feels the contact, a solve of the task's own cost warm-started
     /// from it. The first task solve that feels the contact under `settings` and costs a percent less than
     /// `start` replaces it; otherwise `start` is kept. A pull that did not bring the pair into contact
@@ -765,6 +793,8 @@ impl ContactProblem<'_> {
         apart.sort_by(|a, b| a.0.total_cmp(&b.0));
         let pulling = Ddp::new(DdpSettings {
             max_iterations: self.ddp.settings().max_iterations.min(REACH_PULL_PASSES),
+            tol_cost: self.ddp.settings().tol_cost.max(REACH_PULL_TOLERANCE),
+            method: ddp::Method::GaussNewton,
             ..self.ddp.settings().clone()
         })
         .map_err(|source| TaskError::Optimiser { solve: 0, source })?;
@@ -773,12 +803,24 @@ impl ContactProblem<'_> {
             let pull = ReachCost::new(self.cost, self.scene, pair, weight)?;
             let pulled = self.solve(&pulling, *self.settings, &pull, &start.controls)?;
             if !self.felt(*self.settings, &pulled.controls)? {
-                tries.push((pair, pulled.cost, None, false));
+                tries.push(Pull {
+                    pair,
+                    cost: pulled.cost,
+                    passes: pulled.iterations.len(),
+                    task_cost: None,
+                    felt: false,
+                });
                 continue;
             }
             let sol = self.solve(self.ddp, *self.settings, self.cost, &pulled.controls)?;
             let felt = self.felt(*self.settings, &sol.controls)? && lowers(untouched, sol.cost);
-            tries.push((pair, pulled.cost, Some(sol.cost), felt));
+            tries.push(Pull {
+                pair,
+                cost: pulled.cost,
+                passes: pulled.iterations.len(),
+                task_cost: Some(sol.cost),
+                felt,
+            });
             if felt {
                 return Ok(Reach {
                     solution: sol,

@@ -153,6 +153,8 @@ pub(crate) fn stamp() -> String {
         // Target tasks' contact searches skip a contact plainly too far (the finger's never search in
         // growth, so the finger's own stamps leave it out).
         "search": task::OUT_OF_REACH_SLACK,
+        // A pull is a Gauss-Newton scaffold that stops when its passes stop paying.
+        "pull": ["gauss-newton", task::REACH_PULL_PASSES, task::REACH_PULL_TOLERANCE],
         // A target task's final-check branches for a world of another time step are optimised at that
         // step, and the policy prefers the controllers of the step it runs at (the finger's growth,
         // a progress task's, has none: its stamps leave it out).

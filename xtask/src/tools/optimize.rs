@@ -262,24 +262,26 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             let mut note = None;
             if let Some(search) = finished.search.as_ref().filter(|_| !felt) {
                 let reach = search.reach.as_ref();
-                for (pair, pulled, cost, felt) in reach.map_or(&[][..], |r| &r.tries[..]) {
-                    let name = pair_name(&file.scene, *pair);
-                    match cost {
+                for pull in reach.map_or(&[][..], |r| &r.tries[..]) {
+                    let name = pair_name(&file.scene, pull.pair);
+                    match pull.task_cost {
                         Some(cost) => println!(
-                            "reach: {name} pulled together (cost {}), then the task's own solve: \
-                             cost {}, contact {}",
-                            Num(*pulled, 6),
-                            Num(*cost, 6),
-                            if *felt {
+                            "reach: {name} pulled together ({} passes, cost {}), then the task's own \
+                             solve: cost {}, contact {}",
+                            pull.passes,
+                            Num(pull.cost, 6),
+                            Num(cost, 6),
+                            if pull.felt {
                                 "felt"
                             } else {
                                 "not felt, or no cheaper"
                             }
                         ),
                         None => println!(
-                            "reach: {name} pulled (cost {}), but not into contact: no task solve \
-                             from there",
-                            Num(*pulled, 6)
+                            "reach: {name} pulled ({} passes, cost {}), but not into contact: no task \
+                             solve from there",
+                            pull.passes,
+                            Num(pull.cost, 6)
                         ),
                     }
                 }
