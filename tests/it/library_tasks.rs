@@ -1457,7 +1457,17 @@ fn growth_sharpening_shapes_a_target_tasks_branches_and_leaves_a_progress_task_a
         sharp.entries.len() > trunk && own.entries.len() > trunk,
         "no growth"
     );
-    assert_eq!(sharp.entries[..trunk], own.entries[..trunk]);
+    // The trunk is the same; growth may end its controllers' reach short of a state it failed from.
+    let solved = |e: &library::Entry| library::Entry {
+        reach: None,
+        ..e.clone()
+    };
+    assert!(
+        sharp.entries[..trunk]
+            .iter()
+            .zip(&own.entries[..trunk])
+            .all(|(a, b)| solved(a) == solved(b))
+    );
     assert_ne!(sharp.entries, own.entries);
     // The finger's spin: the same library either way.
     let finger = ProblemFile::builtin();
