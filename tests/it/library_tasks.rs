@@ -1029,22 +1029,30 @@ fn a_contact_out_of_reach_is_reached_by_pulling_the_pair_together() {
 /// build, 113 of 145 pulls ran out their passes so.
 #[test]
 fn a_pull_stops_when_its_passes_stop_paying() {
-    let file = ProblemFile::from_toml_str(include_str!("../../scenes/pushing.toml")).unwrap();
-    let task = file.task(Some("push")).unwrap();
-    let (ddp, step) = search_setup(&file, &task);
+    let (ddp, _, r) = pull_beyond_reach();
     assert!(ddp.settings().tol_cost < task::REACH_PULL_TOLERANCE);
-    let names = file.scene.coordinate_names();
-    let block_x = names.iter().position(|c| c == "block.x").unwrap();
-    let mut x0 = task.x0.clone();
-    x0[block_x] = 1.0;
-    let start = solve_from(&file, &task, step, &ddp, &x0);
-    let r = reach_from(&file, &task, (&ddp, &step), &x0, &start);
     assert_eq!(r.tries.len(), 1, "{:?}", r.tries);
     let pull = r.tries[0];
     assert!(
         pull.passes > 1 && pull.passes < task::REACH_PULL_PASSES * 3 / 4,
         "{pull:?}"
     );
+}
+
+/// Pushing's block at rest 1 along the ground, beyond the finger's reach (it ends at 0.35): the search
+/// optimiser, the task's solve from there (checked to feel no contact) and the pull from that solve.
+fn pull_beyond_reach() -> (ddp::Ddp, ddp::Solution, task::Reach) {
+    let file = ProblemFile::from_toml_str(include_str!("../../scenes/pushing.toml")).unwrap();
+    let task = file.task(Some("push")).unwrap();
+    let (ddp, step) = search_setup(&file, &task);
+    let names = file.scene.coordinate_names();
+    let block_x = names.iter().position(|c| c == "block.x").unwrap();
+    let mut x0 = task.x0.clone();
+    x0[block_x] = 1.0;
+    let start = solve_from(&file, &task, step, &ddp, &x0);
+    assert!(!felt(&file, &task, step, &x0, &start));
+    let r = reach_from(&file, &task, (&ddp, &step), &x0, &start);
+    (ddp, start, r)
 }
 
 /// Reaching keeps the start where touching does not pay: the two fingers parked at their joint limits
@@ -1093,16 +1101,7 @@ fn reaching_replaces_the_start_only_where_touching_pays() {
 /// so no task solve follows the pull and the start is kept as it was.
 #[test]
 fn a_pull_that_never_touches_is_not_followed_by_a_task_solve() {
-    let file = ProblemFile::from_toml_str(include_str!("../../scenes/pushing.toml")).unwrap();
-    let task = file.task(Some("push")).unwrap();
-    let (ddp, step) = search_setup(&file, &task);
-    let names = file.scene.coordinate_names();
-    let block_x = names.iter().position(|c| c == "block.x").unwrap();
-    let mut x0 = task.x0.clone();
-    x0[block_x] = 1.0;
-    let start = solve_from(&file, &task, step, &ddp, &x0);
-    assert!(!felt(&file, &task, step, &x0, &start));
-    let r = reach_from(&file, &task, (&ddp, &step), &x0, &start);
+    let (_, start, r) = pull_beyond_reach();
     assert_eq!(r.pair, None, "{:?}", r.tries);
     assert!(!r.tries.is_empty());
     for pull in &r.tries {
